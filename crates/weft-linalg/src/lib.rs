@@ -1,0 +1,445 @@
+//! Sparse symmetric linear algebra shared by weft's solvers.
+//!
+//! Every implicit solve in weft — Newton steps of the simulator, the ACAP Poisson
+//! system, the projection layers and their adjoints — assembles a symmetric sparse
+//! matrix with a fixed sparsity pattern and factorises it, often many times. This crate
+//! is the one place that does so, following faer's symbolic/numeric split: the
+//! [`SymmetricPattern`] and its symbolic factorisation are built once per mesh, only the
+//! numeric factorisation is repeated.
+//!
+//! It is deliberately small: upper-triangle CSC storage with O(1) assembly through
+//! precomputed slots, a Cholesky solver for SPD matrices ([`CholeskySolver`]) and a
+//! regularised LDLᵀ with iterative refinement for quasi-definite saddle-point (KKT)
+//! matrices ([`LdltSolver`]). It knows nothing of meshes or physics.
+//!
+//! faer runs single-threaded here: at weft's sizes two threads made faer 2–6× slower on
+//! this project's 2-core machines (see `shared/docs/dependencies.md`); parallelism is
+//! over frames and examples instead.
+//!
+//! ```
+//! use weft_linalg::{CholeskySolver, SymmetricPattern, SymmetricMatrix};
+//! use std::sync::Arc;
+//! // The 1-D Laplacian plus identity: tridiagonal, SPD.
+//! let n = 5;
+//! let pattern = Arc::new(SymmetricPattern::new(n, (0..n - 1).map(|i| (i, i + 1))));
+//! let mut a = SymmetricMatrix::zeros(pattern.clone());
+//! for i in 0..n {
+//!     a.add(i, i, 3.0);
+//!     if i + 1 < n { a.add(i, i + 1, -1.0); }
+//! }
+//! let solver = CholeskySolver::new(pattern)?;
+//! let factor = solver.factorize(&a)?;
+//! let b = vec![1.0; n];
+//! let mut x = b.clone();
+//! factor.solve_in_place(&mut x);
+//! let mut r = vec![0.0; n];
+//! a.mul_vec(&x, &mut r);
+//! assert!(r.iter().zip(&b).all(|(r, b)| (r - b).abs() < 1e-12));
+//! # Ok::<(), weft_linalg::Error>(())
+//! ```
+
+use std::sync::Arc;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::ldlt::factor::{LdltParams, LdltRegularization};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, SymbolicCholesky, SymmetricOrdering,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, MatMut, Par, Side, Spec};
+
+/// Errors of the sparse solvers.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    #[error("matrix is not positive definite (Cholesky failed); an SPD projection or more regularisation is needed")]
+    NotPositiveDefinite,
+    #[error("LDLᵀ factorisation failed: {0}")]
+    Ldlt(String),
+    #[error("factorisation setup failed: {0}")]
+    Setup(String),
+    #[error("{what}: expected length {expected}, got {got}")]
+    DimensionMismatch { what: &'static str, expected: usize, got: usize },
+    #[error("non-finite value in {0}")]
+    NonFinite(&'static str),
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+fn single_threaded() {
+    faer::set_global_parallelism(Par::Seq);
+}
+
+/// The sparsity pattern of a symmetric `n × n` matrix: its upper triangle (diagonal
+/// always included) in compressed-column form.
+#[derive(Debug, Clone)]
+pub struct SymmetricPattern {
+    n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+}
+
+impl SymmetricPattern {
+    /// Builds the pattern from off-diagonal (or diagonal) index pairs in any order and
+    /// either triangle; duplicates are merged and the full diagonal is always present.
+    pub fn new(n: usize, entries: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let mut cols: Vec<Vec<usize>> = (0..n).map(|j| vec![j]).collect();
+        for (r, c) in entries {
+            assert!(r < n && c < n, "pattern entry ({r}, {c}) outside a {n} × {n} matrix");
+            let (r, c) = if r <= c { (r, c) } else { (c, r) };
+            cols[c].push(r);
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        col_ptr.push(0);
+        for mut col in cols {
+            col.sort_unstable();
+            col.dedup();
+            row_idx.extend(col);
+            col_ptr.push(row_idx.len());
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        Self { n, symbolic }
+    }
+
+    /// Builds the pattern of a matrix made of dense `3 × 3` blocks coupling vertex pairs
+    /// (the usual mesh DOF layout: vertex `v` owns DOFs `3v..3v+3`).
+    pub fn from_vertex_pairs(num_vertices: usize, pairs: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let mut entries = Vec::new();
+        for v in 0..num_vertices {
+            for a in 0..3 {
+                for b in a..3 {
+                    entries.push((3 * v + a, 3 * v + b));
+                }
+            }
+        }
+        for (u, v) in pairs {
+            for a in 0..3 {
+                for b in 0..3 {
+                    entries.push((3 * u + a, 3 * v + b));
+                }
+            }
+        }
+        Self::new(3 * num_vertices, entries)
+    }
+
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+    pub fn nnz(&self) -> usize {
+        self.symbolic.row_idx().len()
+    }
+
+    /// Storage slot of entry `(row, col)` (either triangle), or `None` if not in the pattern.
+    pub fn slot(&self, row: usize, col: usize) -> Option<usize> {
+        let (r, c) = if row <= col { (row, col) } else { (col, row) };
+        let start = self.symbolic.col_ptr()[c];
+        let end = self.symbolic.col_ptr()[c + 1];
+        self.symbolic.row_idx()[start..end].binary_search(&r).ok().map(|k| start + k)
+    }
+
+    /// Every stored entry as `(slot, row, col)` with `row <= col`.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        (0..self.n).flat_map(move |c| (cp[c]..cp[c + 1]).map(move |k| (k, ri[k], c)))
+    }
+
+    fn col_ptr(&self) -> &[usize] {
+        self.symbolic.col_ptr()
+    }
+    fn row_idx(&self) -> &[usize] {
+        self.symbolic.row_idx()
+    }
+}
+
+/// A symmetric matrix over a shared [`SymmetricPattern`], upper triangle stored.
+#[derive(Debug, Clone)]
+pub struct SymmetricMatrix {
+    pattern: Arc<SymmetricPattern>,
+    values: Vec<f64>,
+}
+
+impl SymmetricMatrix {
+    pub fn zeros(pattern: Arc<SymmetricPattern>) -> Self {
+        let values = vec![0.0; pattern.nnz()];
+        Self { pattern, values }
+    }
+    pub fn pattern(&self) -> &Arc<SymmetricPattern> {
+        &self.pattern
+    }
+    pub fn dim(&self) -> usize {
+        self.pattern.n
+    }
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+    pub fn values_mut(&mut self) -> &mut [f64] {
+        &mut self.values
+    }
+    pub fn set_zero(&mut self) {
+        self.values.iter_mut().for_each(|v| *v = 0.0);
+    }
+
+    /// Adds `v` to entry `(row, col)` if `row <= col`; lower-triangle entries are
+    /// ignored, so a caller may add a full symmetric block and each pair counts once.
+    ///
+    /// # Panics
+    /// If `(row, col)` is not in the pattern: that is a bug in the caller's pattern.
+    pub fn add(&mut self, row: usize, col: usize, v: f64) {
+        if row <= col {
+            let s = self.pattern.slot(row, col).unwrap_or_else(|| panic!("entry ({row}, {col}) is not in the pattern"));
+            self.values[s] += v;
+        }
+    }
+
+    /// Adds `v` to the stored slot `slot` (from [`SymmetricPattern::slot`]).
+    pub fn add_to_slot(&mut self, slot: usize, v: f64) {
+        self.values[slot] += v;
+    }
+
+    /// Adds a dense symmetric block over the DOF list `dofs` (row-major `dofs.len()²`).
+    pub fn add_block(&mut self, dofs: &[usize], block: &[f64]) {
+        let k = dofs.len();
+        debug_assert_eq!(block.len(), k * k);
+        for (a, &r) in dofs.iter().enumerate() {
+            for (b, &c) in dofs.iter().enumerate() {
+                self.add(r, c, block[a * k + b]);
+            }
+        }
+    }
+
+    /// Entry `(row, col)` (zero outside the pattern).
+    pub fn get(&self, row: usize, col: usize) -> f64 {
+        self.pattern.slot(row, col).map_or(0.0, |s| self.values[s])
+    }
+
+    /// `y = A x` using both triangles.
+    pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
+        let n = self.dim();
+        assert!(x.len() == n && y.len() == n, "mul_vec dimension mismatch");
+        y.iter_mut().for_each(|v| *v = 0.0);
+        let (cp, ri) = (self.pattern.col_ptr(), self.pattern.row_idx());
+        for c in 0..n {
+            for k in cp[c]..cp[c + 1] {
+                let r = ri[k];
+                let v = self.values[k];
+                y[r] += v * x[c];
+                if r != c {
+                    y[c] += v * x[r];
+                }
+            }
+        }
+    }
+
+    /// Adds `shift` to every diagonal entry.
+    pub fn add_diagonal(&mut self, shift: f64) {
+        for i in 0..self.dim() {
+            self.add(i, i, shift);
+        }
+    }
+
+    /// Dirichlet elimination: zeroes every row and column of a DOF with `fixed[i]` and
+    /// puts 1 on its diagonal, so a solve leaves those DOFs at their right-hand side
+    /// (zero for a Newton step) without changing the free block.
+    pub fn constrain_dofs(&mut self, fixed: &[bool]) {
+        assert_eq!(fixed.len(), self.dim(), "fixed-DOF mask length");
+        let pattern = self.pattern.clone();
+        for (slot, r, c) in pattern.entries() {
+            if fixed[r] || fixed[c] {
+                self.values[slot] = if r == c { 1.0 } else { 0.0 };
+            }
+        }
+    }
+
+    fn check_finite(&self) -> Result<()> {
+        if self.values.iter().all(|v| v.is_finite()) { Ok(()) } else { Err(Error::NonFinite("matrix")) }
+    }
+
+    fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
+        SparseColMatRef::new(self.pattern.symbolic.as_ref(), &self.values)
+    }
+}
+
+/// Sparse Cholesky `A = L Lᵀ` with the symbolic analysis (AMD ordering, elimination
+/// tree) done once per pattern.
+#[derive(Debug, Clone)]
+pub struct CholeskySolver {
+    pattern: Arc<SymmetricPattern>,
+    symbolic: faer::sparse::linalg::solvers::SymbolicLlt<usize>,
+}
+
+/// A numeric Cholesky factor, ready for solves.
+#[derive(Debug, Clone)]
+pub struct CholeskyFactor {
+    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    n: usize,
+}
+
+impl CholeskySolver {
+    pub fn new(pattern: Arc<SymmetricPattern>) -> Result<Self> {
+        single_threaded();
+        let symbolic = faer::sparse::linalg::solvers::SymbolicLlt::try_new(pattern.symbolic.as_ref(), Side::Upper)
+            .map_err(|e| Error::Setup(format!("{e:?}")))?;
+        Ok(Self { pattern, symbolic })
+    }
+
+    pub fn pattern(&self) -> &Arc<SymmetricPattern> {
+        &self.pattern
+    }
+
+    /// The numeric factorisation of `a`, whose pattern must be this solver's.
+    pub fn factorize(&self, a: &SymmetricMatrix) -> Result<CholeskyFactor> {
+        assert!(Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(), "pattern mismatch");
+        a.check_finite()?;
+        let llt = faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(self.symbolic.clone(), a.as_faer(), Side::Upper)
+            .map_err(|_| Error::NotPositiveDefinite)?;
+        Ok(CholeskyFactor { llt, n: a.dim() })
+    }
+}
+
+impl CholeskyFactor {
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+    /// Solves `A x = b` in place (`rhs` holds `b` on entry, `x` on exit).
+    pub fn solve_in_place(&self, rhs: &mut [f64]) {
+        use faer::linalg::solvers::SolveCore;
+        assert_eq!(rhs.len(), self.n, "right-hand side length");
+        let n = self.n;
+        self.llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1));
+    }
+    /// Solves for several right-hand sides stored column-major (`n × k`).
+    pub fn solve_many_in_place(&self, rhs: &mut [f64], k: usize) {
+        use faer::linalg::solvers::SolveCore;
+        assert_eq!(rhs.len(), self.n * k, "right-hand side length");
+        let n = self.n;
+        self.llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, k));
+    }
+}
+
+/// Settings of the regularised LDLᵀ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LdltSettings {
+    /// A pivot whose magnitude falls below `epsilon` (or has the wrong sign) is replaced
+    /// by `±delta`.
+    pub epsilon: f64,
+    pub delta: f64,
+    /// Steps of iterative refinement against the unregularised matrix.
+    pub refinement_steps: usize,
+}
+
+impl Default for LdltSettings {
+    fn default() -> Self {
+        Self { epsilon: 1e-13, delta: 1e-9, refinement_steps: 3 }
+    }
+}
+
+/// Sparse LDLᵀ for symmetric quasi-definite matrices (saddle-point / KKT systems),
+/// with sign-aware dynamic regularisation and iterative refinement.
+///
+/// `signs[i]` is the expected sign of pivot `i`: +1 for primal unknowns, −1 for
+/// multipliers. faer's LDLᵀ on a KKT matrix with a zero block fails with a zero pivot
+/// unless regularised (see `shared/docs/dependencies.md`); refinement against the
+/// original matrix then removes the regularisation's bias to the solve's accuracy.
+#[derive(Debug, Clone)]
+pub struct LdltSolver {
+    pattern: Arc<SymmetricPattern>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    signs: Vec<i8>,
+    settings: LdltSettings,
+}
+
+/// A numeric LDLᵀ factor with the matrix kept for refinement.
+#[derive(Debug, Clone)]
+pub struct LdltFactor {
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
+    matrix: SymmetricMatrix,
+    refinement_steps: usize,
+}
+
+impl LdltSolver {
+    pub fn new(pattern: Arc<SymmetricPattern>, signs: Vec<i8>, settings: LdltSettings) -> Result<Self> {
+        single_threaded();
+        if signs.len() != pattern.dim() {
+            return Err(Error::DimensionMismatch { what: "LDLᵀ pivot signs", expected: pattern.dim(), got: signs.len() });
+        }
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.symbolic.as_ref(),
+            Side::Upper,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| Error::Setup(format!("{e:?}")))?;
+        Ok(Self { pattern, symbolic: Arc::new(symbolic), signs, settings })
+    }
+
+    pub fn pattern(&self) -> &Arc<SymmetricPattern> {
+        &self.pattern
+    }
+
+    pub fn factorize(&self, a: &SymmetricMatrix) -> Result<LdltFactor> {
+        a.check_finite()?;
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let par = Par::Seq;
+        let params: Spec<LdltParams, f64> = Default::default();
+        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_ldlt_scratch::<f64>(par, params));
+        let reg = LdltRegularization {
+            dynamic_regularization_signs: Some(&self.signs),
+            dynamic_regularization_delta: self.settings.delta,
+            dynamic_regularization_epsilon: self.settings.epsilon,
+        };
+        self.symbolic
+            .factorize_numeric_ldlt::<f64>(&mut values, a.as_faer(), Side::Upper, reg, par, MemStack::new(&mut mem), params)
+            .map_err(|e| Error::Ldlt(format!("{e:?}")))?;
+        Ok(LdltFactor {
+            symbolic: self.symbolic.clone(),
+            values,
+            matrix: a.clone(),
+            refinement_steps: self.settings.refinement_steps,
+        })
+    }
+}
+
+impl LdltFactor {
+    fn raw_solve(&self, rhs: &mut [f64]) {
+        let n = self.matrix.dim();
+        let par = Par::Seq;
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        LdltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            par,
+            MemStack::new(&mut mem),
+        );
+    }
+
+    /// Solves `A x = b` in place, refining against the stored (unregularised) `A`.
+    /// Returns the final relative residual `‖b − A x‖ / ‖b‖`.
+    pub fn solve_in_place(&self, rhs: &mut [f64]) -> f64 {
+        let n = self.matrix.dim();
+        assert_eq!(rhs.len(), n, "right-hand side length");
+        let b = rhs.to_vec();
+        let bnorm = norm(&b).max(f64::MIN_POSITIVE);
+        self.raw_solve(rhs);
+        let mut ax = vec![0.0; n];
+        let mut rel = 0.0;
+        for step in 0..=self.refinement_steps {
+            self.matrix.mul_vec(rhs, &mut ax);
+            let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
+            rel = norm(&r) / bnorm;
+            if step == self.refinement_steps || rel < 1e-15 {
+                break;
+            }
+            self.raw_solve(&mut r);
+            rhs.iter_mut().zip(&r).for_each(|(x, d)| *x += d);
+        }
+        rel
+    }
+}
+
+fn norm(x: &[f64]) -> f64 {
+    x.iter().map(|v| v * v).sum::<f64>().sqrt()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,124 @@
+use super::*;
+use weft_testkit::TestRng;
+
+/// A random SPD matrix on a random sparse pattern: B + Bᵀ made diagonally dominant.
+fn random_spd(n: usize, rng: &mut TestRng) -> SymmetricMatrix {
+    let pairs: Vec<(usize, usize)> = (0..3 * n)
+        .map(|_| ((rng.uniform(0.0, n as f64)) as usize, (rng.uniform(0.0, n as f64)) as usize))
+        .collect();
+    let pattern = Arc::new(SymmetricPattern::new(n, pairs.iter().copied()));
+    let mut a = SymmetricMatrix::zeros(pattern);
+    let mut rowsum = vec![0.0; n];
+    for &(r, c) in &pairs {
+        if r != c {
+            let v = rng.uniform(-1.0, 1.0);
+            a.add(r.min(c), r.max(c), v);
+            rowsum[r] += v.abs();
+            rowsum[c] += v.abs();
+        }
+    }
+    for i in 0..n {
+        a.add(i, i, rowsum[i] + 0.5);
+    }
+    a
+}
+
+#[test]
+fn cholesky_solves_random_spd_systems_to_machine_precision() {
+    let mut rng = TestRng::new(1);
+    let a = random_spd(200, &mut rng);
+    let solver = CholeskySolver::new(a.pattern().clone()).unwrap();
+    let f = solver.factorize(&a).unwrap();
+    let b = rng.vec(200, -1.0, 1.0);
+    let mut x = b.clone();
+    f.solve_in_place(&mut x);
+    let mut r = vec![0.0; 200];
+    a.mul_vec(&x, &mut r);
+    let err = r.iter().zip(&b).map(|(r, b)| (r - b).abs()).fold(0.0, f64::max);
+    assert!(err < 1e-12, "residual {err}");
+}
+
+#[test]
+fn cholesky_reuses_symbolic_factorisation_for_new_values() {
+    let mut rng = TestRng::new(2);
+    let a = random_spd(50, &mut rng);
+    let solver = CholeskySolver::new(a.pattern().clone()).unwrap();
+    let mut a2 = a.clone();
+    a2.add_diagonal(10.0);
+    for m in [&a, &a2] {
+        let mut x = vec![1.0; 50];
+        solver.factorize(m).unwrap().solve_in_place(&mut x);
+        let mut r = vec![0.0; 50];
+        m.mul_vec(&x, &mut r);
+        assert!(r.iter().all(|v| (v - 1.0).abs() < 1e-12));
+    }
+}
+
+#[test]
+fn cholesky_rejects_indefinite_and_nan_matrices() {
+    let pattern = Arc::new(SymmetricPattern::new(2, [(0, 1)]));
+    let mut a = SymmetricMatrix::zeros(pattern.clone());
+    a.add(0, 0, 1.0);
+    a.add(1, 1, 1.0);
+    a.add(0, 1, 2.0);
+    let solver = CholeskySolver::new(pattern).unwrap();
+    assert!(matches!(solver.factorize(&a), Err(Error::NotPositiveDefinite)));
+    a.add(0, 0, f64::NAN);
+    assert!(matches!(solver.factorize(&a), Err(Error::NonFinite(_))));
+}
+
+#[test]
+fn ldlt_solves_a_saddle_point_system_with_zero_block() {
+    // [[H, Aᵀ], [A, 0]] with H SPD (random) and A = selection of 3 unknowns.
+    let mut rng = TestRng::new(3);
+    let n = 30;
+    let h = random_spd(n, &mut rng);
+    let pins = [2usize, 11, 25];
+    let m = pins.len();
+    let mut entries: Vec<(usize, usize)> = Vec::new();
+    let hp = h.pattern();
+    for c in 0..n {
+        for r in 0..=c {
+            if hp.slot(r, c).is_some() {
+                entries.push((r, c));
+            }
+        }
+    }
+    for (k, &p) in pins.iter().enumerate() {
+        entries.push((p, n + k));
+    }
+    let pattern = Arc::new(SymmetricPattern::new(n + m, entries));
+    let mut kkt = SymmetricMatrix::zeros(pattern.clone());
+    for c in 0..n {
+        for r in 0..=c {
+            let v = h.get(r, c);
+            if v != 0.0 {
+                kkt.add(r, c, v);
+            }
+        }
+    }
+    for (k, &p) in pins.iter().enumerate() {
+        kkt.add(p, n + k, 1.0);
+    }
+    let signs: Vec<i8> = (0..n + m).map(|i| if i < n { 1 } else { -1 }).collect();
+    let solver = LdltSolver::new(pattern, signs, LdltSettings::default()).unwrap();
+    let f = solver.factorize(&kkt).unwrap();
+    let b = rng.vec(n + m, -1.0, 1.0);
+    let mut x = b.clone();
+    let rel = f.solve_in_place(&mut x);
+    assert!(rel < 1e-12, "relative residual {rel}");
+    // The constraint rows say x[pin] = b[n + k] exactly.
+    for (k, &p) in pins.iter().enumerate() {
+        assert!((x[p] - b[n + k]).abs() < 1e-10);
+    }
+}
+
+#[test]
+fn pattern_slots_are_symmetric_and_include_the_diagonal() {
+    let p = SymmetricPattern::from_vertex_pairs(3, [(0, 2)]);
+    assert_eq!(p.dim(), 9);
+    assert_eq!(p.slot(1, 7), p.slot(7, 1));
+    assert!(p.slot(1, 7).is_some());
+    assert!(p.slot(0, 4).is_none(), "vertices 0 and 1 are not coupled");
+    assert!((0..9).all(|i| p.slot(i, i).is_some()));
+}

@@ -1,0 +1,104 @@
+//! The energy abstraction every solver in weft minimises.
+//!
+//! Implicit Euler, quasistatic equilibrium and the projection layers all solve
+//! `min_x Σ_k E_k(x)` over a flat DOF vector `x = [x0, y0, z0, x1, …]` (metres). Each term
+//! gives its value (J), gradient (N) and Hessian (N/m), the Hessian optionally projected
+//! to positive semi-definite *per element* so that Newton's direction is always a
+//! descent direction (Teran et al. 2005; Tan et al. Eq. 4 is solved this way).
+
+use nalgebra::{SMatrix, SVector};
+use weft_linalg::SymmetricMatrix;
+
+/// A term of a total potential over flat positions `x` (3 DOFs per vertex).
+pub trait Energy: Send + Sync + std::fmt::Debug {
+    /// Short name for reports (`"stretch springs"`, `"inertia"`, …).
+    fn name(&self) -> &'static str;
+    /// Appends every vertex pair whose DOFs this term couples (the Hessian's pattern).
+    fn hessian_pairs(&self, pairs: &mut Vec<(usize, usize)>);
+    /// Energy (J).
+    fn value(&self, x: &[f64]) -> f64;
+    /// Adds `∂E/∂x` into `grad`.
+    fn add_gradient(&self, x: &[f64], grad: &mut [f64]);
+    /// Adds `∂²E/∂x²` into `hessian` (whose pattern includes [`Energy::hessian_pairs`]);
+    /// with `project`, each element's block is first made positive semi-definite.
+    fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix);
+}
+
+/// Sum of the values of several terms.
+pub fn total_value(terms: &[&dyn Energy], x: &[f64]) -> f64 {
+    terms.iter().map(|t| t.value(x)).sum()
+}
+
+/// Sum of the gradients of several terms (overwrites `grad`).
+pub fn total_gradient(terms: &[&dyn Energy], x: &[f64], grad: &mut [f64]) {
+    grad.iter_mut().for_each(|g| *g = 0.0);
+    for t in terms {
+        t.add_gradient(x, grad);
+    }
+}
+
+/// Position of vertex `v` in a flat DOF vector.
+#[inline]
+pub fn vertex(x: &[f64], v: usize) -> nalgebra::Vector3<f64> {
+    nalgebra::Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2])
+}
+
+/// Adds a local gradient over `verts` (3 entries per vertex) into a global one.
+#[inline]
+pub fn scatter_gradient<const D: usize>(verts: &[usize], local: &SVector<f64, D>, grad: &mut [f64]) {
+    for (a, &v) in verts.iter().enumerate() {
+        for k in 0..3 {
+            grad[3 * v + k] += local[3 * a + k];
+        }
+    }
+}
+
+/// Adds a local `D × D` Hessian over `verts` into the global matrix (upper triangle).
+#[inline]
+pub fn scatter_hessian<const D: usize>(verts: &[usize], local: &SMatrix<f64, D, D>, hessian: &mut SymmetricMatrix) {
+    for (a, &va) in verts.iter().enumerate() {
+        for (b, &vb) in verts.iter().enumerate() {
+            for i in 0..3 {
+                for j in 0..3 {
+                    let (r, c) = (3 * va + i, 3 * vb + j);
+                    if r <= c {
+                        hessian.add(r, c, local[(3 * a + i, 3 * b + j)]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Projects a symmetric matrix onto the positive semi-definite cone by clamping its
+/// negative eigenvalues to zero (Teran, Sifakis, Irving, Fedkiw 2005, §4).
+pub fn project_psd<const D: usize>(m: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
+    // nalgebra's fixed-size eigen solver needs type-level dimension bounds that do not
+    // compose with const generics; the dynamic one costs an allocation, negligible
+    // beside the eigen-decomposition itself.
+    let eig = nalgebra::DMatrix::from_fn(D, D, |i, j| 0.5 * (m[(i, j)] + m[(j, i)])).symmetric_eigen();
+    if eig.eigenvalues.iter().all(|&l| l >= 0.0) {
+        return *m;
+    }
+    let mut out = SMatrix::<f64, D, D>::zeros();
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > 0.0 {
+            let v = eig.eigenvectors.column(k);
+            for i in 0..D {
+                for j in 0..D {
+                    out[(i, j)] += l * v[i] * v[j];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// All vertex pairs of an element (for [`Energy::hessian_pairs`]).
+pub fn element_pairs(verts: &[usize], pairs: &mut Vec<(usize, usize)>) {
+    for (a, &u) in verts.iter().enumerate() {
+        for &v in &verts[a + 1..] {
+            pairs.push((u, v));
+        }
+    }
+}

@@ -1,0 +1,42 @@
+//! The one error type of weft-sim.
+
+/// What can go wrong building or stepping a simulation.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    #[error(transparent)]
+    Mesh(#[from] weft_mesh::Error),
+    #[error(transparent)]
+    Linalg(#[from] weft_linalg::Error),
+    #[error("Newton did not converge: residual {residual:e} N after {iterations} iterations (tolerance {tolerance:e} N)")]
+    NotConverged { iterations: usize, residual: f64, tolerance: f64 },
+    #[error("non-finite {what} (at DOF {dof}); the step was rejected")]
+    NonFinite { what: &'static str, dof: usize },
+    #[error("invalid parameter {name} = {value}: {reason}")]
+    InvalidParameter { name: &'static str, value: f64, reason: &'static str },
+    #[error("{what}: expected {expected} entries, got {got}")]
+    LengthMismatch { what: &'static str, expected: usize, got: usize },
+    #[error("vertex index {index} out of range ({num_vertices} vertices) in {what}")]
+    VertexOutOfRange { what: &'static str, index: usize, num_vertices: usize },
+    #[error("scene error: {0}")]
+    Scene(String),
+}
+
+/// `Result` with weft-sim's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter { name, value, reason: "must be positive and finite" })
+    }
+}
+
+pub(crate) fn check_nonnegative(name: &'static str, value: f64) -> Result<()> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(Error::InvalidParameter { name, value, reason: "must be non-negative and finite" })
+    }
+}

@@ -1,0 +1,183 @@
+//! Optimisation-based implicit Euler (Tan et al. Eq. 4; Martin et al. 2011 "Example-based
+//! elastic materials", Liu et al. 2013): each step minimises
+//!
+//! ```text
+//! L_phys(p_{m−2}, p_{m−1}, p, q) = ‖p − 2p_{m−1} + p_{m−2}‖²_M / (2Δt²) + P(p, q)
+//! ```
+//!
+//! over the free DOFs, with the grasped DOFs prescribed to `q`. The minimiser is exactly
+//! the backward-Euler update, and its gradient is the residual force whose squared norm
+//! is Tan's physical-plausibility metric `M_phys` (Eq. 9).
+
+use std::time::Instant;
+
+use crate::energies::Inertia;
+use crate::energy::{total_gradient, Energy};
+use crate::error::{Error, Result};
+use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
+
+/// What one time step did.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct StepReport {
+    pub newton: NewtonReport,
+    /// Total potential (everything but inertia) at the end of the step (J).
+    pub potential_energy: f64,
+    /// Kinetic energy `½ Σ m v²` with `v = (p_m − p_{m−1})/Δt` (J).
+    pub kinetic_energy: f64,
+    /// Wall time of the whole step, including bookkeeping (s).
+    pub seconds: f64,
+}
+
+/// The implicit Euler integrator over a list of potential terms.
+#[derive(Debug)]
+pub struct ImplicitEuler {
+    inertia: Inertia,
+    terms: Vec<Box<dyn Energy>>,
+    solver: NewtonSolver,
+    fixed: Vec<bool>,
+    /// `p_m` after the last step (initially the rest state).
+    current: Vec<f64>,
+    previous: Vec<f64>,
+    pub settings: NewtonSettings,
+}
+
+impl ImplicitEuler {
+    /// `masses` (kg) per vertex, time step `dt` (s), initial positions `x0` (at rest:
+    /// `p_{−1} = p_0`), potential `terms`, and the mask of DOFs that are prescribed
+    /// (grasp points / anchors).
+    pub fn new(masses: Vec<f64>, dt: f64, x0: Vec<f64>, terms: Vec<Box<dyn Energy>>, fixed: Vec<bool>) -> Result<Self> {
+        if x0.len() != 3 * masses.len() {
+            return Err(Error::LengthMismatch { what: "initial positions", expected: 3 * masses.len(), got: x0.len() });
+        }
+        if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite { what: "initial position", dof: i });
+        }
+        let inertia = Inertia::new(masses, dt, &x0)?;
+        let solver = {
+            let mut all: Vec<&dyn Energy> = terms.iter().map(|t| t.as_ref()).collect();
+            all.push(&inertia);
+            NewtonSolver::new(x0.len(), &all, fixed.clone())?
+        };
+        // Default tolerance: a millionth of the heaviest vertex's weight — scale-aware
+        // across mesh resolutions and materials.
+        let max_weight = inertia.masses().iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
+        let settings = NewtonSettings { tolerance: 1e-6 * max_weight.max(1e-12), ..NewtonSettings::default() };
+        Ok(Self { inertia, terms, solver, fixed, previous: x0.clone(), current: x0, settings })
+    }
+
+    pub fn positions(&self) -> &[f64] {
+        &self.current
+    }
+    pub fn previous_positions(&self) -> &[f64] {
+        &self.previous
+    }
+    pub fn dt(&self) -> f64 {
+        self.inertia.dt()
+    }
+    pub fn masses(&self) -> &[f64] {
+        self.inertia.masses()
+    }
+    pub fn fixed(&self) -> &[bool] {
+        &self.fixed
+    }
+    pub fn terms(&self) -> &[Box<dyn Energy>] {
+        &self.terms
+    }
+    pub fn terms_mut(&mut self) -> &mut [Box<dyn Energy>] {
+        &mut self.terms
+    }
+
+    /// Resets the state to `x` at rest (`p_{m−1} = p_m = x`).
+    pub fn set_state(&mut self, x: &[f64], previous: &[f64]) -> Result<()> {
+        if x.len() != self.current.len() || previous.len() != self.current.len() {
+            return Err(Error::LengthMismatch { what: "state", expected: self.current.len(), got: x.len() });
+        }
+        self.current.copy_from_slice(x);
+        self.previous.copy_from_slice(previous);
+        Ok(())
+    }
+
+    /// Advances one step with the prescribed DOFs set to `prescribed` (`(dof, value)`,
+    /// metres). DOFs not in the fixed mask may not be prescribed. On error the state is
+    /// left unchanged, so a caller can retry with a smaller step.
+    pub fn step(&mut self, prescribed: &[(usize, f64)]) -> Result<StepReport> {
+        let start = Instant::now();
+        for &(dof, value) in prescribed {
+            if dof >= self.current.len() || !self.fixed[dof] {
+                return Err(Error::Scene(format!("DOF {dof} is prescribed but not in the fixed set")));
+            }
+            if !value.is_finite() {
+                return Err(Error::NonFinite { what: "prescribed position", dof });
+            }
+        }
+        self.inertia.set_history(&self.current, &self.previous)?;
+        // Start from the inertial prediction (a better guess than p_{m−1} for fast
+        // motion), with the prescribed DOFs moved into place.
+        let mut x = self.inertia.prediction().to_vec();
+        for (i, f) in self.fixed.iter().enumerate() {
+            if *f {
+                x[i] = self.current[i];
+            }
+        }
+        for &(dof, value) in prescribed {
+            x[dof] = value;
+        }
+        let newton = {
+            let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
+            all.push(&self.inertia);
+            self.solver.minimize(&all, &mut x, &self.settings)?
+        };
+        let potential_energy = self.terms.iter().map(|t| t.value(&x)).sum();
+        let dt = self.dt();
+        let kinetic_energy = self
+            .masses()
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                let v2: f64 = (0..3).map(|k| ((x[3 * i + k] - self.current[3 * i + k]) / dt).powi(2)).sum();
+                0.5 * m * v2
+            })
+            .sum();
+        self.previous = std::mem::replace(&mut self.current, x);
+        Ok(StepReport { newton, potential_energy, kinetic_energy, seconds: start.elapsed().as_secs_f64() })
+    }
+
+    /// `L_phys(p_{m−2}, p_{m−1}, p, q)` (Tan et al. Eq. 4) for any frame `p` (with the
+    /// grasped DOFs of `p` taken as `q`), in joules.
+    pub fn l_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {
+        let inertia = self.history_inertia(prev2, prev1)?;
+        Ok(inertia.value(p) + self.terms.iter().map(|t| t.value(p)).sum::<f64>())
+    }
+
+    /// `∂L_phys/∂p_m` at `p` (N), written into `grad` (full length; grasped DOFs included).
+    pub fn l_phys_gradient(&self, prev2: &[f64], prev1: &[f64], p: &[f64], grad: &mut [f64]) -> Result<()> {
+        let inertia = self.history_inertia(prev2, prev1)?;
+        if grad.len() != p.len() {
+            return Err(Error::LengthMismatch { what: "gradient buffer", expected: p.len(), got: grad.len() });
+        }
+        let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
+        all.push(&inertia);
+        total_gradient(&all, p, grad);
+        Ok(())
+    }
+
+    /// Tan et al.'s `M_phys = ‖∂L_phys/∂p_m‖²` over free DOFs (grasped DOFs carry the
+    /// reaction force and are excluded, `shared/docs/metrics.md` (c)); N².
+    pub fn m_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {
+        let mut g = vec![0.0; p.len()];
+        self.l_phys_gradient(prev2, prev1, p, &mut g)?;
+        Ok(g.iter().zip(&self.fixed).filter(|(_, f)| !**f).map(|(g, _)| g * g).sum())
+    }
+
+    fn history_inertia(&self, prev2: &[f64], prev1: &[f64]) -> Result<Inertia> {
+        let n = self.current.len();
+        for (what, v) in [("p_{m-2}", prev2), ("p_{m-1}", prev1)] {
+            if v.len() != n {
+                return Err(Error::LengthMismatch { what, expected: n, got: v.len() });
+            }
+        }
+        let mut inertia = self.inertia.clone();
+        inertia.set_history(prev1, prev2)?;
+        Ok(inertia)
+    }
+}

@@ -1,0 +1,268 @@
+//! Newton's method with SPD projection, a descent-guaranteeing line search and a reused
+//! symbolic Cholesky factorisation — the one nonlinear solver of weft.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
+
+use crate::energy::{total_gradient, total_value, Energy};
+use crate::error::{Error, Result};
+
+/// Settings of [`NewtonSolver`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NewtonSettings {
+    /// Converged when the largest free-DOF residual force `|∂E/∂x_i|` is at most this (N).
+    pub tolerance: f64,
+    pub max_iterations: usize,
+    /// Armijo sufficient-decrease constant.
+    pub armijo: f64,
+    /// Halvings of the step before the line search gives up.
+    pub max_line_search: usize,
+    /// Project element Hessians to PSD (needed whenever an energy is non-convex).
+    pub project_hessian: bool,
+}
+
+impl Default for NewtonSettings {
+    fn default() -> Self {
+        Self { tolerance: 1e-6, max_iterations: 100, armijo: 1e-4, max_line_search: 40, project_hessian: true }
+    }
+}
+
+/// What one minimisation did.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct NewtonReport {
+    pub iterations: usize,
+    /// Final max-norm residual force on free DOFs (N).
+    pub residual: f64,
+    pub initial_residual: f64,
+    /// Final total energy (J).
+    pub energy: f64,
+    /// Total step halvings over all iterations.
+    pub line_search_halvings: usize,
+    /// Times a diagonal shift was needed to make the Newton matrix positive definite.
+    pub regularizations: usize,
+    #[serde(with = "duration_seconds")]
+    pub time: Duration,
+}
+
+mod duration_seconds {
+    pub fn serialize<S: serde::Serializer>(d: &std::time::Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(d.as_secs_f64())
+    }
+}
+
+/// Minimises a sum of [`Energy`] terms over free DOFs, holding fixed DOFs where they are.
+///
+/// The sparsity pattern and its symbolic Cholesky factorisation are computed once in
+/// [`NewtonSolver::new`]; every iteration only assembles values and refactorises
+/// numerically.
+#[derive(Debug)]
+pub struct NewtonSolver {
+    fixed: Vec<bool>,
+    hessian: SymmetricMatrix,
+    cholesky: CholeskySolver,
+    grad: Vec<f64>,
+    dir: Vec<f64>,
+    trial: Vec<f64>,
+}
+
+impl NewtonSolver {
+    /// Prepares a solver for `terms` over `num_dofs` DOFs; `fixed[i]` holds DOF `i`.
+    pub fn new(num_dofs: usize, terms: &[&dyn Energy], fixed: Vec<bool>) -> Result<Self> {
+        if fixed.len() != num_dofs {
+            return Err(Error::LengthMismatch { what: "fixed-DOF mask", expected: num_dofs, got: fixed.len() });
+        }
+        if num_dofs % 3 != 0 {
+            return Err(Error::LengthMismatch { what: "DOFs (3 per vertex)", expected: num_dofs / 3 * 3, got: num_dofs });
+        }
+        let mut pairs = Vec::new();
+        for t in terms {
+            t.hessian_pairs(&mut pairs);
+        }
+        let nv = num_dofs / 3;
+        if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= nv || b >= nv) {
+            return Err(Error::VertexOutOfRange { what: "energy term", index: a.max(b), num_vertices: nv });
+        }
+        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(nv, pairs));
+        let cholesky = CholeskySolver::new(pattern.clone())?;
+        Ok(Self {
+            fixed,
+            hessian: SymmetricMatrix::zeros(pattern),
+            cholesky,
+            grad: vec![0.0; num_dofs],
+            dir: vec![0.0; num_dofs],
+            trial: vec![0.0; num_dofs],
+        })
+    }
+
+    pub fn fixed(&self) -> &[bool] {
+        &self.fixed
+    }
+
+    /// Replaces the fixed-DOF mask (the pattern does not depend on it).
+    pub fn set_fixed(&mut self, fixed: Vec<bool>) -> Result<()> {
+        if fixed.len() != self.fixed.len() {
+            return Err(Error::LengthMismatch { what: "fixed-DOF mask", expected: self.fixed.len(), got: fixed.len() });
+        }
+        self.fixed = fixed;
+        Ok(())
+    }
+
+    /// Max-norm of the free-DOF entries of `grad`.
+    pub fn free_residual(&self, grad: &[f64]) -> f64 {
+        grad.iter().zip(&self.fixed).filter(|(_, f)| !**f).fold(0.0, |m, (g, _)| m.max(g.abs()))
+    }
+
+    /// The assembled (unconstrained) Hessian at the last evaluated point, for adjoint solves.
+    pub fn hessian(&self) -> &SymmetricMatrix {
+        &self.hessian
+    }
+
+    /// Assembles the (optionally projected) Hessian of `terms` at `x` with fixed DOFs
+    /// eliminated, factorises it (shifting the diagonal if needed) and returns the factor.
+    pub fn factorize_at(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &[f64],
+        project: bool,
+    ) -> Result<(weft_linalg::CholeskyFactor, usize)> {
+        self.hessian.set_zero();
+        for t in terms {
+            t.add_hessian(x, project, &mut self.hessian);
+        }
+        self.hessian.constrain_dofs(&self.fixed);
+        match self.cholesky.factorize(&self.hessian) {
+            Ok(f) => Ok((f, 0)),
+            Err(weft_linalg::Error::NotPositiveDefinite) => {
+                // Singular or indefinite (free rigid modes, an unprojected saddle): shift
+                // the diagonal by growing multiples of its mean until it factorises. The
+                // shift changes only the step, never the minimiser.
+                let n = self.hessian.dim();
+                let mean_diag = (0..n).map(|i| self.hessian.get(i, i).abs()).sum::<f64>() / n as f64;
+                let mut shift = 1e-8 * mean_diag.max(1e-12);
+                for attempt in 1..=20 {
+                    let mut shifted = self.hessian.clone();
+                    shifted.add_diagonal(shift);
+                    if let Ok(f) = self.cholesky.factorize(&shifted) {
+                        return Ok((f, attempt));
+                    }
+                    shift *= 10.0;
+                }
+                Err(weft_linalg::Error::NotPositiveDefinite.into())
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Minimises `Σ terms` from `x` (updated in place). Fixed DOFs keep their values.
+    pub fn minimize(&mut self, terms: &[&dyn Energy], x: &mut [f64], settings: &NewtonSettings) -> Result<NewtonReport> {
+        let start = Instant::now();
+        let n = x.len();
+        if n != self.fixed.len() {
+            return Err(Error::LengthMismatch { what: "positions", expected: self.fixed.len(), got: n });
+        }
+        if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite { what: "initial position", dof: i });
+        }
+        let mut energy = total_value(terms, x);
+        let mut grad = std::mem::take(&mut self.grad);
+        total_gradient(terms, x, &mut grad);
+        if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
+            self.grad = grad;
+            return Err(Error::NonFinite { what: "initial gradient", dof: i });
+        }
+        let initial_residual = self.free_residual(&grad);
+        let mut residual = initial_residual;
+        let mut report = NewtonReport {
+            iterations: 0,
+            residual,
+            initial_residual,
+            energy,
+            line_search_halvings: 0,
+            regularizations: 0,
+            time: Duration::ZERO,
+        };
+        let result = (|| {
+            while residual > settings.tolerance {
+                if report.iterations >= settings.max_iterations {
+                    return Err(Error::NotConverged {
+                        iterations: report.iterations,
+                        residual,
+                        tolerance: settings.tolerance,
+                    });
+                }
+                report.iterations += 1;
+                let (factor, shifts) = self.factorize_at(terms, x, settings.project_hessian)?;
+                report.regularizations += shifts;
+                for i in 0..n {
+                    self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
+                }
+                factor.solve_in_place(&mut self.dir);
+                let slope: f64 = self.dir.iter().zip(&grad).map(|(d, g)| d * g).sum();
+                if !(slope < 0.0) {
+                    // Cannot happen for a PD matrix unless round-off dominates: fall back
+                    // to steepest descent on free DOFs.
+                    for i in 0..n {
+                        self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
+                    }
+                }
+                let slope: f64 = self.dir.iter().zip(&grad).map(|(d, g)| d * g).sum();
+                let mut alpha = 1.0;
+                let mut accepted = false;
+                for _ in 0..=settings.max_line_search {
+                    for i in 0..n {
+                        self.trial[i] = x[i] + alpha * self.dir[i];
+                    }
+                    let e = total_value(terms, &self.trial);
+                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope {
+                        energy = e;
+                        accepted = true;
+                        break;
+                    }
+                    alpha *= 0.5;
+                    report.line_search_halvings += 1;
+                }
+                if !accepted {
+                    // Near the minimiser the energy decrease can drop below the round-off
+                    // of E itself, so Armijo fails although the step is good: accept the
+                    // full Newton step if it reduces the residual force instead.
+                    for i in 0..n {
+                        self.trial[i] = x[i] + self.dir[i];
+                    }
+                    total_gradient(terms, &self.trial, &mut grad);
+                    let e = total_value(terms, &self.trial);
+                    let r = self.free_residual(&grad);
+                    if e.is_finite() && r.is_finite() && r < 0.5 * residual {
+                        energy = e;
+                        accepted = true;
+                    } else {
+                        total_gradient(terms, x, &mut grad);
+                    }
+                }
+                if !accepted {
+                    // No decrease is possible along a descent direction: the problem is
+                    // broken or badly scaled. Stop with a clear error rather than loop.
+                    return Err(Error::NotConverged {
+                        iterations: report.iterations,
+                        residual,
+                        tolerance: settings.tolerance,
+                    });
+                }
+                x.copy_from_slice(&self.trial);
+                total_gradient(terms, x, &mut grad);
+                if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
+                    return Err(Error::NonFinite { what: "gradient", dof: i });
+                }
+                residual = self.free_residual(&grad);
+            }
+            Ok(())
+        })();
+        self.grad = grad;
+        report.residual = residual;
+        report.energy = energy;
+        report.time = start.elapsed();
+        result.map(|_| report)
+    }
+}

@@ -1,0 +1,1 @@
+//! Cross-crate pipeline tests live in `tests/tests/`; this library is empty by design.
