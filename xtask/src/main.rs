@@ -1,1 +1,44 @@
-fn main(){}
+//! weft's command line: `cargo xtask <command>`.
+//!
+//! Each subcommand lives in its own module and keeps its own logic thin: the library
+//! crates do the work, xtask wires them together and handles files, progress and
+//! reports. `cargo xtask <command> --help` documents every option.
+
+mod acap;
+mod mesh;
+mod output;
+mod simulate;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "cargo xtask",
+    about = "weft: fast, physically faithful deformable simulation with learned models",
+    version
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Generate a built-in mesh and write it (.obj, .ply, .vtk, .node), or inspect a mesh file.
+    #[command(subcommand)]
+    Mesh(mesh::MeshCommand),
+    /// Run a cloth scene (built-in name or TOML file) and write frames, controls, labels and stats.
+    Simulate(simulate::SimulateArgs),
+    /// ACAP features of deformed meshes (encode) and meshes from features (decode).
+    #[command(subcommand)]
+    Acap(acap::AcapCommand),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Mesh(cmd) => mesh::run(cmd),
+        Command::Simulate(args) => simulate::run(args),
+        Command::Acap(cmd) => acap::run(cmd),
+    }
+}

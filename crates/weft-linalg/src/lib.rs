@@ -43,7 +43,7 @@ use std::sync::Arc;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::{LdltParams, LdltRegularization};
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, SymbolicCholesky, SymmetricOrdering,
+    CholeskySymbolicParams, LdltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side, Spec};
@@ -59,7 +59,11 @@ pub enum Error {
     #[error("factorisation setup failed: {0}")]
     Setup(String),
     #[error("{what}: expected length {expected}, got {got}")]
-    DimensionMismatch { what: &'static str, expected: usize, got: usize },
+    DimensionMismatch {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("non-finite value in {0}")]
     NonFinite(&'static str),
 }
@@ -134,7 +138,10 @@ impl SymmetricPattern {
         let (r, c) = if row <= col { (row, col) } else { (col, row) };
         let start = self.symbolic.col_ptr()[c];
         let end = self.symbolic.col_ptr()[c + 1];
-        self.symbolic.row_idx()[start..end].binary_search(&r).ok().map(|k| start + k)
+        self.symbolic.row_idx()[start..end]
+            .binary_search(&r)
+            .ok()
+            .map(|k| start + k)
     }
 
     /// Every stored entry as `(slot, row, col)` with `row <= col`.
@@ -186,7 +193,10 @@ impl SymmetricMatrix {
     /// If `(row, col)` is not in the pattern: that is a bug in the caller's pattern.
     pub fn add(&mut self, row: usize, col: usize, v: f64) {
         if row <= col {
-            let s = self.pattern.slot(row, col).unwrap_or_else(|| panic!("entry ({row}, {col}) is not in the pattern"));
+            let s = self
+                .pattern
+                .slot(row, col)
+                .unwrap_or_else(|| panic!("entry ({row}, {col}) is not in the pattern"));
             self.values[s] += v;
         }
     }
@@ -251,7 +261,11 @@ impl SymmetricMatrix {
     }
 
     fn check_finite(&self) -> Result<()> {
-        if self.values.iter().all(|v| v.is_finite()) { Ok(()) } else { Err(Error::NonFinite("matrix")) }
+        if self.values.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFinite("matrix"))
+        }
     }
 
     fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
@@ -288,10 +302,14 @@ impl CholeskySolver {
 
     /// The numeric factorisation of `a`, whose pattern must be this solver's.
     pub fn factorize(&self, a: &SymmetricMatrix) -> Result<CholeskyFactor> {
-        assert!(Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(), "pattern mismatch");
+        assert!(
+            Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(),
+            "pattern mismatch"
+        );
         a.check_finite()?;
-        let llt = faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(self.symbolic.clone(), a.as_faer(), Side::Upper)
-            .map_err(|_| Error::NotPositiveDefinite)?;
+        let llt =
+            faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(self.symbolic.clone(), a.as_faer(), Side::Upper)
+                .map_err(|_| Error::NotPositiveDefinite)?;
         Ok(CholeskyFactor { llt, n: a.dim() })
     }
 }
@@ -305,14 +323,16 @@ impl CholeskyFactor {
         use faer::linalg::solvers::SolveCore;
         assert_eq!(rhs.len(), self.n, "right-hand side length");
         let n = self.n;
-        self.llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1));
+        self.llt
+            .solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1));
     }
     /// Solves for several right-hand sides stored column-major (`n × k`).
     pub fn solve_many_in_place(&self, rhs: &mut [f64], k: usize) {
         use faer::linalg::solvers::SolveCore;
         assert_eq!(rhs.len(), self.n * k, "right-hand side length");
         let n = self.n;
-        self.llt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, k));
+        self.llt
+            .solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, k));
     }
 }
 
@@ -329,7 +349,11 @@ pub struct LdltSettings {
 
 impl Default for LdltSettings {
     fn default() -> Self {
-        Self { epsilon: 1e-13, delta: 1e-9, refinement_steps: 3 }
+        Self {
+            epsilon: 1e-13,
+            delta: 1e-9,
+            refinement_steps: 3,
+        }
     }
 }
 
@@ -361,7 +385,11 @@ impl LdltSolver {
     pub fn new(pattern: Arc<SymmetricPattern>, signs: Vec<i8>, settings: LdltSettings) -> Result<Self> {
         single_threaded();
         if signs.len() != pattern.dim() {
-            return Err(Error::DimensionMismatch { what: "LDLᵀ pivot signs", expected: pattern.dim(), got: signs.len() });
+            return Err(Error::DimensionMismatch {
+                what: "LDLᵀ pivot signs",
+                expected: pattern.dim(),
+                got: signs.len(),
+            });
         }
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic.as_ref(),
@@ -370,7 +398,12 @@ impl LdltSolver {
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| Error::Setup(format!("{e:?}")))?;
-        Ok(Self { pattern, symbolic: Arc::new(symbolic), signs, settings })
+        Ok(Self {
+            pattern,
+            symbolic: Arc::new(symbolic),
+            signs,
+            settings,
+        })
     }
 
     pub fn pattern(&self) -> &Arc<SymmetricPattern> {
@@ -389,7 +422,15 @@ impl LdltSolver {
             dynamic_regularization_epsilon: self.settings.epsilon,
         };
         self.symbolic
-            .factorize_numeric_ldlt::<f64>(&mut values, a.as_faer(), Side::Upper, reg, par, MemStack::new(&mut mem), params)
+            .factorize_numeric_ldlt::<f64>(
+                &mut values,
+                a.as_faer(),
+                Side::Upper,
+                reg,
+                par,
+                MemStack::new(&mut mem),
+                params,
+            )
             .map_err(|e| Error::Ldlt(format!("{e:?}")))?;
         Ok(LdltFactor {
             symbolic: self.symbolic.clone(),

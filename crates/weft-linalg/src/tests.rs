@@ -4,7 +4,12 @@ use weft_testkit::TestRng;
 /// A random SPD matrix on a random sparse pattern: B + Bᵀ made diagonally dominant.
 fn random_spd(n: usize, rng: &mut TestRng) -> SymmetricMatrix {
     let pairs: Vec<(usize, usize)> = (0..3 * n)
-        .map(|_| ((rng.uniform(0.0, n as f64)) as usize, (rng.uniform(0.0, n as f64)) as usize))
+        .map(|_| {
+            (
+                (rng.uniform(0.0, n as f64)) as usize,
+                (rng.uniform(0.0, n as f64)) as usize,
+            )
+        })
         .collect();
     let pattern = Arc::new(SymmetricPattern::new(n, pairs.iter().copied()));
     let mut a = SymmetricMatrix::zeros(pattern);

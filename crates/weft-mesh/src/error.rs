@@ -13,9 +13,18 @@ pub enum Error {
     #[error("vertex {vertex} has a non-finite coordinate ({x}, {y}, {z})")]
     NonFiniteCoordinate { vertex: usize, x: f64, y: f64, z: f64 },
     #[error("{element} {index} refers to vertex {vertex}, but there are only {num_vertices} vertices")]
-    IndexOutOfRange { element: &'static str, index: usize, vertex: usize, num_vertices: usize },
+    IndexOutOfRange {
+        element: &'static str,
+        index: usize,
+        vertex: usize,
+        num_vertices: usize,
+    },
     #[error("{element} {index} repeats vertex {vertex}")]
-    RepeatedIndex { element: &'static str, index: usize, vertex: usize },
+    RepeatedIndex {
+        element: &'static str,
+        index: usize,
+        vertex: usize,
+    },
     #[error("edge ({a}, {b}) is shared by {count} faces; a surface allows at most 2")]
     NonManifoldEdge { a: usize, b: usize, count: usize },
     #[error("edge ({a}, {b}) is traversed in the same direction by two faces: orientation is inconsistent")]
@@ -25,13 +34,25 @@ pub enum Error {
     #[error("tetrahedron {tet} has signed volume {volume:e}: {}", if *.volume < 0.0 { "inverted" } else { "zero volume" })]
     BadTetVolume { tet: usize, volume: f64 },
     #[error("{what}: expected {expected} entries, got {got}")]
-    LengthMismatch { what: &'static str, expected: usize, got: usize },
+    LengthMismatch {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("invalid generator parameter: {0}")]
     InvalidParameter(String),
     #[error("{path}:{line}: {message}")]
-    Parse { path: PathBuf, line: usize, message: String },
+    Parse {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
     #[error("unsupported mesh file extension {extension:?} for {path} (supported: {supported})")]
-    UnsupportedFormat { path: PathBuf, extension: String, supported: &'static str },
+    UnsupportedFormat {
+        path: PathBuf,
+        extension: String,
+        supported: &'static str,
+    },
     #[error("I/O error on {path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
 }

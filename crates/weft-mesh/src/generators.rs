@@ -20,7 +20,9 @@ pub fn sheet(n: usize, size: f64) -> Result<TriMesh> {
 
 fn sheet_arrays(n: usize, size: f64) -> Result<(Vec<Vector3<f64>>, Vec<[usize; 3]>)> {
     if n < 2 {
-        return Err(Error::InvalidParameter(format!("sheet needs n >= 2 vertices per side, got {n}")));
+        return Err(Error::InvalidParameter(format!(
+            "sheet needs n >= 2 vertices per side, got {n}"
+        )));
     }
     check_positive("sheet size", size)?;
     let h = size / (n - 1) as f64;
@@ -52,8 +54,16 @@ pub struct Hole {
 /// The two holes of the default holed sheet: 60 vertices removed from the 65-grid,
 /// leaving K = 4165 (Tan et al.'s SHEET-with-holes size).
 pub const DEFAULT_HOLES: [Hole; 2] = [
-    Hole { center_i: 21.0, center_j: 21.5, radius: 3.15 },
-    Hole { center_i: 43.0, center_j: 43.5, radius: 3.15 },
+    Hole {
+        center_i: 21.0,
+        center_j: 21.5,
+        radius: 3.15,
+    },
+    Hole {
+        center_i: 43.0,
+        center_j: 43.5,
+        radius: 3.15,
+    },
 ];
 
 /// `sheet(n, size)` with circular holes cut out (faces touching a removed vertex go,
@@ -63,7 +73,9 @@ pub fn sheet_with_holes(n: usize, size: f64, holes: &[Hole]) -> Result<TriMesh> 
     let removed: Vec<bool> = (0..n * n)
         .map(|v| {
             let (i, j) = ((v % n) as f64, (v / n) as f64);
-            holes.iter().any(|h| (i - h.center_i).powi(2) + (j - h.center_j).powi(2) < h.radius * h.radius)
+            holes
+                .iter()
+                .any(|h| (i - h.center_i).powi(2) + (j - h.center_j).powi(2) < h.radius * h.radius)
         })
         .collect();
     let faces: Vec<[usize; 3]> = faces.into_iter().filter(|f| f.iter().all(|&v| !removed[v])).collect();
@@ -118,7 +130,10 @@ pub struct BeamParams {
 impl Default for BeamParams {
     /// 12 × 6 × 6 cells over 1.0 × 0.5 × 0.5 m: 637 vertices, 2592 tetrahedra.
     fn default() -> Self {
-        Self { cells: [12, 6, 6], size: [1.0, 0.5, 0.5] }
+        Self {
+            cells: [12, 6, 6],
+            size: [1.0, 0.5, 0.5],
+        }
     }
 }
 
@@ -132,10 +147,14 @@ pub fn beam(params: &BeamParams) -> Result<TetMesh> {
 pub fn tapered_beam(params: &BeamParams, tip_scale: f64) -> Result<TetMesh> {
     check_positive("tip scale", tip_scale)?;
     let [lx, ly, lz] = params.size;
-    grid_tets(params, |_, _, _| true, |p| {
-        let s = 1.0 + (tip_scale - 1.0) * p.x / lx;
-        Vector3::new(p.x, ly / 2.0 + (p.y - ly / 2.0) * s, lz / 2.0 + (p.z - lz / 2.0) * s)
-    })
+    grid_tets(
+        params,
+        |_, _, _| true,
+        |p| {
+            let s = 1.0 + (tip_scale - 1.0) * p.x / lx;
+            Vector3::new(p.x, ly / 2.0 + (p.y - ly / 2.0) * s, lz / 2.0 + (p.z - lz / 2.0) * s)
+        },
+    )
 }
 
 /// A beam bent by `angle` radians about the Y axis: its centre line becomes a circular
@@ -143,7 +162,9 @@ pub fn tapered_beam(params: &BeamParams, tip_scale: f64) -> Result<TetMesh> {
 pub fn bent_beam(params: &BeamParams, angle: f64) -> Result<TetMesh> {
     let [lx, _, lz] = params.size;
     if !(angle.is_finite() && angle > 0.0) {
-        return Err(Error::InvalidParameter(format!("bend angle must be positive, got {angle}")));
+        return Err(Error::InvalidParameter(format!(
+            "bend angle must be positive, got {angle}"
+        )));
     }
     let radius = lx / angle;
     if radius <= lz / 2.0 {
@@ -152,13 +173,17 @@ pub fn bent_beam(params: &BeamParams, angle: f64) -> Result<TetMesh> {
             radius - lz / 2.0
         )));
     }
-    grid_tets(params, |_, _, _| true, |p| {
-        // Arc length x along the centre line z = lz/2, curving towards −Z about the
-        // axis through (0, ·, lz/2 − R); z' = z − lz/2 is the offset from the centre line.
-        let phi = p.x / radius;
-        let r = radius + (p.z - lz / 2.0);
-        Vector3::new(r * phi.sin(), p.y, lz / 2.0 - radius + r * phi.cos())
-    })
+    grid_tets(
+        params,
+        |_, _, _| true,
+        |p| {
+            // Arc length x along the centre line z = lz/2, curving towards −Z about the
+            // axis through (0, ·, lz/2 − R); z' = z − lz/2 is the offset from the centre line.
+            let phi = p.x / radius;
+            let r = radius + (p.z - lz / 2.0);
+            Vector3::new(r * phi.sin(), p.y, lz / 2.0 - radius + r * phi.cos())
+        },
+    )
 }
 
 /// A T-section beam: the cross-section is a flange (the top third of the cells in Z, full
@@ -179,7 +204,9 @@ fn check_positive(what: &str, x: f64) -> Result<()> {
     if x.is_finite() && x > 0.0 {
         Ok(())
     } else {
-        Err(Error::InvalidParameter(format!("{what} must be positive and finite, got {x}")))
+        Err(Error::InvalidParameter(format!(
+            "{what} must be positive and finite, got {x}"
+        )))
     }
 }
 
@@ -190,12 +217,19 @@ fn grid_tets(
 ) -> Result<TetMesh> {
     let [nx, ny, nz] = params.cells;
     if nx == 0 || ny == 0 || nz == 0 {
-        return Err(Error::InvalidParameter(format!("beam needs at least one cell per axis, got {:?}", params.cells)));
+        return Err(Error::InvalidParameter(format!(
+            "beam needs at least one cell per axis, got {:?}",
+            params.cells
+        )));
     }
     for (axis, s) in params.size.iter().enumerate() {
         check_positive(["beam length (X)", "beam width (Y)", "beam height (Z)"][axis], *s)?;
     }
-    let h = [params.size[0] / nx as f64, params.size[1] / ny as f64, params.size[2] / nz as f64];
+    let h = [
+        params.size[0] / nx as f64,
+        params.size[1] / ny as f64,
+        params.size[2] / nz as f64,
+    ];
     let vid = |i: usize, j: usize, k: usize| (k * (ny + 1) + j) * (nx + 1) + i;
     let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
     for k in 0..=nz {
@@ -237,7 +271,10 @@ fn grid_tets(
 }
 
 /// Drops unreferenced vertices, keeping the order of the rest.
-fn compact<const N: usize>(positions: &[Vector3<f64>], elements: &[[usize; N]]) -> (Vec<Vector3<f64>>, Vec<[usize; N]>) {
+fn compact<const N: usize>(
+    positions: &[Vector3<f64>],
+    elements: &[[usize; N]],
+) -> (Vec<Vector3<f64>>, Vec<[usize; N]>) {
     let mut used = vec![false; positions.len()];
     for e in elements {
         for &v in e {

@@ -29,13 +29,22 @@ impl Ord for Item {
 /// factor (≈ 8 % on a regular grid), which is all NNWarp's geodesic feature needs.
 pub fn geodesic_distances(positions: &[Vector3<f64>], adjacency: &Adjacency, sources: &[usize]) -> Result<Vec<f64>> {
     if adjacency.len() != positions.len() {
-        return Err(Error::LengthMismatch { what: "adjacency vertices", expected: positions.len(), got: adjacency.len() });
+        return Err(Error::LengthMismatch {
+            what: "adjacency vertices",
+            expected: positions.len(),
+            got: adjacency.len(),
+        });
     }
     let mut dist = vec![f64::INFINITY; positions.len()];
     let mut heap = BinaryHeap::new();
     for &s in sources {
         if s >= positions.len() {
-            return Err(Error::IndexOutOfRange { element: "geodesic source", index: s, vertex: s, num_vertices: positions.len() });
+            return Err(Error::IndexOutOfRange {
+                element: "geodesic source",
+                index: s,
+                vertex: s,
+                num_vertices: positions.len(),
+            });
         }
         dist[s] = 0.0;
         heap.push(Item(0.0, s));

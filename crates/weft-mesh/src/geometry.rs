@@ -16,15 +16,24 @@ pub fn triangle_area(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> f6
 
 /// Unit normal of counter-clockwise triangle `abc` (zero vector for a degenerate one).
 pub fn triangle_normal(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Vector3<f64> {
-    (b - a).cross(&(c - a)).try_normalize(0.0).unwrap_or_else(Vector3::zeros)
+    (b - a)
+        .cross(&(c - a))
+        .try_normalize(0.0)
+        .unwrap_or_else(Vector3::zeros)
 }
 
 pub fn face_areas(positions: &[Vector3<f64>], faces: &[[usize; 3]]) -> Vec<f64> {
-    faces.iter().map(|f| triangle_area(&positions[f[0]], &positions[f[1]], &positions[f[2]])).collect()
+    faces
+        .iter()
+        .map(|f| triangle_area(&positions[f[0]], &positions[f[1]], &positions[f[2]]))
+        .collect()
 }
 
 pub fn face_normals(positions: &[Vector3<f64>], faces: &[[usize; 3]]) -> Vec<Vector3<f64>> {
-    faces.iter().map(|f| triangle_normal(&positions[f[0]], &positions[f[1]], &positions[f[2]])).collect()
+    faces
+        .iter()
+        .map(|f| triangle_normal(&positions[f[0]], &positions[f[1]], &positions[f[2]]))
+        .collect()
 }
 
 /// Area-weighted vertex normals (unit length; zero for a vertex with only degenerate faces).
@@ -37,7 +46,9 @@ pub fn vertex_normals(positions: &[Vector3<f64>], faces: &[[usize; 3]]) -> Vec<V
             n[v] += w;
         }
     }
-    n.into_iter().map(|v| v.try_normalize(0.0).unwrap_or_else(Vector3::zeros)).collect()
+    n.into_iter()
+        .map(|v| v.try_normalize(0.0).unwrap_or_else(Vector3::zeros))
+        .collect()
 }
 
 /// Lumped vertex masses of a surface: each face gives a third of `density · area` to each
@@ -66,7 +77,11 @@ pub fn cotangent_weights(positions: &[Vector3<f64>], faces: &[[usize; 3]], topol
     for (fi, f) in faces.iter().enumerate() {
         let area = triangle_area(&positions[f[0]], &positions[f[1]], &positions[f[2]]);
         if !(area > 0.0) {
-            return Err(Error::DegenerateFace { face: fi, area, tolerance: 0.0 });
+            return Err(Error::DegenerateFace {
+                face: fi,
+                area,
+                tolerance: 0.0,
+            });
         }
         for k in 0..3 {
             // Edge (k, k+1) is opposite corner k+2.
@@ -80,7 +95,11 @@ pub fn cotangent_weights(positions: &[Vector3<f64>], faces: &[[usize; 3]], topol
 /// The cotangent Laplacian `L` as `(row, col, value)` triplets (duplicates summed by the
 /// consumer): `L_ij = −w_ij`, `L_ii = Σ_j w_ij`, so every row sums to zero and `L` is
 /// positive semi-definite on a Delaunay mesh.
-pub fn cotangent_laplacian(positions: &[Vector3<f64>], faces: &[[usize; 3]], topology: &Topology) -> Result<Vec<(usize, usize, f64)>> {
+pub fn cotangent_laplacian(
+    positions: &[Vector3<f64>],
+    faces: &[[usize; 3]],
+    topology: &Topology,
+) -> Result<Vec<(usize, usize, f64)>> {
     let w = cotangent_weights(positions, faces, topology)?;
     let mut t = Vec::with_capacity(4 * w.len());
     for (&[a, b], &wij) in topology.edges.iter().zip(&w) {
@@ -116,7 +135,12 @@ pub fn dihedral_angles(positions: &[Vector3<f64>], topology: &Topology) -> Vec<f
         .iter()
         .map(|h| {
             let [x0, x1] = h.edge_vertices;
-            dihedral_angle(&positions[x0], &positions[x1], &positions[h.opposite[0]], &positions[h.opposite[1]])
+            dihedral_angle(
+                &positions[x0],
+                &positions[x1],
+                &positions[h.opposite[0]],
+                &positions[h.opposite[1]],
+            )
         })
         .collect()
 }
@@ -127,7 +151,9 @@ pub fn tet_signed_volume(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>, d
 }
 
 pub fn tet_volumes(positions: &[Vector3<f64>], tets: &[[usize; 4]]) -> Vec<f64> {
-    tets.iter().map(|t| tet_signed_volume(&positions[t[0]], &positions[t[1]], &positions[t[2]], &positions[t[3]])).collect()
+    tets.iter()
+        .map(|t| tet_signed_volume(&positions[t[0]], &positions[t[1]], &positions[t[2]], &positions[t[3]]))
+        .collect()
 }
 
 /// Shape matrix `D = [x1 − x0, x2 − x0, x3 − x0]` (columns) of a tetrahedron; the

@@ -36,4 +36,4 @@ pub mod trimesh;
 pub use error::{Error, Result};
 pub use tetmesh::{BoundarySurface, TetMesh};
 pub use topology::{Adjacency, Hinge, TetTopology, Topology};
-pub use trimesh::{flatten, unflatten, TriMesh};
+pub use trimesh::{TriMesh, flatten, unflatten};

@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
 use crate::geometry::tet_signed_volume;
-use crate::trimesh::{check_finite, check_indices, TriMesh};
+use crate::trimesh::{TriMesh, check_finite, check_indices};
 
 /// A tetrahedral mesh: vertex positions (metres) and positively oriented tetrahedra.
 ///
@@ -72,7 +72,14 @@ impl TetMesh {
     pub fn volume(&self) -> f64 {
         self.tets
             .iter()
-            .map(|t| tet_signed_volume(&self.positions[t[0]], &self.positions[t[1]], &self.positions[t[2]], &self.positions[t[3]]))
+            .map(|t| {
+                tet_signed_volume(
+                    &self.positions[t[0]],
+                    &self.positions[t[1]],
+                    &self.positions[t[2]],
+                    &self.positions[t[3]],
+                )
+            })
             .sum()
     }
 
@@ -89,8 +96,7 @@ impl TetMesh {
                 count.entry(key).and_modify(|e| e.0 += 1).or_insert((1, f));
             }
         }
-        let mut faces: Vec<[usize; 3]> =
-            count.into_values().filter(|(n, _)| *n == 1).map(|(_, f)| f).collect();
+        let mut faces: Vec<[usize; 3]> = count.into_values().filter(|(n, _)| *n == 1).map(|(_, f)| f).collect();
         faces.sort_unstable();
         faces
     }
@@ -113,6 +119,9 @@ impl TetMesh {
             })
             .collect();
         let positions = volume_vertex.iter().map(|&v| self.positions[v]).collect();
-        Ok(BoundarySurface { mesh: TriMesh::new(positions, faces)?, volume_vertex })
+        Ok(BoundarySurface {
+            mesh: TriMesh::new(positions, faces)?,
+            volume_vertex,
+        })
     }
 }

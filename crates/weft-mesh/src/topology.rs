@@ -105,8 +105,7 @@ impl Topology {
         let faces = mesh.faces();
         let nv = mesh.num_vertices();
         let edges = unique_edges(faces);
-        let index: HashMap<[usize; 2], usize> =
-            edges.iter().enumerate().map(|(i, &e)| (e, i)).collect();
+        let index: HashMap<[usize; 2], usize> = edges.iter().enumerate().map(|(i, &e)| (e, i)).collect();
 
         let mut edge_faces = vec![[None, None]; edges.len()];
         let mut face_edges = Vec::with_capacity(faces.len());
@@ -117,7 +116,11 @@ impl Topology {
                 fe[k] = e;
                 let slot = &mut edge_faces[e];
                 // TriMesh validation guarantees at most two faces per edge.
-                if slot[0].is_none() { slot[0] = Some(fi) } else { slot[1] = Some(fi) }
+                if slot[0].is_none() {
+                    slot[0] = Some(fi)
+                } else {
+                    slot[1] = Some(fi)
+                }
             }
             face_edges.push(fe);
         }
@@ -146,12 +149,25 @@ impl Topology {
         }
         let vertex_faces = Adjacency::from_lists(vf);
         let boundary_loops = boundary_loops(faces, &edge_faces, &face_edges);
-        Self { edges, edge_faces, face_edges, hinges, one_ring, two_ring, vertex_faces, boundary_loops }
+        Self {
+            edges,
+            edge_faces,
+            face_edges,
+            hinges,
+            one_ring,
+            two_ring,
+            vertex_faces,
+            boundary_loops,
+        }
     }
 
     /// Edges with a single face.
     pub fn boundary_edges(&self) -> impl Iterator<Item = usize> + '_ {
-        self.edge_faces.iter().enumerate().filter(|(_, f)| f[1].is_none()).map(|(e, _)| e)
+        self.edge_faces
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f[1].is_none())
+            .map(|(e, _)| e)
     }
 
     /// `true` for vertices on a boundary edge.
@@ -255,9 +271,7 @@ impl TetTopology {
         let mut edges: Vec<[usize; 2]> = mesh
             .tets()
             .iter()
-            .flat_map(|t| {
-                [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| sorted2(t[a], t[b]))
-            })
+            .flat_map(|t| [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| sorted2(t[a], t[b])))
             .collect();
         edges.sort_unstable();
         edges.dedup();

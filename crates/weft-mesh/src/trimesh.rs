@@ -38,7 +38,7 @@ impl TriMesh {
 
     /// Builds a mesh from flat arrays (`3 * V` coordinates).
     pub fn from_flat(coords: &[f64], faces: Vec<[usize; 3]>) -> Result<Self> {
-        if coords.len() % 3 != 0 {
+        if !coords.len().is_multiple_of(3) {
             return Err(Error::LengthMismatch {
                 what: "flat coordinates (multiple of 3)",
                 expected: coords.len() / 3 * 3,
@@ -58,7 +58,10 @@ impl TriMesh {
             });
         }
         check_finite(&positions)?;
-        Ok(Self { positions, faces: self.faces.clone() })
+        Ok(Self {
+            positions,
+            faces: self.faces.clone(),
+        })
     }
 
     pub fn positions(&self) -> &[Vector3<f64>] {
@@ -81,9 +84,16 @@ impl TriMesh {
 
     /// Errors on the first face whose area is at or below `tolerance` (m²).
     pub fn check_face_areas(&self, tolerance: f64) -> Result<()> {
-        for (f, a) in geometry::face_areas(&self.positions, &self.faces).into_iter().enumerate() {
+        for (f, a) in geometry::face_areas(&self.positions, &self.faces)
+            .into_iter()
+            .enumerate()
+        {
             if a.is_nan() || a <= tolerance {
-                return Err(Error::DegenerateFace { face: f, area: a, tolerance });
+                return Err(Error::DegenerateFace {
+                    face: f,
+                    area: a,
+                    tolerance,
+                });
             }
         }
         Ok(())
@@ -109,7 +119,12 @@ impl TriMesh {
 pub(crate) fn check_finite(positions: &[Vector3<f64>]) -> Result<()> {
     for (i, p) in positions.iter().enumerate() {
         if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-            return Err(Error::NonFiniteCoordinate { vertex: i, x: p.x, y: p.y, z: p.z });
+            return Err(Error::NonFiniteCoordinate {
+                vertex: i,
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            });
         }
     }
     Ok(())
@@ -123,10 +138,19 @@ pub(crate) fn check_indices<const N: usize>(
     for (index, e) in elements.iter().enumerate() {
         for (k, &v) in e.iter().enumerate() {
             if v >= num_vertices {
-                return Err(Error::IndexOutOfRange { element, index, vertex: v, num_vertices });
+                return Err(Error::IndexOutOfRange {
+                    element,
+                    index,
+                    vertex: v,
+                    num_vertices,
+                });
             }
             if e[..k].contains(&v) {
-                return Err(Error::RepeatedIndex { element, index, vertex: v });
+                return Err(Error::RepeatedIndex {
+                    element,
+                    index,
+                    vertex: v,
+                });
             }
         }
     }

@@ -5,8 +5,8 @@ use std::path::Path;
 use nalgebra::Vector3;
 use weft_mesh::geometry::*;
 use weft_mesh::io::*;
-use weft_mesh::{generators, Error, TetMesh, TetTopology, Topology, TriMesh};
-use weft_testkit::{assert_close, TestRng};
+use weft_mesh::{Error, TetMesh, TetTopology, Topology, TriMesh, generators};
+use weft_testkit::{TestRng, assert_close};
 
 fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
     Vector3::new(x, y, z)
@@ -14,7 +14,11 @@ fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
 
 /// Two right triangles forming the unit square: (0,1,2), (0,2,3).
 fn square() -> TriMesh {
-    TriMesh::new(vec![v(0., 0., 0.), v(1., 0., 0.), v(1., 1., 0.), v(0., 1., 0.)], vec![[0, 1, 2], [0, 2, 3]]).unwrap()
+    TriMesh::new(
+        vec![v(0., 0., 0.), v(1., 0., 0.), v(1., 1., 0.), v(0., 1., 0.)],
+        vec![[0, 1, 2], [0, 2, 3]],
+    )
+    .unwrap()
 }
 
 fn tmp(name: &str) -> std::path::PathBuf {
@@ -32,20 +36,40 @@ fn validation_names_each_kind_of_bad_input() {
     assert!(matches!(TriMesh::new(p.clone(), vec![]), Err(Error::NoElements { .. })));
     assert!(matches!(
         TriMesh::new(p.clone(), vec![[0, 1, 3]]),
-        Err(Error::IndexOutOfRange { index: 0, vertex: 3, num_vertices: 3, .. })
+        Err(Error::IndexOutOfRange {
+            index: 0,
+            vertex: 3,
+            num_vertices: 3,
+            ..
+        })
     ));
-    assert!(matches!(TriMesh::new(p.clone(), vec![[0, 1, 1]]), Err(Error::RepeatedIndex { vertex: 1, .. })));
+    assert!(matches!(
+        TriMesh::new(p.clone(), vec![[0, 1, 1]]),
+        Err(Error::RepeatedIndex { vertex: 1, .. })
+    ));
     let mut bad = p.clone();
     bad[1].y = f64::NAN;
-    assert!(matches!(TriMesh::new(bad, vec![[0, 1, 2]]), Err(Error::NonFiniteCoordinate { vertex: 1, .. })));
+    assert!(matches!(
+        TriMesh::new(bad, vec![[0, 1, 2]]),
+        Err(Error::NonFiniteCoordinate { vertex: 1, .. })
+    ));
     let mut inf = p.clone();
     inf[2].z = f64::INFINITY;
-    assert!(matches!(TriMesh::new(inf, vec![[0, 1, 2]]), Err(Error::NonFiniteCoordinate { vertex: 2, .. })));
+    assert!(matches!(
+        TriMesh::new(inf, vec![[0, 1, 2]]),
+        Err(Error::NonFiniteCoordinate { vertex: 2, .. })
+    ));
 }
 
 #[test]
 fn three_faces_on_an_edge_is_non_manifold() {
-    let p = vec![v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.), v(0., -1., 0.), v(0., 0., 1.)];
+    let p = vec![
+        v(0., 0., 0.),
+        v(1., 0., 0.),
+        v(0., 1., 0.),
+        v(0., -1., 0.),
+        v(0., 0., 1.),
+    ];
     let e = TriMesh::new(p, vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]]).unwrap_err();
     assert!(matches!(e, Error::NonManifoldEdge { a: 0, b: 1, count: 3 }), "{e}");
 }
@@ -60,9 +84,15 @@ fn flipped_face_is_inconsistent_orientation() {
 #[test]
 fn zero_area_face_is_reported_where_area_is_needed() {
     let m = TriMesh::new(vec![v(0., 0., 0.), v(1., 0., 0.), v(2., 0., 0.)], vec![[0, 1, 2]]).unwrap();
-    assert!(matches!(m.check_face_areas(1e-12), Err(Error::DegenerateFace { face: 0, .. })));
+    assert!(matches!(
+        m.check_face_areas(1e-12),
+        Err(Error::DegenerateFace { face: 0, .. })
+    ));
     let topo = Topology::new(&m);
-    assert!(matches!(cotangent_weights(m.positions(), m.faces(), &topo), Err(Error::DegenerateFace { .. })));
+    assert!(matches!(
+        cotangent_weights(m.positions(), m.faces(), &topo),
+        Err(Error::DegenerateFace { .. })
+    ));
     assert!(square().check_face_areas(1e-12).is_ok());
 }
 
@@ -71,7 +101,10 @@ fn inverted_and_flat_tets_are_rejected() {
     let p = vec![v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.), v(0., 0., 1.)];
     assert!(TetMesh::new(p.clone(), vec![[0, 1, 2, 3]]).is_ok());
     let e = TetMesh::new(p.clone(), vec![[0, 2, 1, 3]]).unwrap_err();
-    assert!(matches!(e, Error::BadTetVolume { tet: 0, volume } if volume < 0.0), "{e}");
+    assert!(
+        matches!(e, Error::BadTetVolume { tet: 0, volume } if volume < 0.0),
+        "{e}"
+    );
     assert!(e.to_string().contains("inverted"));
     let flat = vec![v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.), v(1., 1., 0.)];
     let e = TetMesh::new(flat, vec![[0, 1, 2, 3]]).unwrap_err();
@@ -84,13 +117,19 @@ fn random_garbage_never_panics() {
     let mut rng = TestRng::new(42);
     for round in 0..2000 {
         let nv = (rng.uniform(0.0, 8.0)) as usize;
-        let mut p: Vec<Vector3<f64>> = (0..nv).map(|_| v(rng.uniform(-1., 1.), rng.uniform(-1., 1.), rng.uniform(-1., 1.))).collect();
+        let mut p: Vec<Vector3<f64>> = (0..nv)
+            .map(|_| v(rng.uniform(-1., 1.), rng.uniform(-1., 1.), rng.uniform(-1., 1.)))
+            .collect();
         if round % 7 == 0 && nv > 0 {
             p[0].x = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][round % 3];
         }
         let nf = (rng.uniform(0.0, 6.0)) as usize;
-        let faces: Vec<[usize; 3]> = (0..nf).map(|_| [0; 3].map(|_| rng.uniform(0.0, 9.0) as usize)).collect();
-        let tets: Vec<[usize; 4]> = (0..nf).map(|_| [0; 4].map(|_| rng.uniform(0.0, 9.0) as usize)).collect();
+        let faces: Vec<[usize; 3]> = (0..nf)
+            .map(|_| [0; 3].map(|_| rng.uniform(0.0, 9.0) as usize))
+            .collect();
+        let tets: Vec<[usize; 4]> = (0..nf)
+            .map(|_| [0; 4].map(|_| rng.uniform(0.0, 9.0) as usize))
+            .collect();
         if let Ok(m) = TriMesh::new(p.clone(), faces) {
             let t = Topology::new(&m);
             let _ = cotangent_weights(m.positions(), m.faces(), &t);
@@ -165,7 +204,12 @@ fn euler_characteristic_of_generated_meshes() {
     assert_eq!(generators::sheet(33, 1.0).unwrap().euler_characteristic(), 1);
     assert_eq!(generators::ball(48, 32, 0.5).unwrap().euler_characteristic(), 2);
     // A disc with k holes: χ = 1 − k.
-    assert_eq!(generators::sheet_with_holes(65, 1.0, &generators::DEFAULT_HOLES).unwrap().euler_characteristic(), -1);
+    assert_eq!(
+        generators::sheet_with_holes(65, 1.0, &generators::DEFAULT_HOLES)
+            .unwrap()
+            .euler_characteristic(),
+        -1
+    );
     // Tet boundary of a box is a sphere.
     let beam = generators::beam(&generators::BeamParams::default()).unwrap();
     assert_eq!(beam.boundary_surface().unwrap().mesh.euler_characteristic(), 2);
@@ -173,7 +217,11 @@ fn euler_characteristic_of_generated_meshes() {
 
 #[test]
 fn tet_topology_and_boundary_of_one_cube() {
-    let cube = generators::beam(&generators::BeamParams { cells: [1, 1, 1], size: [1.0, 1.0, 1.0] }).unwrap();
+    let cube = generators::beam(&generators::BeamParams {
+        cells: [1, 1, 1],
+        size: [1.0, 1.0, 1.0],
+    })
+    .unwrap();
     assert_eq!(cube.num_tets(), 6);
     assert_eq!(cube.num_vertices(), 8);
     let t = TetTopology::new(&cube);
@@ -225,7 +273,12 @@ fn square_geometry_by_hand() {
 fn dihedral_angle_sign_and_value() {
     // Hinge along +X; x2 on +Y (first face normal +Z), x3 on −Y.
     let (x0, x1, x2) = (v(0., 0., 0.), v(1., 0., 0.), v(0., 1., 0.));
-    assert_close!(dihedral_angle(&x0, &x1, &x2, &v(0., -1., 0.)), 0.0, rtol = 0.0, atol = 1e-15);
+    assert_close!(
+        dihedral_angle(&x0, &x1, &x2, &v(0., -1., 0.)),
+        0.0,
+        rtol = 0.0,
+        atol = 1e-15
+    );
     for theta in [0.3f64, 1.0, 2.5, 3.0] {
         // Lift x3 along +Z (valley towards the normal): negative by our convention.
         let x3 = v(0., -theta.cos(), theta.sin());
@@ -241,24 +294,40 @@ fn dihedral_angles_of_a_ball_are_all_convex() {
     let t = Topology::new(&ball);
     let a = dihedral_angles(ball.positions(), &t);
     assert_eq!(a.len(), t.edges.len(), "closed surface: every edge is a hinge");
-    let (lo, hi) = a.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+    let (lo, hi) = a
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
     // Quad diagonals of the UV sphere are flat (planar trapezoids); every other hinge is
     // convex, which our sign convention makes positive.
-    assert!(lo > -1e-12 && hi < 0.5, "convex surface has small non-negative angles, got [{lo}, {hi}]");
+    assert!(
+        lo > -1e-12 && hi < 0.5,
+        "convex surface has small non-negative angles, got [{lo}, {hi}]"
+    );
     let convex = a.iter().filter(|&&x| x > 1e-3).count();
-    assert_eq!(convex, t.edges.len() - 48 * 31, "all but the 48 × 31 quad diagonals are strictly convex");
+    assert_eq!(
+        convex,
+        t.edges.len() - 48 * 31,
+        "all but the 48 × 31 quad diagonals are strictly convex"
+    );
 }
 
 #[test]
 fn cotangent_laplacian_rows_sum_to_zero_and_reproduce_linear_functions() {
-    for m in [generators::sheet(17, 1.0).unwrap(), generators::ball(48, 32, 0.5).unwrap()] {
+    for m in [
+        generators::sheet(17, 1.0).unwrap(),
+        generators::ball(48, 32, 0.5).unwrap(),
+    ] {
         let t = Topology::new(&m);
         let trip = cotangent_laplacian(m.positions(), m.faces(), &t).unwrap();
         let mut row = vec![0.0; m.num_vertices()];
         for &(r, _, val) in &trip {
             row[r] += val;
         }
-        assert!(row.iter().all(|s| s.abs() < 1e-12), "row sums {:?}", row.iter().fold(0.0f64, |a, b| a.max(b.abs())));
+        assert!(
+            row.iter().all(|s| s.abs() < 1e-12),
+            "row sums {:?}",
+            row.iter().fold(0.0f64, |a, b| a.max(b.abs()))
+        );
     }
     // On a flat sheet, L x = 0 at interior vertices for linear x (linear precision).
     let m = generators::sheet(9, 1.0).unwrap();
@@ -320,7 +389,10 @@ fn other_tet_shapes_are_valid_and_have_the_expected_volume() {
     let t = generators::t_beam(&p).unwrap();
     // 6×6 cross-section: flange = top 2 rows × 6, web = middle 2 columns × 4 rows below.
     assert_close!(t.volume(), 0.25 * (12.0 + 8.0) / 36.0, rtol = 1e-12, atol = 0.0);
-    assert!(generators::bent_beam(&p, 10.0).is_err(), "inner radius would be negative");
+    assert!(
+        generators::bent_beam(&p, 10.0).is_err(),
+        "inner radius would be negative"
+    );
 }
 
 #[test]
@@ -328,7 +400,12 @@ fn generator_sizes_match_the_papers() {
     assert_eq!(generators::sheet(65, 1.0).unwrap().num_vertices(), 4225);
     assert_eq!(generators::sheet(33, 1.0).unwrap().num_vertices(), 1089);
     assert_eq!(generators::sheet(17, 1.0).unwrap().num_vertices(), 289);
-    assert_eq!(generators::sheet_with_holes(65, 1.0, &generators::DEFAULT_HOLES).unwrap().num_vertices(), 4165);
+    assert_eq!(
+        generators::sheet_with_holes(65, 1.0, &generators::DEFAULT_HOLES)
+            .unwrap()
+            .num_vertices(),
+        4165
+    );
     assert_eq!(generators::ball(48, 32, 0.5).unwrap().num_vertices(), 1538);
     assert!(generators::sheet(1, 1.0).is_err());
     assert!(generators::ball(2, 3, 1.0).is_err());
@@ -381,17 +458,33 @@ fn bad_obj_files_give_line_numbered_errors() {
     assert!(e.to_string().contains("t.obj:3"));
     let out_of_range = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n";
     let e = parse_obj(out_of_range, Path::new("r.obj")).unwrap_err();
-    assert!(matches!(e, Error::Parse { line: 4, .. }) && e.to_string().contains("out of range"), "{e}");
+    assert!(
+        matches!(e, Error::Parse { line: 4, .. }) && e.to_string().contains("out of range"),
+        "{e}"
+    );
     let nan = "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n";
-    assert!(matches!(parse_obj(nan, Path::new("n.obj")), Err(Error::NonFiniteCoordinate { vertex: 1, .. })));
+    assert!(matches!(
+        parse_obj(nan, Path::new("n.obj")),
+        Err(Error::NonFiniteCoordinate { vertex: 1, .. })
+    ));
     let junk = "v 0 0 zero\n";
-    assert!(matches!(parse_obj(junk, Path::new("j.obj")), Err(Error::Parse { line: 1, .. })));
-    assert!(matches!(read_obj(Path::new("/nonexistent/x.obj")), Err(Error::Io { .. })));
+    assert!(matches!(
+        parse_obj(junk, Path::new("j.obj")),
+        Err(Error::Parse { line: 1, .. })
+    ));
+    assert!(matches!(
+        read_obj(Path::new("/nonexistent/x.obj")),
+        Err(Error::Io { .. })
+    ));
 }
 
 #[test]
 fn tetgen_round_trip_and_one_based_files() {
-    let beam = generators::t_beam(&generators::BeamParams { cells: [4, 3, 3], size: [1.0, 0.3, 0.3] }).unwrap();
+    let beam = generators::t_beam(&generators::BeamParams {
+        cells: [4, 3, 3],
+        size: [1.0, 0.3, 0.3],
+    })
+    .unwrap();
     let path = tmp("tbeam.node");
     write_tetgen(&path, &beam).unwrap();
     let back = read_tetgen(&path.with_extension("ele")).unwrap();
@@ -419,7 +512,11 @@ fn ply_and_vtk_writers_produce_well_formed_files() {
     assert!(text.contains("element vertex 4") && text.contains("property uchar red"));
     assert_eq!(text.lines().filter(|l| l.starts_with("3 ")).count(), 2);
     assert!(write_ply(&ply, m.positions(), m.faces(), Some(&[[0, 0, 0]; 3])).is_err());
-    let beam = generators::beam(&generators::BeamParams { cells: [2, 1, 1], size: [2.0, 1.0, 1.0] }).unwrap();
+    let beam = generators::beam(&generators::BeamParams {
+        cells: [2, 1, 1],
+        size: [2.0, 1.0, 1.0],
+    })
+    .unwrap();
     let vtk = tmp("beam.vtk");
     let disp = vec![0.0; 3 * beam.num_vertices()];
     write_vtk_tets(&vtk, beam.positions(), beam.tets(), &[("displacement", 3, &disp)]).unwrap();

@@ -8,16 +8,34 @@ pub enum Error {
     Mesh(#[from] weft_mesh::Error),
     #[error(transparent)]
     Linalg(#[from] weft_linalg::Error),
-    #[error("Newton did not converge: residual {residual:e} N after {iterations} iterations (tolerance {tolerance:e} N)")]
-    NotConverged { iterations: usize, residual: f64, tolerance: f64 },
+    #[error(
+        "Newton did not converge: residual {residual:e} N after {iterations} iterations (tolerance {tolerance:e} N)"
+    )]
+    NotConverged {
+        iterations: usize,
+        residual: f64,
+        tolerance: f64,
+    },
     #[error("non-finite {what} (at DOF {dof}); the step was rejected")]
     NonFinite { what: &'static str, dof: usize },
     #[error("invalid parameter {name} = {value}: {reason}")]
-    InvalidParameter { name: &'static str, value: f64, reason: &'static str },
+    InvalidParameter {
+        name: &'static str,
+        value: f64,
+        reason: &'static str,
+    },
     #[error("{what}: expected {expected} entries, got {got}")]
-    LengthMismatch { what: &'static str, expected: usize, got: usize },
+    LengthMismatch {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("vertex index {index} out of range ({num_vertices} vertices) in {what}")]
-    VertexOutOfRange { what: &'static str, index: usize, num_vertices: usize },
+    VertexOutOfRange {
+        what: &'static str,
+        index: usize,
+        num_vertices: usize,
+    },
     #[error("scene error: {0}")]
     Scene(String),
 }
@@ -29,7 +47,11 @@ pub(crate) fn check_positive(name: &'static str, value: f64) -> Result<()> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(Error::InvalidParameter { name, value, reason: "must be positive and finite" })
+        Err(Error::InvalidParameter {
+            name,
+            value,
+            reason: "must be positive and finite",
+        })
     }
 }
 
@@ -37,6 +59,10 @@ pub(crate) fn check_nonnegative(name: &'static str, value: f64) -> Result<()> {
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(Error::InvalidParameter { name, value, reason: "must be non-negative and finite" })
+        Err(Error::InvalidParameter {
+            name,
+            value,
+            reason: "must be non-negative and finite",
+        })
     }
 }

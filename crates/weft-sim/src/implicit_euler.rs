@@ -12,7 +12,7 @@
 use std::time::Instant;
 
 use crate::energies::Inertia;
-use crate::energy::{total_gradient, Energy};
+use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result};
 use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
 
@@ -47,10 +47,17 @@ impl ImplicitEuler {
     /// (grasp points / anchors).
     pub fn new(masses: Vec<f64>, dt: f64, x0: Vec<f64>, terms: Vec<Box<dyn Energy>>, fixed: Vec<bool>) -> Result<Self> {
         if x0.len() != 3 * masses.len() {
-            return Err(Error::LengthMismatch { what: "initial positions", expected: 3 * masses.len(), got: x0.len() });
+            return Err(Error::LengthMismatch {
+                what: "initial positions",
+                expected: 3 * masses.len(),
+                got: x0.len(),
+            });
         }
         if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "initial position", dof: i });
+            return Err(Error::NonFinite {
+                what: "initial position",
+                dof: i,
+            });
         }
         let inertia = Inertia::new(masses, dt, &x0)?;
         let solver = {
@@ -58,11 +65,22 @@ impl ImplicitEuler {
             all.push(&inertia);
             NewtonSolver::new(x0.len(), &all, fixed.clone())?
         };
-        // Default tolerance: a millionth of the heaviest vertex's weight — scale-aware
-        // across mesh resolutions and materials.
+        // Default tolerance: 1e-5 of the heaviest vertex's weight — scale-aware across
+        // mesh resolutions and materials.
         let max_weight = inertia.masses().iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
-        let settings = NewtonSettings { tolerance: 1e-6 * max_weight.max(1e-12), ..NewtonSettings::default() };
-        Ok(Self { inertia, terms, solver, fixed, previous: x0.clone(), current: x0, settings })
+        let settings = NewtonSettings {
+            tolerance: 1e-5 * max_weight.max(1e-12),
+            ..NewtonSettings::default()
+        };
+        Ok(Self {
+            inertia,
+            terms,
+            solver,
+            fixed,
+            previous: x0.clone(),
+            current: x0,
+            settings,
+        })
     }
 
     pub fn positions(&self) -> &[f64] {
@@ -90,7 +108,11 @@ impl ImplicitEuler {
     /// Resets the state to `x` at rest (`p_{m−1} = p_m = x`).
     pub fn set_state(&mut self, x: &[f64], previous: &[f64]) -> Result<()> {
         if x.len() != self.current.len() || previous.len() != self.current.len() {
-            return Err(Error::LengthMismatch { what: "state", expected: self.current.len(), got: x.len() });
+            return Err(Error::LengthMismatch {
+                what: "state",
+                expected: self.current.len(),
+                got: x.len(),
+            });
         }
         self.current.copy_from_slice(x);
         self.previous.copy_from_slice(previous);
@@ -104,10 +126,15 @@ impl ImplicitEuler {
         let start = Instant::now();
         for &(dof, value) in prescribed {
             if dof >= self.current.len() || !self.fixed[dof] {
-                return Err(Error::Scene(format!("DOF {dof} is prescribed but not in the fixed set")));
+                return Err(Error::Scene(format!(
+                    "DOF {dof} is prescribed but not in the fixed set"
+                )));
             }
             if !value.is_finite() {
-                return Err(Error::NonFinite { what: "prescribed position", dof });
+                return Err(Error::NonFinite {
+                    what: "prescribed position",
+                    dof,
+                });
             }
         }
         self.inertia.set_history(&self.current, &self.previous)?;
@@ -134,12 +161,19 @@ impl ImplicitEuler {
             .iter()
             .enumerate()
             .map(|(i, m)| {
-                let v2: f64 = (0..3).map(|k| ((x[3 * i + k] - self.current[3 * i + k]) / dt).powi(2)).sum();
+                let v2: f64 = (0..3)
+                    .map(|k| ((x[3 * i + k] - self.current[3 * i + k]) / dt).powi(2))
+                    .sum();
                 0.5 * m * v2
             })
             .sum();
         self.previous = std::mem::replace(&mut self.current, x);
-        Ok(StepReport { newton, potential_energy, kinetic_energy, seconds: start.elapsed().as_secs_f64() })
+        Ok(StepReport {
+            newton,
+            potential_energy,
+            kinetic_energy,
+            seconds: start.elapsed().as_secs_f64(),
+        })
     }
 
     /// `L_phys(p_{m−2}, p_{m−1}, p, q)` (Tan et al. Eq. 4) for any frame `p` (with the
@@ -153,7 +187,11 @@ impl ImplicitEuler {
     pub fn l_phys_gradient(&self, prev2: &[f64], prev1: &[f64], p: &[f64], grad: &mut [f64]) -> Result<()> {
         let inertia = self.history_inertia(prev2, prev1)?;
         if grad.len() != p.len() {
-            return Err(Error::LengthMismatch { what: "gradient buffer", expected: p.len(), got: grad.len() });
+            return Err(Error::LengthMismatch {
+                what: "gradient buffer",
+                expected: p.len(),
+                got: grad.len(),
+            });
         }
         let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
         all.push(&inertia);
@@ -166,14 +204,22 @@ impl ImplicitEuler {
     pub fn m_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {
         let mut g = vec![0.0; p.len()];
         self.l_phys_gradient(prev2, prev1, p, &mut g)?;
-        Ok(g.iter().zip(&self.fixed).filter(|(_, f)| !**f).map(|(g, _)| g * g).sum())
+        Ok(g.iter()
+            .zip(&self.fixed)
+            .filter(|(_, f)| !**f)
+            .map(|(g, _)| g * g)
+            .sum())
     }
 
     fn history_inertia(&self, prev2: &[f64], prev1: &[f64]) -> Result<Inertia> {
         let n = self.current.len();
         for (what, v) in [("p_{m-2}", prev2), ("p_{m-1}", prev1)] {
             if v.len() != n {
-                return Err(Error::LengthMismatch { what, expected: n, got: v.len() });
+                return Err(Error::LengthMismatch {
+                    what,
+                    expected: n,
+                    got: v.len(),
+                });
             }
         }
         let mut inertia = self.inertia.clone();

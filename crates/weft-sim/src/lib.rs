@@ -32,8 +32,10 @@ pub mod energy;
 pub mod error;
 pub mod implicit_euler;
 pub mod newton;
+pub mod scene;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
 pub use implicit_euler::{ImplicitEuler, StepReport};
-pub use newton::{NewtonReport, NewtonSettings, NewtonSolver};
+pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
+pub use scene::{BUILTIN_SCENES, ClothSimulation, Frame, MotionLabel, Scene};

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
-use crate::energy::{total_gradient, total_value, Energy};
+use crate::energy::{Energy, total_gradient, total_value};
 use crate::error::{Error, Result};
 
 /// Settings of [`NewtonSolver`].
@@ -20,13 +20,32 @@ pub struct NewtonSettings {
     pub armijo: f64,
     /// Halvings of the step before the line search gives up.
     pub max_line_search: usize,
-    /// Project element Hessians to PSD (needed whenever an energy is non-convex).
-    pub project_hessian: bool,
+    /// When to project element Hessians to PSD (needed whenever an energy is non-convex).
+    pub projection: HessianProjection,
+}
+
+/// How Newton makes its matrix positive definite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HessianProjection {
+    /// Always project every element block (robust, linear convergence near folds).
+    Always,
+    /// Use the exact Hessian; project only when it fails to factorise (quadratic
+    /// convergence whenever the exact Hessian is positive definite).
+    WhenIndefinite,
+    /// Never project: a non-PD matrix gets a diagonal shift instead.
+    Never,
 }
 
 impl Default for NewtonSettings {
     fn default() -> Self {
-        Self { tolerance: 1e-6, max_iterations: 100, armijo: 1e-4, max_line_search: 40, project_hessian: true }
+        Self {
+            tolerance: 1e-6,
+            max_iterations: 100,
+            armijo: 1e-4,
+            max_line_search: 40,
+            projection: HessianProjection::WhenIndefinite,
+        }
     }
 }
 
@@ -72,10 +91,18 @@ impl NewtonSolver {
     /// Prepares a solver for `terms` over `num_dofs` DOFs; `fixed[i]` holds DOF `i`.
     pub fn new(num_dofs: usize, terms: &[&dyn Energy], fixed: Vec<bool>) -> Result<Self> {
         if fixed.len() != num_dofs {
-            return Err(Error::LengthMismatch { what: "fixed-DOF mask", expected: num_dofs, got: fixed.len() });
+            return Err(Error::LengthMismatch {
+                what: "fixed-DOF mask",
+                expected: num_dofs,
+                got: fixed.len(),
+            });
         }
-        if num_dofs % 3 != 0 {
-            return Err(Error::LengthMismatch { what: "DOFs (3 per vertex)", expected: num_dofs / 3 * 3, got: num_dofs });
+        if !num_dofs.is_multiple_of(3) {
+            return Err(Error::LengthMismatch {
+                what: "DOFs (3 per vertex)",
+                expected: num_dofs / 3 * 3,
+                got: num_dofs,
+            });
         }
         let mut pairs = Vec::new();
         for t in terms {
@@ -83,7 +110,11 @@ impl NewtonSolver {
         }
         let nv = num_dofs / 3;
         if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= nv || b >= nv) {
-            return Err(Error::VertexOutOfRange { what: "energy term", index: a.max(b), num_vertices: nv });
+            return Err(Error::VertexOutOfRange {
+                what: "energy term",
+                index: a.max(b),
+                num_vertices: nv,
+            });
         }
         let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(nv, pairs));
         let cholesky = CholeskySolver::new(pattern.clone())?;
@@ -104,7 +135,11 @@ impl NewtonSolver {
     /// Replaces the fixed-DOF mask (the pattern does not depend on it).
     pub fn set_fixed(&mut self, fixed: Vec<bool>) -> Result<()> {
         if fixed.len() != self.fixed.len() {
-            return Err(Error::LengthMismatch { what: "fixed-DOF mask", expected: self.fixed.len(), got: fixed.len() });
+            return Err(Error::LengthMismatch {
+                what: "fixed-DOF mask",
+                expected: self.fixed.len(),
+                got: fixed.len(),
+            });
         }
         self.fixed = fixed;
         Ok(())
@@ -112,7 +147,10 @@ impl NewtonSolver {
 
     /// Max-norm of the free-DOF entries of `grad`.
     pub fn free_residual(&self, grad: &[f64]) -> f64 {
-        grad.iter().zip(&self.fixed).filter(|(_, f)| !**f).fold(0.0, |m, (g, _)| m.max(g.abs()))
+        grad.iter()
+            .zip(&self.fixed)
+            .filter(|(_, f)| !**f)
+            .fold(0.0, |m, (g, _)| m.max(g.abs()))
     }
 
     /// The assembled (unconstrained) Hessian at the last evaluated point, for adjoint solves.
@@ -120,22 +158,35 @@ impl NewtonSolver {
         &self.hessian
     }
 
-    /// Assembles the (optionally projected) Hessian of `terms` at `x` with fixed DOFs
-    /// eliminated, factorises it (shifting the diagonal if needed) and returns the factor.
+    /// Assembles the Hessian of `terms` at `x` (projected per `projection`) with fixed
+    /// DOFs eliminated, factorises it (shifting the diagonal if needed) and returns the
+    /// factor and the number of diagonal shifts that were needed.
     pub fn factorize_at(
         &mut self,
         terms: &[&dyn Energy],
         x: &[f64],
-        project: bool,
+        projection: HessianProjection,
     ) -> Result<(weft_linalg::CholeskyFactor, usize)> {
-        self.hessian.set_zero();
-        for t in terms {
-            t.add_hessian(x, project, &mut self.hessian);
+        let attempts: &[bool] = match projection {
+            HessianProjection::Always => &[true],
+            HessianProjection::WhenIndefinite => &[false, true],
+            HessianProjection::Never => &[false],
+        };
+        for (k, &project) in attempts.iter().enumerate() {
+            self.hessian.set_zero();
+            for t in terms {
+                t.add_hessian(x, project, &mut self.hessian);
+            }
+            self.hessian.constrain_dofs(&self.fixed);
+            match self.cholesky.factorize(&self.hessian) {
+                Ok(f) => return Ok((f, 0)),
+                Err(weft_linalg::Error::NotPositiveDefinite) if k + 1 < attempts.len() => continue,
+                Err(weft_linalg::Error::NotPositiveDefinite) => break,
+                Err(e) => return Err(e.into()),
+            }
         }
-        self.hessian.constrain_dofs(&self.fixed);
-        match self.cholesky.factorize(&self.hessian) {
-            Ok(f) => Ok((f, 0)),
-            Err(weft_linalg::Error::NotPositiveDefinite) => {
+        {
+            {
                 // Singular or indefinite (free rigid modes, an unprojected saddle): shift
                 // the diagonal by growing multiples of its mean until it factorises. The
                 // shift changes only the step, never the minimiser.
@@ -152,26 +203,40 @@ impl NewtonSolver {
                 }
                 Err(weft_linalg::Error::NotPositiveDefinite.into())
             }
-            Err(e) => Err(e.into()),
         }
     }
 
     /// Minimises `Σ terms` from `x` (updated in place). Fixed DOFs keep their values.
-    pub fn minimize(&mut self, terms: &[&dyn Energy], x: &mut [f64], settings: &NewtonSettings) -> Result<NewtonReport> {
+    pub fn minimize(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+        settings: &NewtonSettings,
+    ) -> Result<NewtonReport> {
         let start = Instant::now();
         let n = x.len();
         if n != self.fixed.len() {
-            return Err(Error::LengthMismatch { what: "positions", expected: self.fixed.len(), got: n });
+            return Err(Error::LengthMismatch {
+                what: "positions",
+                expected: self.fixed.len(),
+                got: n,
+            });
         }
         if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "initial position", dof: i });
+            return Err(Error::NonFinite {
+                what: "initial position",
+                dof: i,
+            });
         }
         let mut energy = total_value(terms, x);
         let mut grad = std::mem::take(&mut self.grad);
         total_gradient(terms, x, &mut grad);
         if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
             self.grad = grad;
-            return Err(Error::NonFinite { what: "initial gradient", dof: i });
+            return Err(Error::NonFinite {
+                what: "initial gradient",
+                dof: i,
+            });
         }
         let initial_residual = self.free_residual(&grad);
         let mut residual = initial_residual;
@@ -194,7 +259,7 @@ impl NewtonSolver {
                     });
                 }
                 report.iterations += 1;
-                let (factor, shifts) = self.factorize_at(terms, x, settings.project_hessian)?;
+                let (factor, shifts) = self.factorize_at(terms, x, settings.projection)?;
                 report.regularizations += shifts;
                 for i in 0..n {
                     self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
@@ -216,7 +281,10 @@ impl NewtonSolver {
                         self.trial[i] = x[i] + alpha * self.dir[i];
                     }
                     let e = total_value(terms, &self.trial);
-                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope {
+                    // Armijo with round-off slack: near the minimiser the true decrease
+                    // falls below the rounding error of E itself.
+                    let slack = 64.0 * f64::EPSILON * energy.abs();
+                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope + slack {
                         energy = e;
                         accepted = true;
                         break;
@@ -234,7 +302,7 @@ impl NewtonSolver {
                     total_gradient(terms, &self.trial, &mut grad);
                     let e = total_value(terms, &self.trial);
                     let r = self.free_residual(&grad);
-                    if e.is_finite() && r.is_finite() && r < 0.5 * residual {
+                    if e.is_finite() && r.is_finite() && r < residual {
                         energy = e;
                         accepted = true;
                     } else {
@@ -253,7 +321,10 @@ impl NewtonSolver {
                 x.copy_from_slice(&self.trial);
                 total_gradient(terms, x, &mut grad);
                 if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
-                    return Err(Error::NonFinite { what: "gradient", dof: i });
+                    return Err(Error::NonFinite {
+                        what: "gradient",
+                        dof: i,
+                    });
                 }
                 residual = self.free_residual(&grad);
             }

@@ -34,7 +34,10 @@ const READABLE: &str = ".obj, .node, .ele";
 const WRITABLE: &str = ".obj, .ply, .vtk, .node";
 
 fn extension(path: &Path) -> String {
-    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
 }
 
 /// Reads a mesh, choosing the format by extension (`.obj` surface, `.node`/`.ele` TetGen volume).
@@ -42,7 +45,11 @@ pub fn read_mesh(path: &Path) -> Result<AnyMesh> {
     match extension(path).as_str() {
         "obj" => read_obj(path).map(AnyMesh::Surface),
         "node" | "ele" => read_tetgen(path).map(AnyMesh::Volume),
-        e => Err(Error::UnsupportedFormat { path: path.into(), extension: e.into(), supported: READABLE }),
+        e => Err(Error::UnsupportedFormat {
+            path: path.into(),
+            extension: e.into(),
+            supported: READABLE,
+        }),
     }
 }
 
@@ -67,16 +74,27 @@ pub fn write_volume(path: &Path, mesh: &TetMesh) -> Result<()> {
         "vtk" => write_vtk_tets(path, mesh.positions(), mesh.tets(), &[]),
         "node" | "ele" => write_tetgen(path, mesh),
         "obj" | "ply" => write_surface(path, &mesh.boundary_surface()?.mesh),
-        e => Err(Error::UnsupportedFormat { path: path.into(), extension: e.into(), supported: WRITABLE }),
+        e => Err(Error::UnsupportedFormat {
+            path: path.into(),
+            extension: e.into(),
+            supported: WRITABLE,
+        }),
     }
 }
 
 pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
-    move |source| Error::Io { path: path.to_path_buf(), source }
+    move |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 pub(crate) fn parse_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
-    Error::Parse { path: PathBuf::from(path), line, message: message.into() }
+    Error::Parse {
+        path: PathBuf::from(path),
+        line,
+        message: message.into(),
+    }
 }
 
 /// Writes through a buffer, then renames into place, so a failed write never leaves a

@@ -25,10 +25,12 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<TriMesh> {
             Some("v") => {
                 let mut c = [0.0; 3];
                 for (k, slot) in c.iter_mut().enumerate() {
-                    let tok = it.next().ok_or_else(|| {
-                        parse_err(path, line, format!("vertex has {k} coordinates, expected 3"))
-                    })?;
-                    *slot = tok.parse().map_err(|_| parse_err(path, line, format!("bad coordinate {tok:?}")))?;
+                    let tok = it
+                        .next()
+                        .ok_or_else(|| parse_err(path, line, format!("vertex has {k} coordinates, expected 3")))?;
+                    *slot = tok
+                        .parse()
+                        .map_err(|_| parse_err(path, line, format!("bad coordinate {tok:?}")))?;
                 }
                 positions.push(Vector3::from(c));
             }
@@ -36,9 +38,17 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<TriMesh> {
                 let mut poly = Vec::new();
                 for tok in it {
                     let first = tok.split('/').next().unwrap_or("");
-                    let idx: i64 = first.parse().map_err(|_| parse_err(path, line, format!("bad face index {tok:?}")))?;
+                    let idx: i64 = first
+                        .parse()
+                        .map_err(|_| parse_err(path, line, format!("bad face index {tok:?}")))?;
                     let n = positions.len() as i64;
-                    let v = if idx > 0 { idx - 1 } else if idx < 0 { n + idx } else { -1 };
+                    let v = if idx > 0 {
+                        idx - 1
+                    } else if idx < 0 {
+                        n + idx
+                    } else {
+                        -1
+                    };
                     if v < 0 || v >= n {
                         return Err(parse_err(
                             path,
@@ -49,7 +59,11 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<TriMesh> {
                     poly.push(v as usize);
                 }
                 if poly.len() < 3 {
-                    return Err(parse_err(path, line, format!("face has {} vertices, expected at least 3", poly.len())));
+                    return Err(parse_err(
+                        path,
+                        line,
+                        format!("face has {} vertices, expected at least 3", poly.len()),
+                    ));
                 }
                 for k in 1..poly.len() - 1 {
                     faces.push([poly[0], poly[k], poly[k + 1]]);

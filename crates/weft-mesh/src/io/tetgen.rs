@@ -20,7 +20,8 @@ fn data_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
 
 fn num<T: std::str::FromStr>(path: &Path, line: usize, tok: Option<&&str>, what: &str) -> Result<T> {
     let tok = tok.ok_or_else(|| parse_err(path, line, format!("missing {what}")))?;
-    tok.parse().map_err(|_| parse_err(path, line, format!("bad {what} {tok:?}")))
+    tok.parse()
+        .map_err(|_| parse_err(path, line, format!("bad {what} {tok:?}")))
 }
 
 /// Reads a TetGen `.node` + `.ele` pair (either path, or the shared stem with either
@@ -41,15 +42,27 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh> {
     let mut positions = Vec::with_capacity(count);
     let mut base = None;
     for _ in 0..count {
-        let (l, t) = lines
-            .next()
-            .ok_or_else(|| parse_err(&node, ntext.lines().count(), format!("file ends after {} of {count} points", positions.len())))?;
+        let (l, t) = lines.next().ok_or_else(|| {
+            parse_err(
+                &node,
+                ntext.lines().count(),
+                format!("file ends after {} of {count} points", positions.len()),
+            )
+        })?;
         let id: usize = num(&node, l, t.first(), "point index")?;
         let b = *base.get_or_insert(id.min(1));
         if id != positions.len() + b {
-            return Err(parse_err(&node, l, format!("point index {id}, expected {}", positions.len() + b)));
+            return Err(parse_err(
+                &node,
+                l,
+                format!("point index {id}, expected {}", positions.len() + b),
+            ));
         }
-        let c = [num(&node, l, t.get(1), "x")?, num(&node, l, t.get(2), "y")?, num(&node, l, t.get(3), "z")?];
+        let c = [
+            num(&node, l, t.get(1), "x")?,
+            num(&node, l, t.get(2), "y")?,
+            num(&node, l, t.get(3), "z")?,
+        ];
         positions.push(Vector3::from(c));
     }
     let base = base.unwrap_or(0);
@@ -59,18 +72,33 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh> {
     let count: usize = num(&ele, hl, header.first(), "tetrahedron count")?;
     let per: usize = num(&ele, hl, header.get(1), "nodes per tetrahedron")?;
     if per != 4 {
-        return Err(parse_err(&ele, hl, format!("{per} nodes per tetrahedron; only linear (4-node) tets are supported")));
+        return Err(parse_err(
+            &ele,
+            hl,
+            format!("{per} nodes per tetrahedron; only linear (4-node) tets are supported"),
+        ));
     }
     let mut tets = Vec::with_capacity(count);
     for _ in 0..count {
-        let (l, t) = lines
-            .next()
-            .ok_or_else(|| parse_err(&ele, etext.lines().count(), format!("file ends after {} of {count} tetrahedra", tets.len())))?;
+        let (l, t) = lines.next().ok_or_else(|| {
+            parse_err(
+                &ele,
+                etext.lines().count(),
+                format!("file ends after {} of {count} tetrahedra", tets.len()),
+            )
+        })?;
         let mut tet = [0usize; 4];
         for k in 0..4 {
             let v: usize = num(&ele, l, t.get(k + 1), "node index")?;
             if v < base || v - base >= positions.len() {
-                return Err(parse_err(&ele, l, format!("node index {v} is out of range ({} points, base {base})", positions.len())));
+                return Err(parse_err(
+                    &ele,
+                    l,
+                    format!(
+                        "node index {v} is out of range ({} points, base {base})",
+                        positions.len()
+                    ),
+                ));
             }
             tet[k] = v - base;
         }

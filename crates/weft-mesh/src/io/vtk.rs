@@ -61,11 +61,21 @@ fn write_vtk<const N: usize>(
 }
 
 /// Legacy VTK unstructured grid of tetrahedra (cell type 10) with optional point fields.
-pub fn write_vtk_tets(path: &Path, positions: &[Vector3<f64>], tets: &[[usize; 4]], fields: &[PointField<'_>]) -> Result<()> {
+pub fn write_vtk_tets(
+    path: &Path,
+    positions: &[Vector3<f64>],
+    tets: &[[usize; 4]],
+    fields: &[PointField<'_>],
+) -> Result<()> {
     write_vtk(path, positions, tets, 10, fields)
 }
 
 /// Legacy VTK unstructured grid of triangles (cell type 5) with optional point fields.
-pub fn write_vtk_triangles(path: &Path, positions: &[Vector3<f64>], faces: &[[usize; 3]], fields: &[PointField<'_>]) -> Result<()> {
+pub fn write_vtk_triangles(
+    path: &Path,
+    positions: &[Vector3<f64>],
+    faces: &[[usize; 3]],
+    fields: &[PointField<'_>],
+) -> Result<()> {
     write_vtk(path, positions, faces, 5, fields)
 }

@@ -1,10 +1,9 @@
 //! Inertia, gravity and other external forces, and zero-length springs to targets.
 
-
 use weft_linalg::SymmetricMatrix;
 
-use crate::energy::{vertex, Energy};
-use crate::error::{check_nonnegative, check_positive, Error, Result};
+use crate::energy::{Energy, vertex};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
 
 /// Zero-length springs pulling each vertex to a target: `E = ½ Σ_i w_i ‖x_i − t_i‖²`
 /// (weights in N/m). Used for inertia, for attachment to a network's prediction (Geng et
@@ -19,7 +18,11 @@ pub struct ZeroLengthSprings {
 impl ZeroLengthSprings {
     pub fn new(name: &'static str, weights: Vec<f64>, targets: Vec<f64>) -> Result<Self> {
         if targets.len() != 3 * weights.len() {
-            return Err(Error::LengthMismatch { what: "spring targets", expected: 3 * weights.len(), got: targets.len() });
+            return Err(Error::LengthMismatch {
+                what: "spring targets",
+                expected: 3 * weights.len(),
+                got: targets.len(),
+            });
         }
         for &w in &weights {
             check_nonnegative("zero-length spring weight", w)?;
@@ -34,14 +37,22 @@ impl ZeroLengthSprings {
     }
     pub fn set_targets(&mut self, targets: &[f64]) -> Result<()> {
         if targets.len() != self.targets.len() {
-            return Err(Error::LengthMismatch { what: "spring targets", expected: self.targets.len(), got: targets.len() });
+            return Err(Error::LengthMismatch {
+                what: "spring targets",
+                expected: self.targets.len(),
+                got: targets.len(),
+            });
         }
         self.targets.copy_from_slice(targets);
         Ok(())
     }
     pub fn set_weights(&mut self, weights: &[f64]) -> Result<()> {
         if weights.len() != self.weights.len() {
-            return Err(Error::LengthMismatch { what: "spring weights", expected: self.weights.len(), got: weights.len() });
+            return Err(Error::LengthMismatch {
+                what: "spring weights",
+                expected: self.weights.len(),
+                got: weights.len(),
+            });
         }
         self.weights.copy_from_slice(weights);
         Ok(())
@@ -103,7 +114,11 @@ impl Inertia {
     /// Sets the history `p_{m−1}`, `p_{m−2}`.
     pub fn set_history(&mut self, prev1: &[f64], prev2: &[f64]) -> Result<()> {
         if prev1.len() != prev2.len() {
-            return Err(Error::LengthMismatch { what: "history frames", expected: prev1.len(), got: prev2.len() });
+            return Err(Error::LengthMismatch {
+                what: "history frames",
+                expected: prev1.len(),
+                got: prev2.len(),
+            });
         }
         let y: Vec<f64> = prev1.iter().zip(prev2).map(|(a, b)| 2.0 * a - b).collect();
         self.springs.set_targets(&y)
@@ -141,7 +156,10 @@ pub struct ConstantForce {
 impl ConstantForce {
     pub fn new(name: &'static str, forces: Vec<f64>) -> Result<Self> {
         if let Some(i) = forces.iter().position(|f| !f.is_finite()) {
-            return Err(Error::NonFinite { what: "external force", dof: i });
+            return Err(Error::NonFinite {
+                what: "external force",
+                dof: i,
+            });
         }
         Ok(Self { name, forces })
     }
@@ -167,4 +185,3 @@ impl Energy for ConstantForce {
     }
     fn add_hessian(&self, _x: &[f64], _project: bool, _hessian: &mut SymmetricMatrix) {}
 }
-

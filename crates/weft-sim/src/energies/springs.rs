@@ -6,8 +6,8 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 use weft_linalg::SymmetricMatrix;
 use weft_mesh::{Topology, TriMesh};
 
-use crate::energy::{vertex, Energy};
-use crate::error::{check_nonnegative, Error, Result};
+use crate::energy::{Energy, vertex};
+use crate::error::{Error, Result, check_nonnegative};
 
 /// A set of springs between vertex pairs with rest lengths (m) and stiffnesses (N/m).
 #[derive(Debug, Clone)]
@@ -21,25 +21,50 @@ pub struct Springs {
 impl Springs {
     pub fn new(name: &'static str, pairs: Vec<[usize; 2]>, rest: Vec<f64>, stiffness: Vec<f64>) -> Result<Self> {
         if rest.len() != pairs.len() {
-            return Err(Error::LengthMismatch { what: "spring rest lengths", expected: pairs.len(), got: rest.len() });
+            return Err(Error::LengthMismatch {
+                what: "spring rest lengths",
+                expected: pairs.len(),
+                got: rest.len(),
+            });
         }
         if stiffness.len() != pairs.len() {
-            return Err(Error::LengthMismatch { what: "spring stiffnesses", expected: pairs.len(), got: stiffness.len() });
+            return Err(Error::LengthMismatch {
+                what: "spring stiffnesses",
+                expected: pairs.len(),
+                got: stiffness.len(),
+            });
         }
         for (&l, &k) in rest.iter().zip(&stiffness) {
             check_nonnegative("spring rest length", l)?;
             check_nonnegative("spring stiffness", k)?;
         }
-        Ok(Self { name, pairs, rest, stiffness })
+        Ok(Self {
+            name,
+            pairs,
+            rest,
+            stiffness,
+        })
     }
 
     /// Springs on `pairs` at their lengths in `rest_positions`, all of stiffness `k`.
-    pub fn at_rest(name: &'static str, rest_positions: &[Vector3<f64>], pairs: Vec<[usize; 2]>, k: f64) -> Result<Self> {
+    pub fn at_rest(
+        name: &'static str,
+        rest_positions: &[Vector3<f64>],
+        pairs: Vec<[usize; 2]>,
+        k: f64,
+    ) -> Result<Self> {
         let n = rest_positions.len();
         if let Some(&[a, b]) = pairs.iter().find(|p| p[0] >= n || p[1] >= n) {
-            return Err(Error::VertexOutOfRange { what: "spring", index: a.max(b), num_vertices: n });
+            return Err(Error::VertexOutOfRange {
+                what: "spring",
+                index: a.max(b),
+                num_vertices: n,
+            });
         }
-        let rest = pairs.iter().map(|&[a, b]| (rest_positions[a] - rest_positions[b]).norm()).collect();
+        let rest = pairs
+            .iter()
+            .map(|&[a, b]| (rest_positions[a] - rest_positions[b]).norm())
+            .collect();
         let count = pairs.len();
         Self::new(name, pairs, rest, vec![k; count])
     }
@@ -53,7 +78,14 @@ impl Springs {
     /// `k` (N/m) — Tan et al. Fig. 1c.
     pub fn bend_two_ring(mesh: &TriMesh, topology: &Topology, k: f64) -> Result<Self> {
         let pairs = (0..mesh.num_vertices())
-            .flat_map(|i| topology.two_ring.neighbors(i).iter().filter(move |&&j| i < j).map(move |&j| [i, j]))
+            .flat_map(|i| {
+                topology
+                    .two_ring
+                    .neighbors(i)
+                    .iter()
+                    .filter(move |&&j| i < j)
+                    .map(move |&j| [i, j])
+            })
             .collect();
         Self::at_rest("bend springs", mesh.positions(), pairs, k)
     }
@@ -83,7 +115,11 @@ impl Springs {
         if l <= 1e-300 {
             // Coincident endpoints: direction undefined; the isotropic limit keeps the
             // matrix bounded (and PSD when projected).
-            return if project { Matrix3::zeros() } else { -k * (self.rest[s] > 0.0) as i32 as f64 * Matrix3::identity() };
+            return if project {
+                Matrix3::zeros()
+            } else {
+                -k * (self.rest[s] > 0.0) as i32 as f64 * Matrix3::identity()
+            };
         }
         let dd = d * d.transpose() / (l * l);
         let mut t = 1.0 - self.rest[s] / l;

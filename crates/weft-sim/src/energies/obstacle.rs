@@ -1,0 +1,215 @@
+//! Penalty contact against a static obstacle: `E = ½ k Σ_i max(0, δ − d(x_i))²`, with
+//! `d` the signed distance to the obstacle (positive outside) and `δ` a contact margin
+//! (m). The energy is C¹ with a Lipschitz gradient, which is what Newton with a line
+//! search needs; at rest a vertex pressed by force `f` sits `f/k` inside the margin, so
+//! the *penetration tolerance* of a scene is `max(0, f_max/k − δ)` — with the defaults
+//! (δ = 5 mm, k = 1e4 N/m per vertex) nothing enters the obstacle under cloth weight.
+//! Only vertices are tested against the obstacle (no edge–face contact); meshes are fine
+//! enough in weft's scenes for that to hold.
+
+use nalgebra::{Matrix3, Vector3};
+use parry3d_f64::math::Vector as PVec;
+use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::shape::{TriMesh as ParryMesh, TriMeshFlags, TrianglePointLocation};
+use weft_linalg::SymmetricMatrix;
+
+use crate::energy::{Energy, vertex};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
+
+/// The shape of a static obstacle.
+#[derive(Debug, Clone)]
+pub enum ObstacleShape {
+    Sphere {
+        center: Vector3<f64>,
+        radius: f64,
+    },
+    /// Half-space `{x : (x − point) · normal ≤ 0}` is solid; `normal` points out of it.
+    Plane {
+        point: Vector3<f64>,
+        normal: Vector3<f64>,
+    },
+    /// A closed, outward-oriented triangle mesh.
+    Mesh(Box<ParryMesh>),
+}
+
+/// Closest-feature query: signed distance, outward normal and the curvature `∇²d`
+/// (zero where the closest feature is flat).
+struct Contact {
+    distance: f64,
+    normal: Vector3<f64>,
+    curvature: Matrix3<f64>,
+}
+
+impl ObstacleShape {
+    /// A triangle-mesh obstacle from weft's mesh (must be closed and outward-oriented for
+    /// inside/outside to be meaningful).
+    pub fn mesh(mesh: &weft_mesh::TriMesh) -> Result<Self> {
+        let vertices = mesh.positions().iter().map(|p| PVec::new(p.x, p.y, p.z)).collect();
+        let indices = mesh.faces().iter().map(|f| f.map(|v| v as u32)).collect();
+        let m = ParryMesh::with_flags(vertices, indices, TriMeshFlags::ORIENTED)
+            .map_err(|e| Error::Scene(format!("obstacle mesh rejected by parry3d: {e:?}")))?;
+        Ok(Self::Mesh(Box::new(m)))
+    }
+
+    fn contact(&self, x: &Vector3<f64>) -> Contact {
+        match self {
+            Self::Sphere { center, radius } => {
+                let r = x - center;
+                let l = r.norm();
+                if l < 1e-12 * radius.max(1.0) {
+                    return Contact {
+                        distance: -radius,
+                        normal: Vector3::z(),
+                        curvature: Matrix3::zeros(),
+                    };
+                }
+                let n = r / l;
+                Contact {
+                    distance: l - radius,
+                    normal: n,
+                    curvature: (Matrix3::identity() - n * n.transpose()) / l,
+                }
+            }
+            Self::Plane { point, normal } => Contact {
+                distance: (x - point).dot(normal),
+                normal: *normal,
+                curvature: Matrix3::zeros(),
+            },
+            Self::Mesh(m) => {
+                let q = PVec::new(x.x, x.y, x.z);
+                let (proj, (tri, loc)) = m.project_local_point_and_get_location(q, false);
+                let p = Vector3::new(proj.point.x, proj.point.y, proj.point.z);
+                let d = x - p;
+                let l = d.norm();
+                let sign = if proj.is_inside { -1.0 } else { 1.0 };
+                let face_normal = || {
+                    let t = m.triangle(tri);
+                    let n = (t.b - t.a).cross(t.c - t.a).normalize();
+                    Vector3::new(n.x, n.y, n.z)
+                };
+                if l < 1e-12 {
+                    return Contact {
+                        distance: 0.0,
+                        normal: face_normal(),
+                        curvature: Matrix3::zeros(),
+                    };
+                }
+                let n = sign * d / l;
+                // Closest feature a vertex: d is the distance to a point (sphere-like
+                // curvature). On a face: flat. On an edge: curvature only across the edge
+                // (Gauss–Newton there: the across-edge term is dropped).
+                let curvature = match loc {
+                    TrianglePointLocation::OnVertex(_) => sign * (Matrix3::identity() - n * n.transpose()) / l,
+                    _ => Matrix3::zeros(),
+                };
+                Contact {
+                    distance: sign * l,
+                    normal: n,
+                    curvature,
+                }
+            }
+        }
+    }
+}
+
+/// Penalty contact energy of all vertices against one obstacle.
+#[derive(Debug, Clone)]
+pub struct ObstaclePenalty {
+    shape: ObstacleShape,
+    stiffness: f64,
+    margin: f64,
+    num_vertices: usize,
+}
+
+impl ObstaclePenalty {
+    /// `stiffness` k (N/m per vertex), `margin` δ (m).
+    pub fn new(shape: ObstacleShape, num_vertices: usize, stiffness: f64, margin: f64) -> Result<Self> {
+        check_positive("obstacle stiffness (N/m)", stiffness)?;
+        check_nonnegative("obstacle margin (m)", margin)?;
+        if let ObstacleShape::Sphere { radius, .. } = &shape {
+            check_positive("sphere radius (m)", *radius)?;
+        }
+        if let ObstacleShape::Plane { normal, .. } = &shape {
+            if !(normal.norm() > 0.0) {
+                return Err(Error::InvalidParameter {
+                    name: "plane normal length",
+                    value: normal.norm(),
+                    reason: "must be non-zero",
+                });
+            }
+        }
+        let shape = match shape {
+            ObstacleShape::Plane { point, normal } => ObstacleShape::Plane {
+                point,
+                normal: normal.normalize(),
+            },
+            s => s,
+        };
+        Ok(Self {
+            shape,
+            stiffness,
+            margin,
+            num_vertices,
+        })
+    }
+
+    pub fn shape(&self) -> &ObstacleShape {
+        &self.shape
+    }
+
+    /// Signed distance of a point to the obstacle surface (m, positive outside).
+    pub fn signed_distance(&self, x: &Vector3<f64>) -> f64 {
+        self.shape.contact(x).distance
+    }
+}
+
+impl Energy for ObstaclePenalty {
+    fn name(&self) -> &'static str {
+        "obstacle"
+    }
+    fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
+    fn value(&self, x: &[f64]) -> f64 {
+        (0..self.num_vertices)
+            .map(|i| {
+                let phi = self.margin - self.shape.contact(&vertex(x, i)).distance;
+                if phi > 0.0 {
+                    0.5 * self.stiffness * phi * phi
+                } else {
+                    0.0
+                }
+            })
+            .sum()
+    }
+    fn add_gradient(&self, x: &[f64], grad: &mut [f64]) {
+        for i in 0..self.num_vertices {
+            let c = self.shape.contact(&vertex(x, i));
+            let phi = self.margin - c.distance;
+            if phi > 0.0 {
+                // ∇E = k φ ∇φ = −k φ n.
+                for k in 0..3 {
+                    grad[3 * i + k] -= self.stiffness * phi * c.normal[k];
+                }
+            }
+        }
+    }
+    fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix) {
+        for i in 0..self.num_vertices {
+            let c = self.shape.contact(&vertex(x, i));
+            let phi = self.margin - c.distance;
+            if phi > 0.0 {
+                // ∇²E = k (n nᵀ − φ ∇²d). Outside a convex feature ∇²d is PSD, so the
+                // second term is negative: projection drops it.
+                let mut h = self.stiffness * c.normal * c.normal.transpose();
+                let curv = -self.stiffness * phi * c.curvature;
+                if !project || curv.symmetric_eigenvalues().iter().all(|&l| l >= 0.0) {
+                    h += curv;
+                }
+                for a in 0..3 {
+                    for b in 0..3 {
+                        hessian.add(3 * i + a, 3 * i + b, h[(a, b)]);
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,365 @@
+//! `cargo xtask acap`: ACAP features of meshes to `.npy`, and back to OBJ meshes.
+//!
+//! The work is weft-acap's (`AcapFeatures`, `PoissonPseudoInverse`); this module reads
+//! and writes files and shows progress.
+
+use std::fs;
+use std::io::{BufReader, BufWriter};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail, ensure};
+use indicatif::{ProgressBar, ProgressStyle};
+use npyz::WriterBuilder;
+use weft_acap::nalgebra::Vector3;
+use weft_acap::{AcapFeatures, AcapSettings, Feature, PoissonPseudoInverse};
+use weft_mesh::TriMesh;
+
+/// ACAP features (Tan et al. §III-A) and their inverse (§IV-A, Eq. 6).
+#[derive(Debug, clap::Subcommand)]
+pub enum AcapCommand {
+    /// Encode deformed meshes into ACAP features: an f64 .npy of shape [frames, vertices, 9]
+    /// holding (K12, K13, K23, S11, S12, S13, S22, S23, S33) per vertex (docs/ACAP.md).
+    Encode {
+        /// Rest mesh (.obj), or a `simulate` output directory holding `rest.obj` and
+        /// `frames.safetensors` (an f64 tensor `positions` of shape [frames, vertices, 3]),
+        /// whose frames are then encoded before any --mesh.
+        #[arg(long, value_name = "REST.obj|DIR")]
+        rest: PathBuf,
+        /// A deformed mesh (.obj) with the rest mesh's connectivity; repeat for several frames.
+        #[arg(long = "mesh", value_name = "DEF.obj")]
+        meshes: Vec<PathBuf>,
+        /// Output features (.npy, [frames, vertices, 9], f64).
+        #[arg(long, value_name = "F.npy")]
+        out: PathBuf,
+        /// Grasp-point vertex indices, comma-separated (e.g. `--pin 0,64`). Their positions in
+        /// every frame are written beside the output as F.pins.npy ([frames, pins, 3], f64)
+        /// and F.pins.json, so `acap decode` can place them where the input had them.
+        #[arg(long, value_name = "I,J,...", value_delimiter = ',')]
+        pin: Vec<usize>,
+        /// Treat the frames as a time sequence: seed each frame's log-rotations from the
+        /// previous frame so they do not jump when a rotation passes π (encoded serially).
+        #[arg(long)]
+        sequence: bool,
+    },
+    /// Decode ACAP features back to meshes: one OBJ per frame in the output directory.
+    Decode {
+        /// Rest mesh (.obj) the features were computed against, or a `simulate` output
+        /// directory holding `rest.obj`.
+        #[arg(long, value_name = "REST.obj|DIR")]
+        rest: PathBuf,
+        /// Features (.npy, [frames, vertices, 9] or [vertices, 9], f64).
+        #[arg(long, value_name = "F.npy")]
+        features: PathBuf,
+        /// Pinned vertex indices, comma-separated. Default: the pins recorded by `acap encode`
+        /// in F.pins.json.
+        #[arg(long, value_name = "I,J,...", value_delimiter = ',')]
+        pin: Vec<usize>,
+        /// Pin positions for every frame, `x,y,z;x,y,z;...` in metres, one triple per pin.
+        /// Default: the per-frame positions recorded by `acap encode` in F.pins.npy.
+        #[arg(long, value_name = "X,Y,Z;...", allow_hyphen_values = true)]
+        pin_positions: Option<String>,
+        /// Output directory; frame k is written as frame_<k>.obj (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out_dir: PathBuf,
+    },
+}
+
+/// Runs one `acap` subcommand.
+pub fn run(cmd: AcapCommand) -> Result<()> {
+    match cmd {
+        AcapCommand::Encode {
+            rest,
+            meshes,
+            out,
+            pin,
+            sequence,
+        } => encode(&rest, &meshes, &out, &pin, sequence),
+        AcapCommand::Decode {
+            rest,
+            features,
+            pin,
+            pin_positions,
+            out_dir,
+        } => decode(&rest, &features, &pin, pin_positions.as_deref(), &out_dir),
+    }
+}
+
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct PinSidecar {
+    /// Vertex indices of the pins, in the order of F.pins.npy's second axis.
+    pins: Vec<usize>,
+    frames: usize,
+}
+
+fn sidecar(features: &Path, ext: &str) -> PathBuf {
+    let stem = features
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    features.with_file_name(format!("{stem}.pins.{ext}"))
+}
+
+fn rest_mesh(path: &Path) -> Result<TriMesh> {
+    let file = if path.is_dir() {
+        path.join("rest.obj")
+    } else {
+        path.to_path_buf()
+    };
+    weft_mesh::io::read_obj(&file).with_context(|| format!("reading rest mesh {}", file.display()))
+}
+
+fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequence: bool) -> Result<()> {
+    let rest = rest_mesh(rest_path)?;
+    let nv = rest.num_vertices();
+    let mut frames: Vec<Vec<Vector3<f64>>> = Vec::new();
+    if rest_path.is_dir() {
+        frames.extend(read_safetensors_frames(&rest_path.join("frames.safetensors"), nv)?);
+    }
+    for m in meshes {
+        let mesh = weft_mesh::io::read_obj(m).with_context(|| format!("reading {}", m.display()))?;
+        ensure!(
+            mesh.faces() == rest.faces(),
+            "{} does not have the rest mesh's connectivity ({} faces vs {})",
+            m.display(),
+            mesh.num_faces(),
+            rest.num_faces()
+        );
+        frames.push(mesh.positions().to_vec());
+    }
+    ensure!(
+        !frames.is_empty(),
+        "nothing to encode: give --mesh files or a simulate directory as --rest"
+    );
+    for &p in pins {
+        ensure!(p < nv, "pin {p} is out of range for {nv} vertices");
+    }
+
+    let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
+    let bar = progress(frames.len() as u64, "encoding");
+    let mut features: Vec<Vec<Feature>> = Vec::with_capacity(frames.len());
+    if sequence {
+        for (k, p) in frames.iter().enumerate() {
+            let (f, _) = acap
+                .encode_with_report(p, features.last().map(Vec::as_slice))
+                .with_context(|| format!("encoding frame {k}"))?;
+            features.push(f);
+            bar.inc(1);
+        }
+    } else {
+        for (c, chunk) in frames.chunks(64).enumerate() {
+            let f = acap
+                .encode_batch(chunk)
+                .with_context(|| format!("encoding frames {}..", 64 * c))?;
+            features.extend(f);
+            bar.inc(chunk.len() as u64);
+        }
+    }
+    bar.finish();
+
+    write_npy(
+        out,
+        &[frames.len() as u64, nv as u64, 9],
+        features.iter().flatten().flatten().copied(),
+    )?;
+    if !pins.is_empty() {
+        let values = frames
+            .iter()
+            .flat_map(|p| pins.iter().flat_map(move |&i| [p[i].x, p[i].y, p[i].z]));
+        write_npy(
+            &sidecar(out, "npy"),
+            &[frames.len() as u64, pins.len() as u64, 3],
+            values,
+        )?;
+        let json = serde_json::to_string_pretty(&PinSidecar {
+            pins: pins.to_vec(),
+            frames: frames.len(),
+        })?;
+        fs::write(sidecar(out, "json"), json).with_context(|| format!("writing {}", sidecar(out, "json").display()))?;
+    }
+    println!(
+        "wrote {} frames × {} vertices × 9 features to {}",
+        frames.len(),
+        nv,
+        out.display()
+    );
+    Ok(())
+}
+
+fn decode(
+    rest_path: &Path,
+    features_path: &Path,
+    pins: &[usize],
+    pin_positions: Option<&str>,
+    out_dir: &Path,
+) -> Result<()> {
+    let rest = rest_mesh(rest_path)?;
+    let nv = rest.num_vertices();
+    let (shape, values) = read_npy(features_path)?;
+    let frames = match shape.as_slice() {
+        [v, 9] => {
+            ensure!(*v as usize == nv, "features have {v} vertices, the rest mesh {nv}");
+            1
+        }
+        [f, v, 9] => {
+            ensure!(*v as usize == nv, "features have {v} vertices, the rest mesh {nv}");
+            *f as usize
+        }
+        other => bail!("features must have shape [frames, vertices, 9] or [vertices, 9], got {other:?}"),
+    };
+    let features: Vec<Vec<Feature>> = values
+        .chunks_exact(9 * nv)
+        .map(|frame| {
+            frame
+                .chunks_exact(9)
+                .map(|c| c.try_into().expect("chunks of 9"))
+                .collect()
+        })
+        .collect();
+
+    let recorded: Option<PinSidecar> = match fs::read_to_string(sidecar(features_path, "json")) {
+        Ok(text) => Some(serde_json::from_str(&text).context("parsing the pin sidecar JSON")?),
+        Err(_) => None,
+    };
+    let pins: Vec<usize> = if !pins.is_empty() {
+        pins.to_vec()
+    } else if let Some(r) = &recorded {
+        r.pins.clone()
+    } else {
+        bail!(
+            "no --pin given and no {} from `acap encode`",
+            sidecar(features_path, "json").display()
+        )
+    };
+    let per_frame_pins: Vec<Vec<Vector3<f64>>> = match pin_positions {
+        Some(text) => {
+            let xyz = parse_pin_positions(text)?;
+            ensure!(
+                xyz.len() == pins.len(),
+                "{} pin positions for {} pins",
+                xyz.len(),
+                pins.len()
+            );
+            vec![xyz; frames]
+        }
+        None => {
+            let r = recorded.as_ref().with_context(|| {
+                format!(
+                    "no --pin-positions given and no {}",
+                    sidecar(features_path, "json").display()
+                )
+            })?;
+            ensure!(
+                r.pins == pins,
+                "--pin {pins:?} differs from the pins {:?} recorded at encode time",
+                r.pins
+            );
+            let (pshape, pvals) = read_npy(&sidecar(features_path, "npy"))?;
+            ensure!(
+                pshape == [frames as u64, pins.len() as u64, 3],
+                "pin positions have shape {pshape:?}, expected [{frames}, {}, 3]",
+                pins.len()
+            );
+            pvals
+                .chunks_exact(3 * pins.len())
+                .map(|f| f.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect())
+                .collect()
+        }
+    };
+
+    let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
+    let inverse = PoissonPseudoInverse::new(&acap, &pins).context("factorising the pinned Poisson system")?;
+    fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let bar = progress(frames as u64, "decoding");
+    for (k, (f, x)) in features.iter().zip(&per_frame_pins).enumerate() {
+        let p = inverse.decode(f, x).with_context(|| format!("decoding frame {k}"))?;
+        let path = out_dir.join(format!("frame_{k:05}.obj"));
+        weft_mesh::io::write_obj(&path, &p, rest.faces()).with_context(|| format!("writing {}", path.display()))?;
+        bar.inc(1);
+    }
+    bar.finish();
+    println!("wrote {frames} meshes to {}", out_dir.display());
+    Ok(())
+}
+
+fn progress(len: u64, what: &'static str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} frames [{elapsed_precise}]") {
+        bar.set_style(style);
+    }
+    bar.set_message(what);
+    bar
+}
+
+/// `x,y,z;x,y,z;...` → points.
+fn parse_pin_positions(text: &str) -> Result<Vec<Vector3<f64>>> {
+    text.split(';')
+        .filter(|s| !s.trim().is_empty())
+        .map(|triple| {
+            let c: Vec<f64> = triple
+                .split(',')
+                .map(|v| {
+                    v.trim()
+                        .parse::<f64>()
+                        .with_context(|| format!("bad coordinate {v:?} in {triple:?}"))
+                })
+                .collect::<Result<_>>()?;
+            ensure!(c.len() == 3, "pin position {triple:?} must have 3 coordinates");
+            Ok(Vector3::new(c[0], c[1], c[2]))
+        })
+        .collect()
+}
+
+fn read_safetensors_frames(path: &Path, nv: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
+    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let tensors = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+    let t = tensors
+        .tensor("positions")
+        .map_err(|e| anyhow::anyhow!("{}: no tensor `positions`: {e}", path.display()))?;
+    ensure!(
+        t.dtype() == safetensors::Dtype::F64,
+        "{}: `positions` must be f64, is {:?}",
+        path.display(),
+        t.dtype()
+    );
+    let shape = t.shape();
+    ensure!(
+        shape.len() == 3 && shape[1] == nv && shape[2] == 3,
+        "{}: `positions` has shape {shape:?}, expected [frames, {nv}, 3]",
+        path.display()
+    );
+    let values: Vec<f64> = t
+        .data()
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().expect("chunks of 8")))
+        .collect();
+    Ok(values
+        .chunks_exact(3 * nv)
+        .map(|f| f.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect())
+        .collect())
+}
+
+fn read_npy(path: &Path) -> Result<(Vec<u64>, Vec<f64>)> {
+    let file = fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let npy = npyz::NpyFile::new(BufReader::new(file)).with_context(|| format!("reading {}", path.display()))?;
+    let shape = npy.shape().to_vec();
+    let values = npy
+        .into_vec::<f64>()
+        .with_context(|| format!("{}: expected f64 data", path.display()))?;
+    Ok((shape, values))
+}
+
+fn write_npy(path: &Path, shape: &[u64], values: impl IntoIterator<Item = f64>) -> Result<()> {
+    let file = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut writer = npyz::WriteOptions::<f64>::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(BufWriter::new(file))
+        .begin_nd()
+        .with_context(|| format!("writing {}", path.display()))?;
+    writer
+        .extend(values)
+        .with_context(|| format!("writing {}", path.display()))?;
+    writer.finish().with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}

@@ -1,0 +1,189 @@
+//! `cargo xtask mesh`: generate built-in meshes, inspect mesh files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use serde_json::json;
+use weft_mesh::generators::{self, BeamParams};
+use weft_mesh::io::{self, AnyMesh};
+use weft_mesh::{TetTopology, Topology};
+
+#[derive(Subcommand)]
+pub enum MeshCommand {
+    /// Square n×n vertex grid in the XY plane (65 → 4225 vertices, Tan et al.'s SHEET).
+    Sheet {
+        /// Vertices per side.
+        #[arg(long, default_value_t = 65)]
+        n: usize,
+        /// Side length (m).
+        #[arg(long, default_value_t = 1.0)]
+        size: f64,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// The 65-grid sheet with two circular holes (4165 vertices).
+    SheetHoles {
+        /// Side length (m).
+        #[arg(long, default_value_t = 1.0)]
+        size: f64,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Closed UV sphere (48 segments × 32 rings + 2 poles = 1538 vertices, Tan et al.'s BALL).
+    Ball {
+        #[arg(long, default_value_t = 48)]
+        segments: usize,
+        #[arg(long, default_value_t = 32)]
+        rings: usize,
+        /// Radius (m).
+        #[arg(long, default_value_t = 0.5)]
+        radius: f64,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Tetrahedral box beam (default 12×6×6 cells, 2592 tets; NNWarp's training beam analogue).
+    Beam {
+        #[command(flatten)]
+        beam: BeamArgs,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Beam whose cross-section shrinks linearly to `--tip-scale` at its free end.
+    TaperedBeam {
+        #[command(flatten)]
+        beam: BeamArgs,
+        #[arg(long, default_value_t = 0.5)]
+        tip_scale: f64,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Beam bent along a circular arc by `--angle` radians.
+    BentBeam {
+        #[command(flatten)]
+        beam: BeamArgs,
+        #[arg(long, default_value_t = std::f64::consts::FRAC_PI_2)]
+        angle: f64,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Beam with a T-shaped cross-section.
+    TBeam {
+        #[command(flatten)]
+        beam: BeamArgs,
+        #[command(flatten)]
+        out: Out,
+    },
+    /// Print counts and validation results of a mesh file (.obj, .node/.ele) as JSON.
+    Info {
+        /// The mesh file.
+        file: PathBuf,
+    },
+}
+
+#[derive(Args)]
+pub struct Out {
+    /// Output file; the format follows the extension: .obj, .ply, .vtk, or .node (TetGen .node + .ele, tet meshes only).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+pub struct BeamArgs {
+    /// Cells along X, Y, Z (each cell is split into 6 tetrahedra).
+    #[arg(long, num_args = 3, value_names = ["NX", "NY", "NZ"], default_values_t = [12, 6, 6])]
+    cells: Vec<usize>,
+    /// Size along X, Y, Z (m).
+    #[arg(long, num_args = 3, value_names = ["LX", "LY", "LZ"], default_values_t = [1.0, 0.5, 0.5])]
+    size: Vec<f64>,
+}
+
+impl BeamArgs {
+    fn params(&self) -> BeamParams {
+        BeamParams {
+            cells: [self.cells[0], self.cells[1], self.cells[2]],
+            size: [self.size[0], self.size[1], self.size[2]],
+        }
+    }
+}
+
+pub fn run(cmd: MeshCommand) -> anyhow::Result<()> {
+    let (mesh, out) = match cmd {
+        MeshCommand::Info { file } => return info(&file),
+        MeshCommand::Sheet { n, size, out } => (AnyMesh::Surface(generators::sheet(n, size)?), out),
+        MeshCommand::SheetHoles { size, out } => (
+            AnyMesh::Surface(generators::sheet_with_holes(65, size, &generators::DEFAULT_HOLES)?),
+            out,
+        ),
+        MeshCommand::Ball {
+            segments,
+            rings,
+            radius,
+            out,
+        } => (AnyMesh::Surface(generators::ball(segments, rings, radius)?), out),
+        MeshCommand::Beam { beam, out } => (AnyMesh::Volume(generators::beam(&beam.params())?), out),
+        MeshCommand::TaperedBeam { beam, tip_scale, out } => (
+            AnyMesh::Volume(generators::tapered_beam(&beam.params(), tip_scale)?),
+            out,
+        ),
+        MeshCommand::BentBeam { beam, angle, out } => {
+            (AnyMesh::Volume(generators::bent_beam(&beam.params(), angle)?), out)
+        }
+        MeshCommand::TBeam { beam, out } => (AnyMesh::Volume(generators::t_beam(&beam.params())?), out),
+    };
+    match &mesh {
+        AnyMesh::Surface(m) => io::write_surface(&out.out, m),
+        AnyMesh::Volume(m) => io::write_volume(&out.out, m),
+    }
+    .with_context(|| format!("writing {}", out.out.display()))?;
+    let (v, e) = match &mesh {
+        AnyMesh::Surface(m) => (m.num_vertices(), format!("{} faces", m.num_faces())),
+        AnyMesh::Volume(m) => (m.num_vertices(), format!("{} tetrahedra", m.num_tets())),
+    };
+    eprintln!("wrote {} ({v} vertices, {e})", out.out.display());
+    Ok(())
+}
+
+fn info(file: &Path) -> anyhow::Result<()> {
+    let report = match io::read_mesh(file) {
+        Err(e) => json!({ "file": file, "valid": false, "error": e.to_string() }),
+        Ok(AnyMesh::Surface(m)) => {
+            let t = Topology::new(&m);
+            let degenerate = m.check_face_areas(0.0).err().map(|e| e.to_string());
+            json!({
+                "file": file,
+                "valid": true,
+                "kind": "triangle surface",
+                "vertices": m.num_vertices(),
+                "faces": m.num_faces(),
+                "edges": t.edges.len(),
+                "boundary_loops": t.boundary_loops.len(),
+                "euler_characteristic": m.euler_characteristic(),
+                "area_m2": m.area(),
+                "bounding_box_diagonal_m": m.bounding_box_diagonal(),
+                "degenerate_faces": degenerate,
+            })
+        }
+        Ok(AnyMesh::Volume(m)) => {
+            let t = TetTopology::new(&m);
+            let s = m.boundary_surface()?;
+            json!({
+                "file": file,
+                "valid": true,
+                "kind": "tetrahedral volume",
+                "vertices": m.num_vertices(),
+                "tetrahedra": m.num_tets(),
+                "edges": t.edges.len(),
+                "boundary_faces": s.mesh.num_faces(),
+                "boundary_vertices": s.mesh.num_vertices(),
+                "boundary_loops": Topology::new(&s.mesh).boundary_loops.len(),
+                "volume_m3": m.volume(),
+            })
+        }
+    };
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    if report["valid"] == false {
+        anyhow::bail!("{} is not a valid mesh: {}", file.display(), report["error"]);
+    }
+    Ok(())
+}
