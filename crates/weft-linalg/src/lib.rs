@@ -206,6 +206,28 @@ impl SymmetricMatrix {
         self.values[slot] += v;
     }
 
+    /// Adds the `3 × 3` block `block` at vertex pair `(u, v)` — DOFs `3u..3u+3` by
+    /// `3v..3v+3` — of a pattern built by [`SymmetricPattern::from_vertex_pairs`]. Only
+    /// the part in the stored upper triangle is added (for `u == v`, its upper half;
+    /// for `u > v`, nothing — the caller adds the transposed block at `(v, u)`). One
+    /// binary search per column instead of one per entry: vertex DOFs are contiguous.
+    pub fn add_vertex_block(&mut self, u: usize, v: usize, block: &[[f64; 3]; 3]) {
+        if u > v {
+            return;
+        }
+        for j in 0..3 {
+            let c = 3 * v + j;
+            let base = self
+                .pattern
+                .slot(3 * u, c)
+                .unwrap_or_else(|| panic!("vertex block ({u}, {v}) is not in the pattern"));
+            let rows = if u == v { j + 1 } else { 3 };
+            for i in 0..rows {
+                self.values[base + i] += block[i][j];
+            }
+        }
+    }
+
     /// Adds a dense symmetric block over the DOF list `dofs` (row-major `dofs.len()²`).
     pub fn add_block(&mut self, dofs: &[usize], block: &[f64]) {
         let k = dofs.len();

@@ -58,13 +58,9 @@ pub fn scatter_gradient<const D: usize>(verts: &[usize], local: &SVector<f64, D>
 pub fn scatter_hessian<const D: usize>(verts: &[usize], local: &SMatrix<f64, D, D>, hessian: &mut SymmetricMatrix) {
     for (a, &va) in verts.iter().enumerate() {
         for (b, &vb) in verts.iter().enumerate() {
-            for i in 0..3 {
-                for j in 0..3 {
-                    let (r, c) = (3 * va + i, 3 * vb + j);
-                    if r <= c {
-                        hessian.add(r, c, local[(3 * a + i, 3 * b + j)]);
-                    }
-                }
+            if va <= vb {
+                let block = [0, 1, 2].map(|i| [0, 1, 2].map(|j| local[(3 * a + i, 3 * b + j)]));
+                hessian.add_vertex_block(va, vb, &block);
             }
         }
     }

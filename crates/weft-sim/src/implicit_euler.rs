@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
 
 /// What one time step did.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct StepReport {
     pub newton: NewtonReport,
     /// Total potential (everything but inertia) at the end of the step (J).
@@ -179,13 +179,13 @@ impl ImplicitEuler {
     /// `L_phys(p_{m−2}, p_{m−1}, p, q)` (Tan et al. Eq. 4) for any frame `p` (with the
     /// grasped DOFs of `p` taken as `q`), in joules.
     pub fn l_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {
-        let inertia = self.history_inertia(prev2, prev1)?;
+        let inertia = self.history_inertia(prev2, prev1, p)?;
         Ok(inertia.value(p) + self.terms.iter().map(|t| t.value(p)).sum::<f64>())
     }
 
     /// `∂L_phys/∂p_m` at `p` (N), written into `grad` (full length; grasped DOFs included).
     pub fn l_phys_gradient(&self, prev2: &[f64], prev1: &[f64], p: &[f64], grad: &mut [f64]) -> Result<()> {
-        let inertia = self.history_inertia(prev2, prev1)?;
+        let inertia = self.history_inertia(prev2, prev1, p)?;
         if grad.len() != p.len() {
             return Err(Error::LengthMismatch {
                 what: "gradient buffer",
@@ -211,9 +211,9 @@ impl ImplicitEuler {
             .sum())
     }
 
-    fn history_inertia(&self, prev2: &[f64], prev1: &[f64]) -> Result<Inertia> {
+    fn history_inertia(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Inertia> {
         let n = self.current.len();
-        for (what, v) in [("p_{m-2}", prev2), ("p_{m-1}", prev1)] {
+        for (what, v) in [("p_{m-2}", prev2), ("p_{m-1}", prev1), ("p_m", p)] {
             if v.len() != n {
                 return Err(Error::LengthMismatch {
                     what,

@@ -50,7 +50,7 @@ impl Default for NewtonSettings {
 }
 
 /// What one minimisation did.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct NewtonReport {
     pub iterations: usize,
     /// Final max-norm residual force on free DOFs (N).
@@ -64,6 +64,9 @@ pub struct NewtonReport {
     pub regularizations: usize,
     #[serde(with = "duration_seconds")]
     pub time: Duration,
+    /// Residual after each iteration (N), for convergence studies.
+    #[serde(skip)]
+    pub residual_history: Vec<f64>,
 }
 
 mod duration_seconds {
@@ -248,6 +251,7 @@ impl NewtonSolver {
             line_search_halvings: 0,
             regularizations: 0,
             time: Duration::ZERO,
+            residual_history: Vec::new(),
         };
         let result = (|| {
             while residual > settings.tolerance {
@@ -294,18 +298,24 @@ impl NewtonSolver {
                 }
                 if !accepted {
                     // Near the minimiser the energy decrease can drop below the round-off
-                    // of E itself, so Armijo fails although the step is good: accept the
-                    // full Newton step if it reduces the residual force instead.
-                    for i in 0..n {
-                        self.trial[i] = x[i] + self.dir[i];
+                    // of E itself, so Armijo fails although the direction is good: fall
+                    // back to a line search on the residual force instead.
+                    let mut beta = 1.0;
+                    for _ in 0..12 {
+                        for i in 0..n {
+                            self.trial[i] = x[i] + beta * self.dir[i];
+                        }
+                        total_gradient(terms, &self.trial, &mut grad);
+                        let e = total_value(terms, &self.trial);
+                        let r = self.free_residual(&grad);
+                        if e.is_finite() && r.is_finite() && r < residual {
+                            energy = e;
+                            accepted = true;
+                            break;
+                        }
+                        beta *= 0.5;
                     }
-                    total_gradient(terms, &self.trial, &mut grad);
-                    let e = total_value(terms, &self.trial);
-                    let r = self.free_residual(&grad);
-                    if e.is_finite() && r.is_finite() && r < residual {
-                        energy = e;
-                        accepted = true;
-                    } else {
+                    if !accepted {
                         total_gradient(terms, x, &mut grad);
                     }
                 }
@@ -327,6 +337,7 @@ impl NewtonSolver {
                     });
                 }
                 residual = self.free_residual(&grad);
+                report.residual_history.push(residual);
             }
             Ok(())
         })();

@@ -176,7 +176,7 @@ fn one() -> f64 {
     1.0
 }
 fn default_rel_tol() -> f64 {
-    1e-5
+    1e-3
 }
 fn default_max_iter() -> usize {
     100
