@@ -4,8 +4,9 @@
 //!
 //! `E_axial = Σ ½ k ‖(1 − u) r_a + u r_b − (1 − v) r_c − v r_d‖²`,
 //!
-//! with `u, v` the closest-point parameters of the two segments in the rest state (for
-//! a flat rest state the segments cross, so the spring has zero rest length). It keeps
+//! with `u, v` the closest-point parameters of the two edges' lines in the rest state (for
+//! a flat rest state they cross, so the spring has zero rest length; a curved rest state
+//! is biased toward flat, as in the paper, which considers flat rest states only). It keeps
 //! the tetrahedron of a hinge from collapsing flat-to-degenerate, which the edge and
 //! bending springs alone allow near a flat rest state. The energy is quadratic with a
 //! constant positive semi-definite Hessian `k w wᵀ ⊗ I₃`, `w = [1−u, u, −(1−v), −v]`.
@@ -67,18 +68,20 @@ impl AxialSprings {
     }
 }
 
-/// Closest-point parameters `(u, v) ∈ [0, 1]²` of segments `p0p1` and `q0q1`
-/// (Ericson, Real-Time Collision Detection §5.1.9).
+/// Closest-point parameters `(u, v)` of the *lines* through `p0p1` and `q0q1`. In a flat
+/// rest state the lines of a hinge's shared and bending edges meet, so the spring has zero
+/// rest length even where the crossing lies at or just beyond a segment's end (a
+/// non-convex or degenerate quad, as on a jittered grid). Parallel lines fall back to the
+/// segment midpoints.
 fn closest_parameters(p0: &Vector3<f64>, p1: &Vector3<f64>, q0: &Vector3<f64>, q1: &Vector3<f64>) -> (f64, f64) {
     let (d1, d2, r) = (p1 - p0, q1 - q0, p0 - q0);
     let (a, e, f) = (d1.norm_squared(), d2.norm_squared(), d2.dot(&r));
     let (b, c) = (d1.dot(&d2), d1.dot(&r));
     let denom = a * e - b * b;
-    let mut u = if denom > 1e-14 * a * e { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.5 };
-    let mut v = ((b * u + f) / e).clamp(0.0, 1.0);
-    u = ((b * v - c) / a).clamp(0.0, 1.0);
-    v = ((b * u + f) / e).clamp(0.0, 1.0);
-    (u, v)
+    if !(denom > 1e-12 * a * e) {
+        return (0.5, 0.5);
+    }
+    ((b * f - c * e) / denom, (a * f - b * c) / denom)
 }
 
 impl Energy for AxialSprings {

@@ -236,7 +236,7 @@ impl QuasistaticLayer {
             None => NewtonSolver::new(3 * n, &terms, vec![false; 3 * n])?,
         };
         let mut x = pred.to_vec();
-        let result = solver.minimize(&terms, &mut x, &self.newton).and_then(|report| {
+        let result = self.minimize(&mut solver, &terms, &mut x).and_then(|report| {
             // Eq. 14 needs the true Hessian at r*; factorise it once here for backward.
             let (factor, shifts) = solver.factorize_at(&terms, &x, false)?;
             Ok((report, factor, shifts))
@@ -257,6 +257,36 @@ impl QuasistaticLayer {
             time_seconds: start.elapsed().as_secs_f64(),
         };
         Ok((QuasistaticSolution { positions: x, prediction: pred.to_vec(), mu, factor }, report))
+    }
+
+    /// Newton in two phases: with per-spring PSD projection (the definiteness fix of
+    /// Teran et al. 2005) until the residual force is within `10⁴ ×` the tolerance — far
+    /// from equilibrium, e.g. from an inverted or badly stretched prediction — then with
+    /// the true Hessian (diagonally shifted by weft-sim's solver only if indefinite), whose
+    /// convergence stays quadratic where compressed springs make the projection differ
+    /// from the true Hessian at the minimum.
+    fn minimize(
+        &self,
+        solver: &mut NewtonSolver,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+    ) -> weft_sim::Result<weft_sim::NewtonReport> {
+        let coarse = NewtonSettings { tolerance: 1e4 * self.newton.tolerance, ..self.newton };
+        let first = solver.minimize(terms, x, &coarse)?;
+        let fine = NewtonSettings {
+            project_hessian: false,
+            max_iterations: self.newton.max_iterations.saturating_sub(first.iterations).max(1),
+            ..self.newton
+        };
+        let second = solver.minimize(terms, x, &fine)?;
+        Ok(weft_sim::NewtonReport {
+            iterations: first.iterations + second.iterations,
+            initial_residual: first.initial_residual,
+            line_search_halvings: first.line_search_halvings + second.line_search_halvings,
+            regularizations: first.regularizations + second.regularizations,
+            time: first.time + second.time,
+            ..second
+        })
     }
 
     /// `∂E/∂r̂` and `∂E/∂μ` from `∂E/∂r*` (`grad_out`) by one adjoint solve (Eq. 14, 16).

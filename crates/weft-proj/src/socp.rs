@@ -54,7 +54,7 @@
 //! solution and the LDLᵀ's sign-aware dynamic regularisation pick one multiplier
 //! solution; iterative refinement against the unregularised matrix then restores `η`.
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 use clarabel::algebra::CscMatrix;
@@ -85,6 +85,9 @@ pub struct SocpSettings {
     pub iterative_refinement: bool,
     /// Print Clarabel's iteration log.
     pub verbose: bool,
+    /// Polish the interior-point solution by Newton's method on the active-set KKT
+    /// conditions (Eq. 2), so they hold to round-off.
+    pub polish: bool,
 }
 
 impl Default for SocpSettings {
@@ -97,6 +100,7 @@ impl Default for SocpSettings {
             refinement_steps: 3,
             iterative_refinement: true,
             verbose: false,
+            polish: true,
         }
     }
 }
@@ -114,6 +118,9 @@ pub struct SocpReport {
     /// Clarabel's final status (`Solved` or `AlmostSolved`).
     pub status: String,
     pub iterations: u32,
+    /// Newton iterations of the active-set polish, `None` if it was off or rejected (the
+    /// interior-point solution is returned then).
+    pub polish_iterations: Option<usize>,
     /// Wall time of the whole forward pass, including the conic solve (s).
     pub time_seconds: f64,
     /// Clarabel's own solve time (s).
@@ -161,14 +168,19 @@ pub struct BackwardReport {
     pub constraint_rows: usize,
 }
 
-/// Idle Clarabel solvers: set up once (symbolic KKT factorisation included) and reused
-/// with a new `b`, one per concurrently running forward pass.
-struct SolverPool(Mutex<Vec<DefaultSolver<f64>>>);
+/// One edge's contribution to a KKT matrix over `[r_a, r_b, row_e]`: `D_eᵀ B D_e` in the
+/// primal block, `D_eᵀ c` coupling to the edge's row, `σ` on its diagonal.
+#[derive(Debug, Clone, Copy)]
+struct EdgeBlock {
+    primal: nalgebra::Matrix3<f64>,
+    coupling: Option<nalgebra::Vector3<f64>>,
+    diagonal: f64,
+}
 
-impl std::fmt::Debug for SolverPool {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let idle = self.0.lock().map(|p| p.len()).unwrap_or(0);
-        f.debug_struct("SolverPool").field("idle", &idle).finish()
+impl EdgeBlock {
+    /// An edge without a constraint row: its multiplier decouples (`−1 · ν = 0`).
+    fn decoupled() -> Self {
+        Self { primal: nalgebra::Matrix3::zeros(), coupling: None, diagonal: -1.0 }
     }
 }
 
@@ -185,8 +197,6 @@ pub struct InextensibilityLayer {
     p: CscMatrix<f64>,
     a: CscMatrix<f64>,
     cones: Vec<SupportedConeT<f64>>,
-    /// Conic solvers set up for this layer's sparsity (only `b` changes per example).
-    pool: SolverPool,
     kkt: LdltSolver,
     /// For every edge, the KKT slots of its local 7 × 7 matrix over
     /// `[3a, 3a+1, 3a+2, 3b, 3b+1, 3b+2, 3V+e]` (`usize::MAX` for the lower triangle).
@@ -287,7 +297,6 @@ impl InextensibilityLayer {
             p,
             a,
             cones,
-            pool: SolverPool(Mutex::new(Vec::new())),
             kkt,
             kkt_slots,
             diag_slots,
@@ -324,8 +333,6 @@ impl InextensibilityLayer {
             tol_gap_rel: tol,
             tol_feas: tol,
             tol_ktratio: tol.min(1e-6),
-            // The data is updated per example, which Clarabel allows only without presolve.
-            presolve_enable: false,
             ..DefaultSettings::default()
         };
         let q = vec![0.0; 3 * self.num_vertices()];
@@ -345,52 +352,25 @@ impl InextensibilityLayer {
             b[4 * e] = self.max_lengths[e] / ell;
             b[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
         }
-        let pooled = self.pool.0.lock().map_err(|_| Error::SolverSetup("solver pool poisoned".into()))?.pop();
-        let mut solver = match pooled {
-            Some(mut s) => {
-                s.update_b(&b).map_err(|e| Error::SolverSetup(e.to_string()))?;
-                s
-            }
-            None => self.new_solver(&b)?,
-        };
+        // A fresh solver per call keeps results independent of call order and thread.
+        let mut solver = self.new_solver(&b)?;
         solver.solve();
         let sol = &solver.solution;
         let status = sol.status;
         let iterations = sol.iterations;
-        let accepted = matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved);
-        let result = if accepted {
-            self.finish(pred, &sol.x, &sol.s, &sol.z, status, iterations, sol.solve_time, sol.r_prim, sol.r_dual, start)
-        } else {
-            Err(Error::SolverFailed { status: format!("{status:?}"), iterations })
-        };
-        if let Ok(mut pool) = self.pool.0.lock() {
-            pool.push(solver);
+        if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
+            return Err(Error::SolverFailed { status: format!("{status:?}"), iterations });
         }
-        result
-    }
+        check_output("conic solution", &sol.x)?;
+        check_output("conic slacks", &sol.s)?;
+        check_output("conic duals", &sol.z)?;
+        let mut x = sol.x.clone();
+        let mut s = sol.s.clone();
+        let mut z = sol.z.clone();
+        let polish_iterations = if self.settings.polish { self.polish(&b, &mut x, &mut s, &mut z) } else { None };
 
-    #[allow(clippy::too_many_arguments)]
-    fn finish(
-        &self,
-        pred: &[f64],
-        x: &[f64],
-        s: &[f64],
-        z: &[f64],
-        status: SolverStatus,
-        iterations: u32,
-        solver_seconds: f64,
-        r_prim: f64,
-        r_dual: f64,
-        start: Instant,
-    ) -> Result<(SocpSolution, SocpReport)> {
-        let ell = self.length_scale;
-        check_output("conic solution", x)?;
-        check_output("conic slacks", s)?;
-        check_output("conic duals", z)?;
-        let positions: Vec<f64> = pred.iter().zip(x).map(|(p, d)| p + ell * d).collect();
+        let positions: Vec<f64> = pred.iter().zip(&x).map(|(p, d)| p + ell * d).collect();
         check_output("projected positions", &positions)?;
-
-        // Constraint violation and activity, measured on the returned positions.
         let mut max_violation = f64::NEG_INFINITY;
         let mut worst = 0;
         let mut active = 0;
@@ -408,41 +388,226 @@ impl InextensibilityLayer {
             let ratio = (1.0 + max_violation) * (1.0 + self.epsilon);
             return Err(Error::ConstraintViolated { edge: worst, ratio, bound: 1.0 + self.epsilon });
         }
+        let (stationarity, complementarity) = self.kkt_residuals(&x, &s, &z);
+        let report = SocpReport {
+            status: format!("{status:?}"),
+            iterations,
+            polish_iterations,
+            time_seconds: start.elapsed().as_secs_f64(),
+            solver_seconds: sol.solve_time,
+            primal_residual: sol.r_prim,
+            dual_residual: sol.r_dual,
+            kkt_residual: stationarity.max(complementarity).max(max_violation.max(0.0)),
+            max_violation,
+            active_constraints: active,
+            num_constraints: m,
+        };
+        Ok((SocpSolution { positions, s, z }, report))
+    }
 
-        // Stationarity Kδ + Aᵀz = 0 and complementarity, from x, s, z.
+    /// Relative stationarity `‖Kδ + Aᵀz‖∞ / max(‖Kδ‖∞, ‖Aᵀz‖∞)` and relative
+    /// complementarity `max_e |s_eᵀz_e| / (s_e⁰ max z⁰)` in solver units.
+    fn kkt_residuals(&self, x: &[f64], s: &[f64], z: &[f64]) -> (f64, f64) {
         let w = self.rest.weights();
         let mut grad_obj: Vec<f64> = x.iter().enumerate().map(|(i, d)| w[i / 3] * d).collect();
         let mut at_z = vec![0.0; x.len()];
-        let mut complementarity: f64 = 0.0;
         let z0_max = (0..self.num_constraints()).map(|e| z[4 * e]).fold(0.0, f64::max);
+        let mut complementarity: f64 = 0.0;
         for (e, &[va, vb]) in self.rest.edges().iter().enumerate() {
             for c in 0..3 {
                 at_z[3 * va + c] -= z[4 * e + 1 + c];
                 at_z[3 * vb + c] += z[4 * e + 1 + c];
             }
             let sz: f64 = (0..4).map(|k| s[4 * e + k] * z[4 * e + k]).sum();
-            // Relative to the largest multiplier, so round-off on force-free edges is not amplified.
-            complementarity = complementarity.max(sz.abs() / (s[4 * e] * z0_max).max(f64::MIN_POSITIVE));
+            if z0_max > 0.0 {
+                complementarity = complementarity.max(sz.abs() / (s[4 * e] * z0_max));
+            }
         }
         let scale = grad_obj.iter().chain(&at_z).fold(0.0f64, |m, v| m.max(v.abs()));
         grad_obj.iter_mut().zip(&at_z).for_each(|(g, a)| *g += a);
-        let stationarity = grad_obj.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale.max(f64::MIN_POSITIVE);
-        let stationarity = if scale == 0.0 { 0.0 } else { stationarity };
-        let kkt_residual = stationarity.max(complementarity).max(max_violation.max(0.0));
+        let stationarity =
+            if scale > 0.0 { grad_obj.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale } else { 0.0 };
+        (stationarity, complementarity)
+    }
 
-        let report = SocpReport {
-            status: format!("{status:?}"),
-            iterations,
-            time_seconds: start.elapsed().as_secs_f64(),
-            solver_seconds,
-            primal_residual: r_prim,
-            dual_residual: r_dual,
-            kkt_residual,
-            max_violation,
-            active_constraints: active,
-            num_constraints: self.num_constraints(),
+    /// Whether the conic pair `(s_e, z_e)` is kept as a constraint row: `2 z⁰ > γ`, i.e.
+    /// eliminating it would add a stiffness `2z⁰/γ` above the mean weight `k̄ = 1`.
+    fn is_active(s: &[f64], z: &[f64]) -> bool {
+        let (s0, z0) = (s[0], z[0]);
+        if !(z0 > 0.0 && s0 > 0.0) {
+            return false;
+        }
+        let s1n = (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
+        2.0 * z0 > ((s0 - s1n) * (s0 + s1n) / s0).max(0.0)
+    }
+
+    /// Polishes the interior-point solution: Newton's method on the KKT conditions of
+    /// Eq. 2 restricted to the active edges (`‖d_e‖ = l_e^max`), so the returned point
+    /// satisfies them to round-off rather than to the interior-point tolerance.
+    /// Accepted only if it converges with non-negative multipliers and every other edge
+    /// within its bound; returns the Newton iterations, or `None` if it was rejected.
+    fn polish(&self, b: &[f64], x: &mut [f64], s: &mut [f64], z: &mut [f64]) -> Option<usize> {
+        let m = self.num_constraints();
+        let edges = self.rest.edges();
+        let d_at = |delta: &[f64], e: usize| {
+            let [va, vb] = edges[e];
+            nalgebra::Vector3::new(
+                b[4 * e + 1] + delta[3 * va] - delta[3 * vb],
+                b[4 * e + 2] + delta[3 * va + 1] - delta[3 * vb + 1],
+                b[4 * e + 3] + delta[3 * va + 2] - delta[3 * vb + 2],
+            )
         };
-        Ok((SocpSolution { positions, s: s.to_vec(), z: z.to_vec() }, report))
+        let mut active: Vec<bool> = (0..m).map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4])).collect();
+        let lambda0: Vec<f64> = (0..m).map(|e| z[4 * e]).collect();
+        let mut total = 0;
+        // A primal active-set loop around Newton: the interior-point solution's active
+        // set is nearly always right; an edge that needs a negative multiplier is
+        // released, one that ends up over its bound is added.
+        for _ in 0..6 {
+            let (delta, lambda, norm, iterations) = self.polish_newton(b, &active, x, &lambda0, &d_at)?;
+            total += iterations;
+            if norm > 1e-12 {
+                return None;
+            }
+            let lambda_max = lambda.iter().fold(0.0f64, |a, b| a.max(*b));
+            let mut changed = false;
+            for e in 0..m {
+                if active[e] && lambda[e] < -1e-10 * lambda_max {
+                    active[e] = false;
+                    changed = true;
+                } else if !active[e] && d_at(&delta, e).norm() > b[4 * e] * (1.0 + 1e-12) {
+                    active[e] = true;
+                    changed = true;
+                }
+            }
+            if changed {
+                continue;
+            }
+            x.copy_from_slice(&delta);
+            for e in 0..m {
+                let d = d_at(&delta, e);
+                s[4 * e] = b[4 * e];
+                s[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
+                let le = if active[e] { lambda[e].max(0.0) } else { 0.0 };
+                let u = d / d.norm().max(f64::MIN_POSITIVE);
+                // z_e = λ_e [1; −u_e]: the dual of ‖d_e‖ ≤ l^max on the cone's boundary.
+                z[4 * e] = le;
+                for c in 0..3 {
+                    z[4 * e + 1 + c] = -le * u[c];
+                }
+            }
+            return Some(total);
+        }
+        None
+    }
+
+    /// Newton's method on Eq. 2 with the edges in `active` held at their bounds, from the
+    /// displacement `x0` and multipliers `lambda0`. Returns `(δ, λ, relative residual,
+    /// iterations)`, or `None` if a factorisation failed or the iteration diverged.
+    fn polish_newton(
+        &self,
+        b: &[f64],
+        active: &[bool],
+        x0: &[f64],
+        lambda0: &[f64],
+        d_at: &dyn Fn(&[f64], usize) -> nalgebra::Vector3<f64>,
+    ) -> Option<(Vec<f64>, Vec<f64>, f64, usize)> {
+        let m = self.num_constraints();
+        let n = x0.len();
+        let edges = self.rest.edges();
+        let w = self.rest.weights();
+        // Residual of Eq. 2 (solver units): K δ + Σ λ_e D_eᵀ u_e and l_e − l_e^max on active edges.
+        let residual = |delta: &[f64], lambda: &[f64]| {
+            let mut r: Vec<f64> = (0..n).map(|i| w[i / 3] * delta[i]).collect();
+            let scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+            let mut r_len = vec![0.0; m];
+            for e in (0..m).filter(|&e| active[e]) {
+                let d = d_at(delta, e);
+                let l = d.norm();
+                let [va, vb] = edges[e];
+                for c in 0..3 {
+                    r[3 * va + c] += lambda[e] * d[c] / l;
+                    r[3 * vb + c] -= lambda[e] * d[c] / l;
+                }
+                r_len[e] = l - b[4 * e];
+            }
+            let norm = r.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale;
+            let norm_len = (0..m).map(|e| (r_len[e] / b[4 * e]).abs()).fold(0.0, f64::max);
+            (r, r_len, norm.max(norm_len))
+        };
+        let mut delta = x0.to_vec();
+        let mut lambda: Vec<f64> = (0..m).map(|e| if active[e] { lambda0[e].max(0.0) } else { 0.0 }).collect();
+        let (mut r, mut r_len, mut norm) = residual(&delta, &lambda);
+        let mut iterations = 0;
+        while norm > 1e-14 && iterations < 10 {
+            iterations += 1;
+            // The Jacobian of Eq. 2: [K + Σ λ_e D_eᵀ (I − u uᵀ)/l D_e, D_eᵀu_e; u_eᵀD_e, 0].
+            let blocks: Vec<EdgeBlock> = (0..m)
+                .map(|e| {
+                    if !active[e] {
+                        return EdgeBlock::decoupled();
+                    }
+                    let d = d_at(&delta, e);
+                    let l = d.norm();
+                    let u = d / l;
+                    let h = (nalgebra::Matrix3::identity() - u * u.transpose()) * (lambda[e] / l);
+                    EdgeBlock { primal: h, coupling: Some(u), diagonal: 0.0 }
+                })
+                .collect();
+            let factor = self.kkt.factorize(&self.assemble(&blocks)).ok()?;
+            let mut step: Vec<f64> = r.iter().chain(&r_len).map(|v| -v).collect();
+            factor.solve_in_place(&mut step);
+            let trial: Vec<f64> = delta.iter().zip(&step).map(|(d, s)| d + s).collect();
+            let trial_lambda: Vec<f64> =
+                (0..m).map(|e| if active[e] { lambda[e] + step[n + e] } else { 0.0 }).collect();
+            let (tr, tr_len, tnorm) = residual(&trial, &trial_lambda);
+            // Newton from an interior-point solution is in its region of quadratic
+            // convergence; an occasional first-step increase (the multipliers of nearly
+            // inactive edges being dropped) is allowed, divergence is not.
+            if !(tnorm.is_finite() && tnorm < 1e3 * norm.max(1e-12)) {
+                return None;
+            }
+            (delta, lambda, r, r_len, norm) = (trial, trial_lambda, tr, tr_len, tnorm);
+        }
+        Some((delta, lambda, norm, iterations))
+    }
+
+    /// Assembles the symmetric KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e; c_eᵀ D_e, σ_e]`.
+    fn assemble(&self, blocks: &[EdgeBlock]) -> SymmetricMatrix {
+        let w = self.rest.weights();
+        let mut kkt = SymmetricMatrix::zeros(self.kkt.pattern().clone());
+        let values = kkt.values_mut();
+        for (i, &slot) in self.diag_slots.iter().enumerate() {
+            values[slot] += w[i / 3];
+        }
+        for (e, block) in blocks.iter().enumerate() {
+            let slots = &self.kkt_slots[e];
+            let mut local = [0.0; 49];
+            for i in 0..3 {
+                for j in 0..3 {
+                    let bij = block.primal[(i, j)];
+                    local[7 * i + j] = bij;
+                    local[7 * (i + 3) + (j + 3)] = bij;
+                    local[7 * i + (j + 3)] = -bij;
+                    local[7 * (i + 3) + j] = -bij;
+                }
+            }
+            if let Some(c) = block.coupling {
+                for i in 0..3 {
+                    local[7 * i + 6] = c[i];
+                    local[7 * (i + 3) + 6] = -c[i];
+                    local[7 * 6 + i] = c[i];
+                    local[7 * 6 + i + 3] = -c[i];
+                }
+            }
+            local[48] = block.diagonal;
+            for k in 0..49 {
+                if slots[k] != usize::MAX && local[k] != 0.0 {
+                    values[slots[k]] += local[k];
+                }
+            }
+        }
+        kkt
     }
 
     /// `∂E/∂r̂` from `∂E/∂r*` (`grad_out`) at a forward solution (Geng et al. Eq. 11).
@@ -459,63 +624,35 @@ impl InextensibilityLayer {
         if solution.s.len() != 4 * m || solution.z.len() != 4 * m || solution.positions.len() != n {
             return Err(Error::LengthMismatch { what: "forward state", expected: 4 * m, got: solution.s.len() });
         }
-        let w = self.rest.weights();
-        let mut kkt = SymmetricMatrix::zeros(self.kkt.pattern().clone());
-        let values = kkt.values_mut();
-        for (i, &slot) in self.diag_slots.iter().enumerate() {
-            values[slot] += w[i / 3];
-        }
         let mut rows = 0;
-        for e in 0..m {
-            let (s, z) = (&solution.s[4 * e..4 * e + 4], &solution.z[4 * e..4 * e + 4]);
-            let s0 = s[0];
-            let s1n = (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
-            let z0 = z[0];
-            let slots = &self.kkt_slots[e];
-            let mut local = [0.0; 49];
-            if z0 > 0.0 && s0 > 0.0 {
-                // γ = (s⁰² − ‖s¹‖²)/s⁰, computed without cancellation; ≥ 0 inside the cone.
+        let blocks: Vec<EdgeBlock> = (0..m)
+            .map(|e| {
+                let (s, z) = (&solution.s[4 * e..4 * e + 4], &solution.z[4 * e..4 * e + 4]);
+                let (s0, z0) = (s[0], z[0]);
+                if !(z0 > 0.0 && s0 > 0.0) {
+                    // No force on the edge (Appendix A, last paragraph): it decouples.
+                    return EdgeBlock::decoupled();
+                }
+                let s1 = nalgebra::Vector3::new(s[1], s[2], s[3]);
+                let s1n = s1.norm();
+                // γ = (s⁰² − ‖s¹‖²)/s⁰ without cancellation; ≥ 0 inside the cone.
                 let gamma = ((s0 - s1n) * (s0 + s1n) / s0).max(0.0);
-                let v = [s[1] / s0, s[2] / s0, s[3] / s0];
-                let c1 = z0 / s0;
-                // Keep the edge as a constraint row unless it is nearly decoupled.
-                let keep = 2.0 * z0 > gamma;
-                let c2 = if keep { 0.0 } else { 2.0 * z0 / gamma };
-                for i in 0..3 {
-                    for j in 0..3 {
-                        let bij = c1 * f64::from(u8::from(i == j)) + c2 * v[i] * v[j];
-                        local[7 * i + j] = bij;
-                        local[7 * (i + 3) + (j + 3)] = bij;
-                        local[7 * i + (j + 3)] = -bij;
-                        local[7 * (i + 3) + j] = -bij;
-                    }
-                }
-                if keep {
+                let v = s1 / s0;
+                let primal = nalgebra::Matrix3::identity() * (z0 / s0);
+                if Self::is_active(s, z) {
                     rows += 1;
-                    for i in 0..3 {
-                        local[7 * i + 6] = v[i];
-                        local[7 * (i + 3) + 6] = -v[i];
-                        local[7 * 6 + i] = v[i];
-                        local[7 * 6 + i + 3] = -v[i];
-                    }
-                    local[48] = -gamma / (2.0 * z0);
+                    EdgeBlock { primal, coupling: Some(v), diagonal: -gamma / (2.0 * z0) }
                 } else {
-                    local[48] = -1.0;
+                    // Exact elimination of the nearly decoupled row (its Schur complement).
+                    EdgeBlock { primal: primal + v * v.transpose() * (2.0 * z0 / gamma), ..EdgeBlock::decoupled() }
                 }
-            } else {
-                // No force on the edge (Appendix A, last paragraph): it decouples.
-                local[48] = -1.0;
-            }
-            for k in 0..49 {
-                if slots[k] != usize::MAX && local[k] != 0.0 {
-                    values[slots[k]] += local[k];
-                }
-            }
-        }
-        let factor = self.kkt.factorize(&kkt)?;
+            })
+            .collect();
+        let factor = self.kkt.factorize(&self.assemble(&blocks))?;
         let mut rhs = vec![0.0; n + m];
         rhs[..n].copy_from_slice(grad_out);
         let linear_residual = factor.solve_in_place(&mut rhs);
+        let w = self.rest.weights();
         let grad_in: Vec<f64> = (0..n).map(|i| w[i / 3] * rhs[i]).collect();
         check_output("SOCP backward gradient", &grad_in)?;
         let report =
