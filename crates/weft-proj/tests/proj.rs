@@ -172,7 +172,11 @@ fn socp_backward_matches_finite_differences_with_most_constraints_active() {
 
 /// Geng et al. Fig. 11 / Appendix A: three collinear, maximally stretched edges whose
 /// multipliers are not unique (a null space of Eq. 7). The rest mesh has a zero-area
-/// face (0, 2, 1) so that l̄_02 = l̄_01 + l̄_12.
+/// face (0, 2, 1) so that l̄_02 = l̄_01 + l̄_12, and the prediction is collinear too.
+/// Along the line the derivative is independent of the multiplier split and the
+/// regularised LDLᵀ must reproduce it; perpendicular to the line it is not (see
+/// docs/PROJECTION.md), so the finite-difference check covers the in-line coordinates
+/// of the degenerate triangle and every coordinate of the other two vertices.
 #[test]
 fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
     let p = vec![
@@ -184,16 +188,39 @@ fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
     ];
     let rest = TriMesh::new(p, vec![[0, 1, 3], [1, 2, 3], [0, 2, 1], [0, 4, 2]]).unwrap();
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
-    let pred = vec![-1.5, 0.0, 0.0, 0.1, 0.02, 0.0, 1.5, 0.0, 0.01, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0];
+    let pred = vec![-1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0];
     let (sol, report) = layer.forward(&pred).unwrap();
     let x = sol.positions();
-    let len = |a: usize, b: usize| Vector3::new(x[3 * a] - x[3 * b], x[3 * a + 1] - x[3 * b + 1], x[3 * a + 2] - x[3 * b + 2]).norm();
+    let len = |a: usize, b: usize| {
+        Vector3::new(x[3 * a] - x[3 * b], x[3 * a + 1] - x[3 * b + 1], x[3 * a + 2] - x[3 * b + 2]).norm()
+    };
     // All three edges of the degenerate triangle sit at their bounds.
-    assert_close!(len(0, 1), 1.1, rtol = 1e-6, atol = 0.0);
-    assert_close!(len(1, 2), 1.1, rtol = 1e-6, atol = 0.0);
-    assert_close!(len(0, 2), 2.2, rtol = 1e-6, atol = 0.0);
-    assert!(report.active_constraints >= 3);
-    check_socp_backward(&layer, &pred, 30);
+    assert_close!(len(0, 1), 1.1, rtol = 1e-9, atol = 0.0);
+    assert_close!(len(1, 2), 1.1, rtol = 1e-9, atol = 0.0);
+    assert_close!(len(0, 2), 2.2, rtol = 1e-9, atol = 0.0);
+    assert!(report.active_constraints >= 3, "{report:?}");
+    assert!(report.kkt_residual < 1e-9, "{report:?}");
+
+    let mut rng = TestRng::new(30);
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    let (analytic, back) = layer.backward_with_report(&sol, &g).unwrap();
+    assert!(analytic.iter().all(|v| v.is_finite()));
+    assert!(back.linear_residual < 1e-8, "{back:?}");
+    let loss = |y: &[f64]| {
+        let (s, _) = layer.forward(y).unwrap();
+        s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+    };
+    let dofs = [0, 3, 6, 9, 10, 11, 12, 13, 14];
+    let mut fd = Vec::new();
+    let mut an = Vec::new();
+    for &i in &dofs {
+        let mut e = vec![0.0; pred.len()];
+        e[i] = 1.0;
+        fd.push(weft_testkit::fd_directional(|y: &[f64]| vec![loss(y)], &pred, &e, 1e-5)[0]);
+        an.push(analytic[i]);
+    }
+    let err = max_norm_rel_error(&an, &fd);
+    assert!(err < 1e-4, "degenerate SOCP backward vs FD: relative error {err:e}: {an:?} vs {fd:?}");
 }
 
 #[test]
@@ -268,8 +295,9 @@ fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
         assert!(sol.positions().iter().all(|x| x.is_finite()));
         assert!(report.residual <= report.initial_residual);
         let after = strain_summary(layer.rest(), sol.positions(), 1.0).unwrap();
-        assert!(after.stretching_energy < before.stretching_energy, "mu = {mu}: {before:?} → {after:?}");
-        assert!(after.max_strain < before.max_strain);
+        // Stiff anchors (μ = 1) keep r* near the bad prediction; weak ones relax it.
+        let factor = if mu < 0.05 { 0.1 } else { 0.6 };
+        assert!(after.stretching_energy < factor * before.stretching_energy, "mu = {mu}: {before:?} → {after:?}");
         assert_eq!(report.adjoint_shifts, 0, "r* should be a strict local minimum");
     }
     // Weaker anchors let the cloth relax further toward its rest lengths.
