@@ -13,8 +13,8 @@
 
 use nalgebra::Vector3;
 use weft_linalg::SymmetricMatrix;
-use weft_sim::energy::{element_pairs, vertex};
 use weft_sim::Energy;
+use weft_sim::energy::{element_pairs, vertex};
 
 use crate::error::{Error, Result};
 use crate::rest::RestShape;
@@ -34,7 +34,11 @@ impl AxialSprings {
     /// skipped), stiffness `k` (N/m).
     pub fn new(rest: &RestShape, k: f64) -> Result<Self> {
         if !(k.is_finite() && k >= 0.0) {
-            return Err(Error::InvalidParameter { name: "axial stiffness", value: k, reason: "must be finite and ≥ 0" });
+            return Err(Error::InvalidParameter {
+                name: "axial stiffness",
+                value: k,
+                reason: "must be finite and ≥ 0",
+            });
         }
         let p = rest.rest_positions();
         let mut quads = Vec::new();
@@ -49,7 +53,11 @@ impl AxialSprings {
             quads.push([a, b, c, d]);
             weights.push([1.0 - u, u, -(1.0 - v), -v]);
         }
-        Ok(Self { quads, weights, stiffness: k })
+        Ok(Self {
+            quads,
+            weights,
+            stiffness: k,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -94,7 +102,9 @@ impl Energy for AxialSprings {
         }
     }
     fn value(&self, x: &[f64]) -> f64 {
-        (0..self.quads.len()).map(|s| 0.5 * self.stiffness * self.gap(s, x).norm_squared()).sum()
+        (0..self.quads.len())
+            .map(|s| 0.5 * self.stiffness * self.gap(s, x).norm_squared())
+            .sum()
     }
     fn add_gradient(&self, x: &[f64], grad: &mut [f64]) {
         for s in 0..self.quads.len() {

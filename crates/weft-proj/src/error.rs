@@ -11,13 +11,26 @@ pub enum Error {
     #[error(transparent)]
     Linalg(#[from] weft_linalg::Error),
     #[error("{what}: expected {expected} entries, got {got}")]
-    LengthMismatch { what: &'static str, expected: usize, got: usize },
+    LengthMismatch {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("non-finite value in {what} at entry {index}")]
     NonFinite { what: &'static str, index: usize },
     #[error("invalid parameter {name} = {value}: {reason}")]
-    InvalidParameter { name: &'static str, value: f64, reason: &'static str },
+    InvalidParameter {
+        name: &'static str,
+        value: f64,
+        reason: &'static str,
+    },
     #[error("rest edge {edge} ({a}, {b}) has length {length:e} m; every rest edge must have positive length")]
-    DegenerateRestEdge { edge: usize, a: usize, b: usize, length: f64 },
+    DegenerateRestEdge {
+        edge: usize,
+        a: usize,
+        b: usize,
+        length: f64,
+    },
     #[error("vertex {vertex} has zero lumped mass in the rest mesh (it is in no face of positive area)")]
     MasslessVertex { vertex: usize },
     #[error("conic solver stopped with status {status} after {iterations} iterations")]
@@ -45,7 +58,15 @@ pub(crate) fn check_finite(what: &'static str, values: &[f64]) -> Result<()> {
 
 /// Fails unless `values` has `expected` entries.
 pub(crate) fn check_len(what: &'static str, values: &[f64], expected: usize) -> Result<()> {
-    if values.len() == expected { Ok(()) } else { Err(Error::LengthMismatch { what, expected, got: values.len() }) }
+    if values.len() == expected {
+        Ok(())
+    } else {
+        Err(Error::LengthMismatch {
+            what,
+            expected,
+            got: values.len(),
+        })
+    }
 }
 
 /// Fails on the first non-finite entry of a computed output (never hand back NaN).

@@ -45,7 +45,7 @@ pub mod socp;
 
 pub use axial::AxialSprings;
 pub use error::{Error, Result};
-pub use metrics::{strain_summary, StrainSummary};
+pub use metrics::{StrainSummary, strain_summary};
 pub use quasistatic::{
     QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution, ZeroLengthScaling,
 };

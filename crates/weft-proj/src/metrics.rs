@@ -3,7 +3,7 @@
 //! `E_edge = Σ ½ k (l − l̄)²` over stretched (`l > l̄`) and compressed (`l < l̄`) edges).
 
 use crate::error::Result;
-use crate::rest::{edge_vector, RestShape};
+use crate::rest::{RestShape, edge_vector};
 
 /// Edge strain statistics of one configuration.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -37,7 +37,7 @@ use weft_sim::energies::{Springs, ZeroLengthSprings};
 use weft_sim::{Energy, NewtonSettings, NewtonSolver};
 
 use crate::axial::AxialSprings;
-use crate::error::{check_finite, check_len, check_output, Error, Result};
+use crate::error::{Error, Result, check_finite, check_len, check_output};
 use crate::rest::RestShape;
 
 /// Material and solver parameters of [`QuasistaticLayer`].
@@ -86,7 +86,11 @@ impl ZeroLengthScaling {
         let mu = match self {
             Self::Global(mu) => {
                 if !(mu.is_finite() && *mu > 0.0) {
-                    return Err(Error::InvalidParameter { name: "mu", value: *mu, reason: "must be positive and finite" });
+                    return Err(Error::InvalidParameter {
+                        name: "mu",
+                        value: *mu,
+                        reason: "must be positive and finite",
+                    });
                 }
                 vec![*mu; n]
             }
@@ -94,10 +98,18 @@ impl ZeroLengthScaling {
                 check_len("per-vertex mu", mu, n)?;
                 check_finite("per-vertex mu", mu)?;
                 if let Some(&bad) = mu.iter().find(|m| **m < 0.0) {
-                    return Err(Error::InvalidParameter { name: "mu_i", value: bad, reason: "must be ≥ 0" });
+                    return Err(Error::InvalidParameter {
+                        name: "mu_i",
+                        value: bad,
+                        reason: "must be ≥ 0",
+                    });
                 }
                 if !mu.iter().any(|m| *m > 0.0) {
-                    return Err(Error::InvalidParameter { name: "mu_i", value: 0.0, reason: "at least one must be > 0" });
+                    return Err(Error::InvalidParameter {
+                        name: "mu_i",
+                        value: 0.0,
+                        reason: "at least one must be > 0",
+                    });
                 }
                 mu.clone()
             }
@@ -176,19 +188,45 @@ impl QuasistaticLayer {
             ("tolerance", params.tolerance),
         ] {
             if !(value.is_finite() && value > 0.0) {
-                return Err(Error::InvalidParameter { name, value, reason: "must be positive and finite" });
+                return Err(Error::InvalidParameter {
+                    name,
+                    value,
+                    reason: "must be positive and finite",
+                });
             }
         }
-        for (name, value) in [("bend_stiffness", params.bend_stiffness), ("axial_stiffness", params.axial_stiffness)] {
+        for (name, value) in [
+            ("bend_stiffness", params.bend_stiffness),
+            ("axial_stiffness", params.axial_stiffness),
+        ] {
             if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::InvalidParameter { name, value, reason: "must be finite and ≥ 0" });
+                return Err(Error::InvalidParameter {
+                    name,
+                    value,
+                    reason: "must be finite and ≥ 0",
+                });
             }
         }
         let rest = RestShape::new(rest)?;
-        let edge = Springs::at_rest("edge springs", rest.rest_positions(), rest.edges().to_vec(), params.stretch_stiffness)?;
-        let bend_pairs =
-            rest.topology().hinges.iter().filter(|h| h.opposite[0] != h.opposite[1]).map(|h| h.opposite).collect();
-        let bending = Springs::at_rest("bending springs", rest.rest_positions(), bend_pairs, params.bend_stiffness)?;
+        let edge = Springs::at_rest(
+            "edge springs",
+            rest.rest_positions(),
+            rest.edges().to_vec(),
+            params.stretch_stiffness,
+        )?;
+        let bend_pairs = rest
+            .topology()
+            .hinges
+            .iter()
+            .filter(|h| h.opposite[0] != h.opposite[1])
+            .map(|h| h.opposite)
+            .collect();
+        let bending = Springs::at_rest(
+            "bending springs",
+            rest.rest_positions(),
+            bend_pairs,
+            params.bend_stiffness,
+        )?;
         let axial = AxialSprings::new(&rest, params.axial_stiffness)?;
         let mean_length = rest.rest_lengths().iter().sum::<f64>() / rest.rest_lengths().len() as f64;
         let newton = NewtonSettings {
@@ -196,7 +234,15 @@ impl QuasistaticLayer {
             max_iterations: params.max_iterations,
             ..NewtonSettings::default()
         };
-        Ok(Self { rest, params, edge, bending, axial, newton, pool: Mutex::new(Vec::new()) })
+        Ok(Self {
+            rest,
+            params,
+            edge,
+            bending,
+            axial,
+            newton,
+            pool: Mutex::new(Vec::new()),
+        })
     }
 
     pub fn rest(&self) -> &RestShape {
@@ -215,7 +261,11 @@ impl QuasistaticLayer {
 
     /// Zero-length spring base stiffness `k_i = k_Z m_i / m̄` (N/m) per vertex.
     pub fn zero_length_base(&self) -> Vec<f64> {
-        self.rest.weights().iter().map(|w| self.params.zero_length_stiffness * w).collect()
+        self.rest
+            .weights()
+            .iter()
+            .map(|w| self.params.zero_length_stiffness * w)
+            .collect()
     }
 
     /// Equilibrium of the spring cloth tied to the prediction `pred` (flat `3 V`
@@ -256,7 +306,15 @@ impl QuasistaticLayer {
             adjoint_shifts,
             time_seconds: start.elapsed().as_secs_f64(),
         };
-        Ok((QuasistaticSolution { positions: x, prediction: pred.to_vec(), mu, factor }, report))
+        Ok((
+            QuasistaticSolution {
+                positions: x,
+                prediction: pred.to_vec(),
+                mu,
+                factor,
+            },
+            report,
+        ))
     }
 
     /// Newton in two phases: with per-spring PSD projection (the definiteness fix of
@@ -271,7 +329,10 @@ impl QuasistaticLayer {
         terms: &[&dyn Energy],
         x: &mut [f64],
     ) -> weft_sim::Result<weft_sim::NewtonReport> {
-        let coarse = NewtonSettings { tolerance: 1e4 * self.newton.tolerance, ..self.newton };
+        let coarse = NewtonSettings {
+            tolerance: 1e4 * self.newton.tolerance,
+            ..self.newton
+        };
         let first = solver.minimize(terms, x, &coarse)?;
         let fine = NewtonSettings {
             project_hessian: false,
@@ -294,7 +355,11 @@ impl QuasistaticLayer {
         self.rest.check_positions("output gradient", grad_out)?;
         let n = self.num_vertices();
         if solution.positions.len() != 3 * n || solution.factor.dim() != 3 * n {
-            return Err(Error::LengthMismatch { what: "forward state", expected: 3 * n, got: solution.positions.len() });
+            return Err(Error::LengthMismatch {
+                what: "forward state",
+                expected: 3 * n,
+                got: solution.positions.len(),
+            });
         }
         let mut eta = grad_out.to_vec();
         solution.factor.solve_in_place(&mut eta);
@@ -311,7 +376,11 @@ impl QuasistaticLayer {
         check_output("quasistatic backward gradient", &pred)?;
         check_output("quasistatic backward mu gradient", &mu_per_vertex)?;
         let mu = mu_per_vertex.iter().sum();
-        Ok(QuasistaticGradient { pred, mu_per_vertex, mu })
+        Ok(QuasistaticGradient {
+            pred,
+            mu_per_vertex,
+            mu,
+        })
     }
 
     /// [`forward`](Self::forward) over many predictions in parallel (rayon over examples).
@@ -330,8 +399,16 @@ impl QuasistaticLayer {
         grads: &[G],
     ) -> Result<Vec<QuasistaticGradient>> {
         if solutions.len() != grads.len() {
-            return Err(Error::LengthMismatch { what: "batch gradients", expected: solutions.len(), got: grads.len() });
+            return Err(Error::LengthMismatch {
+                what: "batch gradients",
+                expected: solutions.len(),
+                got: grads.len(),
+            });
         }
-        solutions.par_iter().zip(grads.par_iter()).map(|(s, g)| self.backward(s, g.as_ref())).collect()
+        solutions
+            .par_iter()
+            .zip(grads.par_iter())
+            .map(|(s, g)| self.backward(s, g.as_ref()))
+            .collect()
     }
 }

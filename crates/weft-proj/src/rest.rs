@@ -3,9 +3,9 @@
 //! vertex mass so that accelerations are more uniform).
 
 use nalgebra::Vector3;
-use weft_mesh::{geometry, Topology, TriMesh};
+use weft_mesh::{Topology, TriMesh, geometry};
 
-use crate::error::{check_finite, check_len, Error, Result};
+use crate::error::{Error, Result, check_finite, check_len};
 
 /// Validated rest-state data shared by the projection layers.
 #[derive(Debug, Clone)]
@@ -40,7 +40,13 @@ impl RestShape {
         // Geng et al. §3: only the relative k_i matter for the SOCP; normalise to mean 1.
         let mean = masses.iter().sum::<f64>() / masses.len() as f64;
         let weights = masses.iter().map(|m| m / mean).collect();
-        Ok(Self { num_vertices: rest.num_vertices(), topology, rest_positions: p.to_vec(), rest_lengths, weights })
+        Ok(Self {
+            num_vertices: rest.num_vertices(),
+            topology,
+            rest_positions: p.to_vec(),
+            rest_lengths,
+            weights,
+        })
     }
 
     pub fn num_vertices(&self) -> usize {
@@ -74,5 +80,9 @@ impl RestShape {
 /// Distance between vertices `a` and `b` of a flat position vector.
 #[inline]
 pub(crate) fn edge_vector(x: &[f64], a: usize, b: usize) -> Vector3<f64> {
-    Vector3::new(x[3 * a] - x[3 * b], x[3 * a + 1] - x[3 * b + 1], x[3 * a + 2] - x[3 * b + 2])
+    Vector3::new(
+        x[3 * a] - x[3 * b],
+        x[3 * a + 1] - x[3 * b + 1],
+        x[3 * a + 2] - x[3 * b + 2],
+    )
 }

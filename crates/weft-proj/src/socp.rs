@@ -65,8 +65,8 @@ use rayon::prelude::*;
 use weft_linalg::{LdltSettings, LdltSolver, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TriMesh;
 
-use crate::error::{check_output, Error, Result};
-use crate::rest::{edge_vector, RestShape};
+use crate::error::{Error, Result, check_output};
+use crate::rest::{RestShape, edge_vector};
 
 /// Settings of [`InextensibilityLayer`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -108,7 +108,10 @@ impl Default for SocpSettings {
 impl SocpSettings {
     /// Tight tolerances (1e-10) for finite-difference checks of the backward pass.
     pub fn tight() -> Self {
-        Self { tolerance: 1e-10, ..Self::default() }
+        Self {
+            tolerance: 1e-10,
+            ..Self::default()
+        }
     }
 }
 
@@ -180,7 +183,11 @@ struct EdgeBlock {
 impl EdgeBlock {
     /// An edge without a constraint row: its multiplier decouples (`−1 · ν = 0`).
     fn decoupled() -> Self {
-        Self { primal: nalgebra::Matrix3::zeros(), coupling: None, diagonal: -1.0 }
+        Self {
+            primal: nalgebra::Matrix3::zeros(),
+            coupling: None,
+            diagonal: -1.0,
+        }
     }
 }
 
@@ -209,12 +216,22 @@ impl InextensibilityLayer {
     /// Builds the layer for the rest mesh `rest` and strain bound `epsilon ≥ 0`.
     pub fn new(rest: &TriMesh, epsilon: f64, settings: SocpSettings) -> Result<Self> {
         if !(epsilon.is_finite() && epsilon >= 0.0) {
-            return Err(Error::InvalidParameter { name: "epsilon", value: epsilon, reason: "must be finite and ≥ 0" });
+            return Err(Error::InvalidParameter {
+                name: "epsilon",
+                value: epsilon,
+                reason: "must be finite and ≥ 0",
+            });
         }
-        for (name, value) in [("tolerance", settings.tolerance), ("feasibility_tolerance", settings.feasibility_tolerance)]
-        {
+        for (name, value) in [
+            ("tolerance", settings.tolerance),
+            ("feasibility_tolerance", settings.feasibility_tolerance),
+        ] {
             if !(value.is_finite() && value > 0.0) {
-                return Err(Error::InvalidParameter { name, value, reason: "must be positive and finite" });
+                return Err(Error::InvalidParameter {
+                    name,
+                    value,
+                    reason: "must be positive and finite",
+                });
             }
         }
         let rest = RestShape::new(rest)?;
@@ -229,7 +246,11 @@ impl InextensibilityLayer {
         let kdiag: Vec<f64> = (0..n).map(|i| rest.weights()[i / 3]).collect();
         let p = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), kdiag);
         // A: rows 4e+1+c hold −1 at (a, c) and +1 at (b, c); row 4e is empty (s_e⁰ = b_e⁰).
-        let (mut ri, mut ci, mut vals) = (Vec::with_capacity(6 * m), Vec::with_capacity(6 * m), Vec::with_capacity(6 * m));
+        let (mut ri, mut ci, mut vals) = (
+            Vec::with_capacity(6 * m),
+            Vec::with_capacity(6 * m),
+            Vec::with_capacity(6 * m),
+        );
         for (e, &[va, vb]) in edges.iter().enumerate() {
             for c in 0..3 {
                 ri.extend([4 * e + 1 + c, 4 * e + 1 + c]);
@@ -263,7 +284,11 @@ impl InextensibilityLayer {
             }
         }
         let pattern = Arc::new(SymmetricPattern::new(n + m, entries));
-        let slot = |r: usize, c: usize| pattern.slot(r, c).unwrap_or_else(|| unreachable!("({r}, {c}) was added"));
+        let slot = |r: usize, c: usize| {
+            pattern
+                .slot(r, c)
+                .unwrap_or_else(|| unreachable!("({r}, {c}) was added"))
+        };
         let kkt_slots = edges
             .iter()
             .enumerate()
@@ -336,7 +361,8 @@ impl InextensibilityLayer {
             ..DefaultSettings::default()
         };
         let q = vec![0.0; 3 * self.num_vertices()];
-        DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings).map_err(|e| Error::SolverSetup(e.to_string()))
+        DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings)
+            .map_err(|e| Error::SolverSetup(e.to_string()))
     }
 
     /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
@@ -359,7 +385,10 @@ impl InextensibilityLayer {
         let status = sol.status;
         let iterations = sol.iterations;
         if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
-            return Err(Error::SolverFailed { status: format!("{status:?}"), iterations });
+            return Err(Error::SolverFailed {
+                status: format!("{status:?}"),
+                iterations,
+            });
         }
         check_output("conic solution", &sol.x)?;
         check_output("conic slacks", &sol.s)?;
@@ -367,7 +396,11 @@ impl InextensibilityLayer {
         let mut x = sol.x.clone();
         let mut s = sol.s.clone();
         let mut z = sol.z.clone();
-        let polish_iterations = if self.settings.polish { self.polish(&b, &mut x, &mut s, &mut z) } else { None };
+        let polish_iterations = if self.settings.polish {
+            self.polish(&b, &mut x, &mut s, &mut z)
+        } else {
+            None
+        };
 
         let positions: Vec<f64> = pred.iter().zip(&x).map(|(p, d)| p + ell * d).collect();
         check_output("projected positions", &positions)?;
@@ -386,7 +419,11 @@ impl InextensibilityLayer {
         }
         if max_violation > self.settings.feasibility_tolerance {
             let ratio = (1.0 + max_violation) * (1.0 + self.epsilon);
-            return Err(Error::ConstraintViolated { edge: worst, ratio, bound: 1.0 + self.epsilon });
+            return Err(Error::ConstraintViolated {
+                edge: worst,
+                ratio,
+                bound: 1.0 + self.epsilon,
+            });
         }
         let (stationarity, complementarity) = self.kkt_residuals(&x, &s, &z);
         let report = SocpReport {
@@ -425,8 +462,11 @@ impl InextensibilityLayer {
         }
         let scale = grad_obj.iter().chain(&at_z).fold(0.0f64, |m, v| m.max(v.abs()));
         grad_obj.iter_mut().zip(&at_z).for_each(|(g, a)| *g += a);
-        let stationarity =
-            if scale > 0.0 { grad_obj.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale } else { 0.0 };
+        let stationarity = if scale > 0.0 {
+            grad_obj.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale
+        } else {
+            0.0
+        };
         (stationarity, complementarity)
     }
 
@@ -457,7 +497,9 @@ impl InextensibilityLayer {
                 b[4 * e + 3] + delta[3 * va + 2] - delta[3 * vb + 2],
             )
         };
-        let mut active: Vec<bool> = (0..m).map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4])).collect();
+        let mut active: Vec<bool> = (0..m)
+            .map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
+            .collect();
         let lambda0: Vec<f64> = (0..m).map(|e| z[4 * e]).collect();
         let mut total = 0;
         // A primal active-set loop around Newton: the interior-point solution's active
@@ -536,7 +578,9 @@ impl InextensibilityLayer {
             (r, r_len, norm.max(norm_len))
         };
         let mut delta = x0.to_vec();
-        let mut lambda: Vec<f64> = (0..m).map(|e| if active[e] { lambda0[e].max(0.0) } else { 0.0 }).collect();
+        let mut lambda: Vec<f64> = (0..m)
+            .map(|e| if active[e] { lambda0[e].max(0.0) } else { 0.0 })
+            .collect();
         let (mut r, mut r_len, mut norm) = residual(&delta, &lambda);
         let mut iterations = 0;
         while norm > 1e-14 && iterations < 10 {
@@ -551,15 +595,20 @@ impl InextensibilityLayer {
                     let l = d.norm();
                     let u = d / l;
                     let h = (nalgebra::Matrix3::identity() - u * u.transpose()) * (lambda[e] / l);
-                    EdgeBlock { primal: h, coupling: Some(u), diagonal: 0.0 }
+                    EdgeBlock {
+                        primal: h,
+                        coupling: Some(u),
+                        diagonal: 0.0,
+                    }
                 })
                 .collect();
             let factor = self.kkt.factorize(&self.assemble(&blocks)).ok()?;
             let mut step: Vec<f64> = r.iter().chain(&r_len).map(|v| -v).collect();
             factor.solve_in_place(&mut step);
             let trial: Vec<f64> = delta.iter().zip(&step).map(|(d, s)| d + s).collect();
-            let trial_lambda: Vec<f64> =
-                (0..m).map(|e| if active[e] { lambda[e] + step[n + e] } else { 0.0 }).collect();
+            let trial_lambda: Vec<f64> = (0..m)
+                .map(|e| if active[e] { lambda[e] + step[n + e] } else { 0.0 })
+                .collect();
             let (tr, tr_len, tnorm) = residual(&trial, &trial_lambda);
             // Newton from an interior-point solution is in its region of quadratic
             // convergence; an occasional first-step increase (the multipliers of nearly
@@ -616,13 +665,21 @@ impl InextensibilityLayer {
     }
 
     /// [`backward`](Self::backward) with a report of the linear solve.
-    pub fn backward_with_report(&self, solution: &SocpSolution, grad_out: &[f64]) -> Result<(Vec<f64>, BackwardReport)> {
+    pub fn backward_with_report(
+        &self,
+        solution: &SocpSolution,
+        grad_out: &[f64],
+    ) -> Result<(Vec<f64>, BackwardReport)> {
         let start = Instant::now();
         self.rest.check_positions("output gradient", grad_out)?;
         let n = 3 * self.num_vertices();
         let m = self.num_constraints();
         if solution.s.len() != 4 * m || solution.z.len() != 4 * m || solution.positions.len() != n {
-            return Err(Error::LengthMismatch { what: "forward state", expected: 4 * m, got: solution.s.len() });
+            return Err(Error::LengthMismatch {
+                what: "forward state",
+                expected: 4 * m,
+                got: solution.s.len(),
+            });
         }
         let mut rows = 0;
         let blocks: Vec<EdgeBlock> = (0..m)
@@ -641,10 +698,17 @@ impl InextensibilityLayer {
                 let primal = nalgebra::Matrix3::identity() * (z0 / s0);
                 if Self::is_active(s, z) {
                     rows += 1;
-                    EdgeBlock { primal, coupling: Some(v), diagonal: -gamma / (2.0 * z0) }
+                    EdgeBlock {
+                        primal,
+                        coupling: Some(v),
+                        diagonal: -gamma / (2.0 * z0),
+                    }
                 } else {
                     // Exact elimination of the nearly decoupled row (its Schur complement).
-                    EdgeBlock { primal: primal + v * v.transpose() * (2.0 * z0 / gamma), ..EdgeBlock::decoupled() }
+                    EdgeBlock {
+                        primal: primal + v * v.transpose() * (2.0 * z0 / gamma),
+                        ..EdgeBlock::decoupled()
+                    }
                 }
             })
             .collect();
@@ -655,8 +719,11 @@ impl InextensibilityLayer {
         let w = self.rest.weights();
         let grad_in: Vec<f64> = (0..n).map(|i| w[i / 3] * rhs[i]).collect();
         check_output("SOCP backward gradient", &grad_in)?;
-        let report =
-            BackwardReport { time_seconds: start.elapsed().as_secs_f64(), linear_residual, constraint_rows: rows };
+        let report = BackwardReport {
+            time_seconds: start.elapsed().as_secs_f64(),
+            linear_residual,
+            constraint_rows: rows,
+        };
         Ok((grad_in, report))
     }
 
@@ -672,8 +739,16 @@ impl InextensibilityLayer {
         grads: &[G],
     ) -> Result<Vec<Vec<f64>>> {
         if solutions.len() != grads.len() {
-            return Err(Error::LengthMismatch { what: "batch gradients", expected: solutions.len(), got: grads.len() });
+            return Err(Error::LengthMismatch {
+                what: "batch gradients",
+                expected: solutions.len(),
+                got: grads.len(),
+            });
         }
-        solutions.par_iter().zip(grads.par_iter()).map(|(s, g)| self.backward(s, g.as_ref())).collect()
+        solutions
+            .par_iter()
+            .zip(grads.par_iter())
+            .map(|(s, g)| self.backward(s, g.as_ref()))
+            .collect()
     }
 }

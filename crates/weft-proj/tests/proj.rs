@@ -2,12 +2,12 @@
 //! backward passes against central finite differences of the forward solve, bad input.
 
 use nalgebra::Vector3;
-use weft_mesh::{generators, TriMesh};
+use weft_mesh::{TriMesh, generators};
 use weft_proj::{
-    strain_summary, Error, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling,
+    Error, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling, strain_summary,
 };
 use weft_sim::Energy;
-use weft_testkit::{assert_close, fd_gradient, max_norm_rel_error, TestRng};
+use weft_testkit::{TestRng, assert_close, fd_gradient, max_norm_rel_error};
 
 /// `sheet(n)` with every interior vertex jittered in-plane: an irregular rest mesh.
 fn random_sheet(n: usize, rng: &mut TestRng) -> TriMesh {
@@ -31,7 +31,11 @@ fn predict(rest: &TriMesh, sx: f64, noise: f64, rng: &mut TestRng) -> Vec<f64> {
         .iter()
         .flat_map(|p| {
             let z = 0.1 * (3.0 * p.x).sin() * (2.0 * p.y).cos();
-            [sx * p.x + rng.uniform(-noise, noise), p.y + rng.uniform(-noise, noise), z + rng.uniform(-noise, noise)]
+            [
+                sx * p.x + rng.uniform(-noise, noise),
+                p.y + rng.uniform(-noise, noise),
+                z + rng.uniform(-noise, noise),
+            ]
         })
         .collect()
 }
@@ -42,7 +46,11 @@ fn max_edge_ratio(layer: &InextensibilityLayer, x: &[f64]) -> f64 {
         .iter()
         .zip(rest.rest_lengths())
         .map(|(&[a, b], l0)| {
-            let d = Vector3::new(x[3 * a] - x[3 * b], x[3 * a + 1] - x[3 * b + 1], x[3 * a + 2] - x[3 * b + 2]);
+            let d = Vector3::new(
+                x[3 * a] - x[3 * b],
+                x[3 * a + 1] - x[3 * b + 1],
+                x[3 * a + 2] - x[3 * b + 2],
+            );
             d.norm() / l0
         })
         .fold(0.0, f64::max)
@@ -96,7 +104,10 @@ fn socp_forward_meets_bounds_and_kkt_on_a_stretched_sheet() {
     let rest = random_sheet(12, &mut rng);
     let pred = predict(&rest, 1.25, 0.01, &mut rng);
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
-    assert!(max_edge_ratio(&layer, &pred) > 1.2, "the prediction must violate the bounds");
+    assert!(
+        max_edge_ratio(&layer, &pred) > 1.2,
+        "the prediction must violate the bounds"
+    );
     let (sol, report) = layer.forward(&pred).unwrap();
     assert!(max_edge_ratio(&layer, sol.positions()) <= 1.1 * (1.0 + 1e-6));
     assert!(report.max_violation <= 1e-6, "{report:?}");
@@ -155,7 +166,10 @@ fn socp_backward_matches_finite_differences_on_random_meshes() {
         let pred = predict(&rest, 1.15, 0.05, &mut rng);
         let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
         let (active, total) = check_socp_backward(&layer, &pred, seed);
-        assert!(active > 0 && active < total, "mixed active set expected: {active}/{total}");
+        assert!(
+            active > 0 && active < total,
+            "mixed active set expected: {active}/{total}"
+        );
     }
 }
 
@@ -163,11 +177,17 @@ fn socp_backward_matches_finite_differences_on_random_meshes() {
 fn socp_backward_matches_finite_differences_with_most_constraints_active() {
     let mut rng = TestRng::new(20);
     let rest = random_sheet(5, &mut rng);
-    let pred: Vec<f64> =
-        predict(&rest, 1.0, 0.02, &mut rng).iter().enumerate().map(|(i, x)| if i % 3 == 2 { *x } else { 1.6 * x }).collect();
+    let pred: Vec<f64> = predict(&rest, 1.0, 0.02, &mut rng)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 2 { *x } else { 1.6 * x })
+        .collect();
     let layer = InextensibilityLayer::new(&rest, 0.05, SocpSettings::tight()).unwrap();
     let (active, total) = check_socp_backward(&layer, &pred, 21);
-    assert!(active * 10 >= total * 8, "most constraints should be active: {active}/{total}");
+    assert!(
+        active * 10 >= total * 8,
+        "most constraints should be active: {active}/{total}"
+    );
 }
 
 /// Geng et al. Fig. 11 / Appendix A: three collinear, maximally stretched edges whose
@@ -188,11 +208,18 @@ fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
     ];
     let rest = TriMesh::new(p, vec![[0, 1, 3], [1, 2, 3], [0, 2, 1], [0, 4, 2]]).unwrap();
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
-    let pred = vec![-1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0];
+    let pred = vec![
+        -1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0,
+    ];
     let (sol, report) = layer.forward(&pred).unwrap();
     let x = sol.positions();
     let len = |a: usize, b: usize| {
-        Vector3::new(x[3 * a] - x[3 * b], x[3 * a + 1] - x[3 * b + 1], x[3 * a + 2] - x[3 * b + 2]).norm()
+        Vector3::new(
+            x[3 * a] - x[3 * b],
+            x[3 * a + 1] - x[3 * b + 1],
+            x[3 * a + 2] - x[3 * b + 2],
+        )
+        .norm()
     };
     // All three edges of the degenerate triangle sit at their bounds.
     assert_close!(len(0, 1), 1.1, rtol = 1e-9, atol = 0.0);
@@ -220,7 +247,10 @@ fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
         an.push(analytic[i]);
     }
     let err = max_norm_rel_error(&an, &fd);
-    assert!(err < 1e-4, "degenerate SOCP backward vs FD: relative error {err:e}: {an:?} vs {fd:?}");
+    assert!(
+        err < 1e-4,
+        "degenerate SOCP backward vs FD: relative error {err:e}: {an:?} vs {fd:?}"
+    );
 }
 
 #[test]
@@ -246,7 +276,10 @@ fn socp_rejects_bad_input() {
         InextensibilityLayer::new(&rest, -0.1, SocpSettings::default()),
         Err(Error::InvalidParameter { name: "epsilon", .. })
     ));
-    assert!(matches!(InextensibilityLayer::new(&rest, f64::NAN, SocpSettings::default()), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        InextensibilityLayer::new(&rest, f64::NAN, SocpSettings::default()),
+        Err(Error::InvalidParameter { .. })
+    ));
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
     let mut pred = rest.flat_positions();
     pred[7] = f64::NAN;
@@ -257,7 +290,10 @@ fn socp_rejects_bad_input() {
     let mut g = vec![1.0; good.len()];
     g[0] = f64::INFINITY;
     assert!(matches!(layer.backward(&sol, &g), Err(Error::NonFinite { .. })));
-    assert!(matches!(layer.backward(&sol, &g[..3]), Err(Error::LengthMismatch { .. })));
+    assert!(matches!(
+        layer.backward(&sol, &g[..3]),
+        Err(Error::LengthMismatch { .. })
+    ));
 
     // Two coincident rest vertices joined by an edge.
     let mut p = rest.positions().to_vec();
@@ -274,7 +310,10 @@ fn socp_rejects_bad_input() {
 }
 
 fn tight_quasistatic() -> QuasistaticParams {
-    QuasistaticParams { tolerance: 1e-11, ..QuasistaticParams::default() }
+    QuasistaticParams {
+        tolerance: 1e-11,
+        ..QuasistaticParams::default()
+    }
 }
 
 #[test]
@@ -287,8 +326,11 @@ fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
     assert_eq!(nb, layer.rest().topology().hinges.len());
     assert_eq!(na, nb);
     // Mirrored in x (every triangle inverted) and stretched 3×, with noise.
-    let inverted: Vec<f64> =
-        predict(&rest, -3.0, 0.02, &mut rng).iter().enumerate().map(|(i, x)| if i % 3 == 1 { 1.5 * x } else { *x }).collect();
+    let inverted: Vec<f64> = predict(&rest, -3.0, 0.02, &mut rng)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 1 { 1.5 * x } else { *x })
+        .collect();
     let before = strain_summary(layer.rest(), &inverted, 1.0).unwrap();
     for mu in [1.0, 0.1, 0.01] {
         let (sol, report) = layer.forward(&inverted, &ZeroLengthScaling::Global(mu)).unwrap();
@@ -297,7 +339,10 @@ fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
         let after = strain_summary(layer.rest(), sol.positions(), 1.0).unwrap();
         // Stiff anchors (μ = 1) keep r* near the bad prediction; weak ones relax it.
         let factor = if mu < 0.05 { 0.1 } else { 0.6 };
-        assert!(after.stretching_energy < factor * before.stretching_energy, "mu = {mu}: {before:?} → {after:?}");
+        assert!(
+            after.stretching_energy < factor * before.stretching_energy,
+            "mu = {mu}: {before:?} → {after:?}"
+        );
         assert_eq!(report.adjoint_shifts, 0, "r* should be a strict local minimum");
     }
     // Weaker anchors let the cloth relax further toward its rest lengths.
@@ -318,10 +363,12 @@ fn quasistatic_equilibrium_has_zero_net_force() {
     let (sol, _) = layer.forward(&pred, &ZeroLengthScaling::Global(0.1)).unwrap();
     // Rebuild the energy independently from weft-sim's terms and check ∇E(r*) = 0.
     let x = sol.positions();
-    let edges = weft_sim::energies::Springs::at_rest("e", rest.positions(), layer.rest().edges().to_vec(), 1.0).unwrap();
+    let edges =
+        weft_sim::energies::Springs::at_rest("e", rest.positions(), layer.rest().edges().to_vec(), 1.0).unwrap();
     let hinges = &layer.rest().topology().hinges;
     let bends =
-        weft_sim::energies::Springs::at_rest("b", rest.positions(), hinges.iter().map(|h| h.opposite).collect(), 0.1).unwrap();
+        weft_sim::energies::Springs::at_rest("b", rest.positions(), hinges.iter().map(|h| h.opposite).collect(), 0.1)
+            .unwrap();
     let axial = weft_proj::AxialSprings::new(layer.rest(), 0.1).unwrap();
     let w: Vec<f64> = layer.zero_length_base().iter().map(|k| 0.1 * k).collect();
     let anchors = weft_sim::energies::ZeroLengthSprings::new("z", w, pred.clone()).unwrap();
@@ -389,7 +436,11 @@ fn quasistatic_batch_matches_serial() {
     let preds: Vec<Vec<f64>> = (0..4).map(|_| predict(&rest, 1.2, 0.02, &mut rng)).collect();
     let grads: Vec<Vec<f64>> = (0..4).map(|_| rng.vec(preds[0].len(), -1.0, 1.0)).collect();
     let scaling = ZeroLengthScaling::Global(0.1);
-    let batch: Vec<_> = layer.forward_batch(&preds, &scaling).into_iter().map(|r| r.unwrap().0).collect();
+    let batch: Vec<_> = layer
+        .forward_batch(&preds, &scaling)
+        .into_iter()
+        .map(|r| r.unwrap().0)
+        .collect();
     let batch_grads = layer.backward_batch(&batch, &grads).unwrap();
     for i in 0..4 {
         let (serial, _) = layer.forward(&preds[i], &scaling).unwrap();
@@ -406,23 +457,50 @@ fn quasistatic_rejects_bad_input() {
     let mut nan = good.clone();
     nan[4] = f64::NAN;
     let mu = ZeroLengthScaling::Global(0.1);
-    assert!(matches!(layer.forward(&nan, &mu), Err(Error::NonFinite { index: 4, .. })));
-    assert!(matches!(layer.forward(&good[..6], &mu), Err(Error::LengthMismatch { .. })));
+    assert!(matches!(
+        layer.forward(&nan, &mu),
+        Err(Error::NonFinite { index: 4, .. })
+    ));
+    assert!(matches!(
+        layer.forward(&good[..6], &mu),
+        Err(Error::LengthMismatch { .. })
+    ));
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-        assert!(matches!(layer.forward(&good, &ZeroLengthScaling::Global(bad)), Err(Error::InvalidParameter { .. })));
+        assert!(matches!(
+            layer.forward(&good, &ZeroLengthScaling::Global(bad)),
+            Err(Error::InvalidParameter { .. })
+        ));
     }
     let n = layer.num_vertices();
-    assert!(matches!(layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.1; n - 1])), Err(Error::LengthMismatch { .. })));
-    assert!(matches!(layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.0; n])), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.1; n - 1])),
+        Err(Error::LengthMismatch { .. })
+    ));
+    assert!(matches!(
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.0; n])),
+        Err(Error::InvalidParameter { .. })
+    ));
     let mut neg = vec![0.1; n];
     neg[3] = -0.1;
-    assert!(matches!(layer.forward(&good, &ZeroLengthScaling::PerVertex(neg)), Err(Error::InvalidParameter { .. })));
     assert!(matches!(
-        QuasistaticLayer::new(&rest, QuasistaticParams { stretch_stiffness: -1.0, ..QuasistaticParams::default() }),
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(neg)),
+        Err(Error::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        QuasistaticLayer::new(
+            &rest,
+            QuasistaticParams {
+                stretch_stiffness: -1.0,
+                ..QuasistaticParams::default()
+            }
+        ),
         Err(Error::InvalidParameter { .. })
     ));
     let (sol, _) = layer.forward(&good, &mu).unwrap();
-    assert!(matches!(layer.backward(&sol, &good[..3]), Err(Error::LengthMismatch { .. })));
+    assert!(matches!(
+        layer.backward(&sol, &good[..3]),
+        Err(Error::LengthMismatch { .. })
+    ));
 }
 
 #[test]
@@ -440,7 +518,10 @@ fn axial_springs_gradient_and_hessian_match_finite_differences() {
     assert!(max_norm_rel_error(&grad, &fd) < 1e-7);
     let mut pairs = Vec::new();
     axial.hessian_pairs(&mut pairs);
-    let pattern = std::sync::Arc::new(weft_linalg::SymmetricPattern::from_vertex_pairs(shape.num_vertices(), pairs));
+    let pattern = std::sync::Arc::new(weft_linalg::SymmetricPattern::from_vertex_pairs(
+        shape.num_vertices(),
+        pairs,
+    ));
     let mut h = weft_linalg::SymmetricMatrix::zeros(pattern);
     axial.add_hessian(&x, false, &mut h);
     let v = rng.vec(x.len(), -1.0, 1.0);
