@@ -7,6 +7,7 @@
 mod acap;
 mod mesh;
 mod output;
+mod project;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -32,6 +33,9 @@ enum Command {
     /// ACAP features of deformed meshes (encode) and meshes from features (decode).
     #[command(subcommand)]
     Acap(acap::AcapCommand),
+    /// Project a predicted cloth onto physics: inextensibility SOCP or quasistatic springs (Geng et al.).
+    #[command(subcommand)]
+    Project(project::ProjectCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -40,5 +44,6 @@ fn main() -> anyhow::Result<()> {
         Command::Mesh(cmd) => mesh::run(cmd),
         Command::Simulate(args) => simulate::run(args),
         Command::Acap(cmd) => acap::run(cmd),
+        Command::Project(cmd) => project::run(cmd),
     }
 }

@@ -1,0 +1,414 @@
+//! The quasistatic layer (Geng et al. §5–6): relax a predicted configuration `r̂` to the
+//! equilibrium of a mass-spring cloth tied to `r̂` by zero-length springs, and
+//! differentiate the equilibrium.
+//!
+//! # Forward (Geng et al. §5)
+//!
+//! `r* = argmin_r E_edge(r) + E_bending(r) + E_axial(r) + Σ_i ½ μ_i k_i ‖r_i − r̂_i‖²`
+//!
+//! - `E_edge = Σ ½ k_L (l_e − l̄_e)²` over mesh edges (weft-sim's `Springs`),
+//! - `E_bending = Σ ½ k_B (l_e − l̄_e)²` over the fictitious edge across every hinge,
+//! - `E_axial` the zero-length springs between each bending edge and its shared edge
+//!   (Fig. 6, [`AxialSprings`]),
+//! - zero-length springs to `r̂` with `k_i = k_Z m_i / m̄` (lumped rest masses over their
+//!   mean) scaled by a global `μ` or per-vertex `μ_i` (weft-sim's `ZeroLengthSprings`).
+//!
+//! Minimised by weft-sim's Newton solver from `r̂` itself (which may be stretched or
+//! inverted): per-spring PSD projection of the Hessian (the definiteness fix of Teran et
+//! al. 2005), an Armijo line search, sparse Cholesky with the symbolic factor reused.
+//!
+//! # Backward (Geng et al. Eq. 12–16)
+//!
+//! At equilibrium `∇E_mat(r*) + W (r* − r̂) = 0` with `W = diag(μ_i k_i)`. Differentiating,
+//! `H dr* = W dr̂ + k_i (r̂_i − r*_i) dμ_i` with `H` the *true* (unprojected) Hessian at
+//! `r*`. One adjoint solve `H η = ∂E/∂r*` (Eq. 14) then gives
+//! `∂E/∂r̂_i = μ_i k_i η_i` and `∂E/∂μ_i = k_i η_i · (r̂_i − r*_i)` (Eq. 16), whose sum over
+//! vertices is `∂E/∂μ` for a global `μ`. The forward pass factorises `H(r*)` after
+//! convergence and keeps the factor, so the backward pass is one pair of triangular
+//! solves.
+
+use std::sync::Mutex;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use weft_linalg::CholeskyFactor;
+use weft_mesh::TriMesh;
+use weft_sim::energies::{Springs, ZeroLengthSprings};
+use weft_sim::{Energy, HessianProjection, NewtonSettings, NewtonSolver};
+
+use crate::axial::AxialSprings;
+use crate::error::{Error, Result, check_finite, check_len, check_output};
+use crate::rest::RestShape;
+
+/// Material and solver parameters of [`QuasistaticLayer`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct QuasistaticParams {
+    /// `k_L` of the mesh-edge springs (N/m).
+    pub stretch_stiffness: f64,
+    /// `k_B` of the bending springs across hinges (N/m).
+    pub bend_stiffness: f64,
+    /// `k_A` of the axial zero-length springs (N/m).
+    pub axial_stiffness: f64,
+    /// `k_Z`: the zero-length spring to `r̂` of a vertex of mean mass has stiffness
+    /// `μ k_Z` (N/m).
+    pub zero_length_stiffness: f64,
+    /// Newton stops when the largest residual force is below
+    /// `tolerance · k_L · (mean rest edge length)`.
+    pub tolerance: f64,
+    pub max_iterations: usize,
+}
+
+impl Default for QuasistaticParams {
+    fn default() -> Self {
+        Self {
+            stretch_stiffness: 1.0,
+            bend_stiffness: 0.1,
+            axial_stiffness: 0.1,
+            zero_length_stiffness: 1.0,
+            tolerance: 1e-8,
+            max_iterations: 100,
+        }
+    }
+}
+
+/// The scaling `μ` of the zero-length springs to the prediction (Geng et al. §6.2).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ZeroLengthScaling {
+    /// One `μ` for every vertex.
+    Global(f64),
+    /// `μ_i` per vertex.
+    PerVertex(Vec<f64>),
+}
+
+impl ZeroLengthScaling {
+    fn per_vertex(&self, n: usize) -> Result<Vec<f64>> {
+        let mu = match self {
+            Self::Global(mu) => {
+                if !(mu.is_finite() && *mu > 0.0) {
+                    return Err(Error::InvalidParameter {
+                        name: "mu",
+                        value: *mu,
+                        reason: "must be positive and finite",
+                    });
+                }
+                vec![*mu; n]
+            }
+            Self::PerVertex(mu) => {
+                check_len("per-vertex mu", mu, n)?;
+                check_finite("per-vertex mu", mu)?;
+                if let Some(&bad) = mu.iter().find(|m| **m < 0.0) {
+                    return Err(Error::InvalidParameter {
+                        name: "mu_i",
+                        value: bad,
+                        reason: "must be ≥ 0",
+                    });
+                }
+                if !mu.iter().any(|m| *m > 0.0) {
+                    return Err(Error::InvalidParameter {
+                        name: "mu_i",
+                        value: 0.0,
+                        reason: "at least one must be > 0",
+                    });
+                }
+                mu.clone()
+            }
+        };
+        Ok(mu)
+    }
+}
+
+/// What one forward solve did.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct QuasistaticReport {
+    pub iterations: usize,
+    /// Final and initial max-norm residual force (N).
+    pub residual: f64,
+    pub initial_residual: f64,
+    /// Final total energy (J).
+    pub energy: f64,
+    pub line_search_halvings: usize,
+    /// Newton steps whose matrix needed a diagonal shift.
+    pub regularizations: usize,
+    /// Diagonal shifts needed to factorise the true Hessian at `r*` for the backward pass
+    /// (0 when `r*` is a strict local minimum, as it should be).
+    pub adjoint_shifts: usize,
+    /// Wall time of the forward pass, including the adjoint factorisation (s).
+    pub time_seconds: f64,
+}
+
+/// The result of [`QuasistaticLayer::forward`]: `r*` and what the backward pass needs.
+#[derive(Debug, Clone)]
+pub struct QuasistaticSolution {
+    positions: Vec<f64>,
+    prediction: Vec<f64>,
+    mu: Vec<f64>,
+    factor: CholeskyFactor,
+}
+
+impl QuasistaticSolution {
+    /// Equilibrium positions `r*`, flat, vertex order of the input.
+    pub fn positions(&self) -> &[f64] {
+        &self.positions
+    }
+    pub fn into_positions(self) -> Vec<f64> {
+        self.positions
+    }
+}
+
+/// Gradients of a loss with respect to the layer's inputs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QuasistaticGradient {
+    /// `∂E/∂r̂` (Eq. 14), flat like the prediction.
+    pub pred: Vec<f64>,
+    /// `∂E/∂μ_i` per vertex (Eq. 16 with per-vertex `μ_i`).
+    pub mu_per_vertex: Vec<f64>,
+    /// `∂E/∂μ` for a global `μ`: the sum of `mu_per_vertex`.
+    pub mu: f64,
+}
+
+/// Geng et al.'s quasistatic projection as a layer: built once per rest mesh.
+#[derive(Debug)]
+pub struct QuasistaticLayer {
+    rest: RestShape,
+    params: QuasistaticParams,
+    edge: Springs,
+    bending: Springs,
+    axial: AxialSprings,
+    newton: NewtonSettings,
+    /// Newton solvers (pattern and symbolic Cholesky built) idle between calls.
+    pool: Mutex<Vec<NewtonSolver>>,
+}
+
+impl QuasistaticLayer {
+    pub fn new(rest: &TriMesh, params: QuasistaticParams) -> Result<Self> {
+        for (name, value) in [
+            ("stretch_stiffness", params.stretch_stiffness),
+            ("zero_length_stiffness", params.zero_length_stiffness),
+            ("tolerance", params.tolerance),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::InvalidParameter {
+                    name,
+                    value,
+                    reason: "must be positive and finite",
+                });
+            }
+        }
+        for (name, value) in [
+            ("bend_stiffness", params.bend_stiffness),
+            ("axial_stiffness", params.axial_stiffness),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(Error::InvalidParameter {
+                    name,
+                    value,
+                    reason: "must be finite and ≥ 0",
+                });
+            }
+        }
+        let rest = RestShape::new(rest)?;
+        let edge = Springs::at_rest(
+            "edge springs",
+            rest.rest_positions(),
+            rest.edges().to_vec(),
+            params.stretch_stiffness,
+        )?;
+        let bend_pairs = rest
+            .topology()
+            .hinges
+            .iter()
+            .filter(|h| h.opposite[0] != h.opposite[1])
+            .map(|h| h.opposite)
+            .collect();
+        let bending = Springs::at_rest(
+            "bending springs",
+            rest.rest_positions(),
+            bend_pairs,
+            params.bend_stiffness,
+        )?;
+        let axial = AxialSprings::new(&rest, params.axial_stiffness)?;
+        let mean_length = rest.rest_lengths().iter().sum::<f64>() / rest.rest_lengths().len() as f64;
+        let newton = NewtonSettings {
+            tolerance: params.tolerance * params.stretch_stiffness * mean_length,
+            max_iterations: params.max_iterations,
+            ..NewtonSettings::default()
+        };
+        Ok(Self {
+            rest,
+            params,
+            edge,
+            bending,
+            axial,
+            newton,
+            pool: Mutex::new(Vec::new()),
+        })
+    }
+
+    pub fn rest(&self) -> &RestShape {
+        &self.rest
+    }
+    pub fn params(&self) -> &QuasistaticParams {
+        &self.params
+    }
+    pub fn num_vertices(&self) -> usize {
+        self.rest.num_vertices()
+    }
+    /// Counts of (edge, bending, axial) springs.
+    pub fn spring_counts(&self) -> (usize, usize, usize) {
+        (self.edge.pairs().len(), self.bending.pairs().len(), self.axial.len())
+    }
+
+    /// Zero-length spring base stiffness `k_i = k_Z m_i / m̄` (N/m) per vertex.
+    pub fn zero_length_base(&self) -> Vec<f64> {
+        self.rest
+            .weights()
+            .iter()
+            .map(|w| self.params.zero_length_stiffness * w)
+            .collect()
+    }
+
+    /// Equilibrium of the spring cloth tied to the prediction `pred` (flat `3 V`
+    /// coordinates) with zero-length scaling `mu` (Geng et al. §5).
+    pub fn forward(&self, pred: &[f64], mu: &ZeroLengthScaling) -> Result<(QuasistaticSolution, QuasistaticReport)> {
+        let start = Instant::now();
+        self.rest.check_positions("prediction", pred)?;
+        let n = self.num_vertices();
+        let mu = mu.per_vertex(n)?;
+        let base = self.zero_length_base();
+        let weights: Vec<f64> = mu.iter().zip(&base).map(|(m, k)| m * k).collect();
+        let anchors = ZeroLengthSprings::new("zero-length springs to the prediction", weights, pred.to_vec())?;
+        let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+
+        let pooled = self.pool.lock().ok().and_then(|mut p| p.pop());
+        let mut solver = match pooled {
+            Some(s) => s,
+            None => NewtonSolver::new(3 * n, &terms, vec![false; 3 * n])?,
+        };
+        let mut x = pred.to_vec();
+        let result = self.minimize(&mut solver, &terms, &mut x).and_then(|report| {
+            // Eq. 14 needs the true Hessian at r*; factorise it once here for backward.
+            let (factor, shifts) = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
+            Ok((report, factor, shifts))
+        });
+        if let Ok(mut pool) = self.pool.lock() {
+            pool.push(solver);
+        }
+        let (newton, factor, adjoint_shifts) = result?;
+        check_output("quasistatic positions", &x)?;
+        let report = QuasistaticReport {
+            iterations: newton.iterations,
+            residual: newton.residual,
+            initial_residual: newton.initial_residual,
+            energy: newton.energy,
+            line_search_halvings: newton.line_search_halvings,
+            regularizations: newton.regularizations,
+            adjoint_shifts,
+            time_seconds: start.elapsed().as_secs_f64(),
+        };
+        Ok((
+            QuasistaticSolution {
+                positions: x,
+                prediction: pred.to_vec(),
+                mu,
+                factor,
+            },
+            report,
+        ))
+    }
+
+    /// Newton in two phases: with per-spring PSD projection (the definiteness fix of
+    /// Teran et al. 2005) until the residual force is within `10⁴ ×` the tolerance — far
+    /// from equilibrium, e.g. from an inverted or badly stretched prediction — then with
+    /// the true Hessian (diagonally shifted by weft-sim's solver only if indefinite), whose
+    /// convergence stays quadratic where compressed springs make the projection differ
+    /// from the true Hessian at the minimum.
+    fn minimize(
+        &self,
+        solver: &mut NewtonSolver,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+    ) -> weft_sim::Result<weft_sim::NewtonReport> {
+        let coarse = NewtonSettings {
+            tolerance: 1e4 * self.newton.tolerance,
+            ..self.newton
+        };
+        let first = solver.minimize(terms, x, &coarse)?;
+        let fine = NewtonSettings {
+            projection: HessianProjection::Never,
+            max_iterations: self.newton.max_iterations.saturating_sub(first.iterations).max(1),
+            ..self.newton
+        };
+        let second = solver.minimize(terms, x, &fine)?;
+        Ok(weft_sim::NewtonReport {
+            iterations: first.iterations + second.iterations,
+            initial_residual: first.initial_residual,
+            line_search_halvings: first.line_search_halvings + second.line_search_halvings,
+            regularizations: first.regularizations + second.regularizations,
+            time: first.time + second.time,
+            ..second
+        })
+    }
+
+    /// `∂E/∂r̂` and `∂E/∂μ` from `∂E/∂r*` (`grad_out`) by one adjoint solve (Eq. 14, 16).
+    pub fn backward(&self, solution: &QuasistaticSolution, grad_out: &[f64]) -> Result<QuasistaticGradient> {
+        self.rest.check_positions("output gradient", grad_out)?;
+        let n = self.num_vertices();
+        if solution.positions.len() != 3 * n || solution.factor.dim() != 3 * n {
+            return Err(Error::LengthMismatch {
+                what: "forward state",
+                expected: 3 * n,
+                got: solution.positions.len(),
+            });
+        }
+        let mut eta = grad_out.to_vec();
+        solution.factor.solve_in_place(&mut eta);
+        let base = self.zero_length_base();
+        let pred: Vec<f64> = (0..3 * n).map(|i| solution.mu[i / 3] * base[i / 3] * eta[i]).collect();
+        let mu_per_vertex: Vec<f64> = (0..n)
+            .map(|v| {
+                base[v]
+                    * (0..3)
+                        .map(|c| eta[3 * v + c] * (solution.prediction[3 * v + c] - solution.positions[3 * v + c]))
+                        .sum::<f64>()
+            })
+            .collect();
+        check_output("quasistatic backward gradient", &pred)?;
+        check_output("quasistatic backward mu gradient", &mu_per_vertex)?;
+        let mu = mu_per_vertex.iter().sum();
+        Ok(QuasistaticGradient {
+            pred,
+            mu_per_vertex,
+            mu,
+        })
+    }
+
+    /// [`forward`](Self::forward) over many predictions in parallel (rayon over examples).
+    pub fn forward_batch<P: AsRef<[f64]> + Sync>(
+        &self,
+        preds: &[P],
+        mu: &ZeroLengthScaling,
+    ) -> Vec<Result<(QuasistaticSolution, QuasistaticReport)>> {
+        preds.par_iter().map(|p| self.forward(p.as_ref(), mu)).collect()
+    }
+
+    /// [`backward`](Self::backward) over many examples in parallel.
+    pub fn backward_batch<G: AsRef<[f64]> + Sync>(
+        &self,
+        solutions: &[QuasistaticSolution],
+        grads: &[G],
+    ) -> Result<Vec<QuasistaticGradient>> {
+        if solutions.len() != grads.len() {
+            return Err(Error::LengthMismatch {
+                what: "batch gradients",
+                expected: solutions.len(),
+                got: grads.len(),
+            });
+        }
+        solutions
+            .par_iter()
+            .zip(grads.par_iter())
+            .map(|(s, g)| self.backward(s, g.as_ref()))
+            .collect()
+    }
+}

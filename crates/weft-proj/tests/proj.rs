@@ -1,0 +1,537 @@
+//! Integration tests of weft-proj: forward correctness against independent methods,
+//! backward passes against central finite differences of the forward solve, bad input.
+
+use nalgebra::Vector3;
+use weft_mesh::{TriMesh, generators};
+use weft_proj::{
+    Error, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling, strain_summary,
+};
+use weft_sim::Energy;
+use weft_testkit::{TestRng, assert_close, fd_gradient, max_norm_rel_error};
+
+/// `sheet(n)` with every interior vertex jittered in-plane: an irregular rest mesh.
+fn random_sheet(n: usize, rng: &mut TestRng) -> TriMesh {
+    let sheet = generators::sheet(n, 1.0).unwrap();
+    let h = 1.0 / (n - 1) as f64;
+    let p = sheet
+        .positions()
+        .iter()
+        .map(|p| {
+            let interior = p.x.abs() < 0.5 - 1e-9 && p.y.abs() < 0.5 - 1e-9;
+            let j = if interior { 0.2 * h } else { 0.0 };
+            Vector3::new(p.x + rng.uniform(-j, j), p.y + rng.uniform(-j, j), 0.0)
+        })
+        .collect();
+    sheet.with_positions(p).unwrap()
+}
+
+/// A network-like prediction: stretch `sx` along x, a smooth bump, and noise.
+fn predict(rest: &TriMesh, sx: f64, noise: f64, rng: &mut TestRng) -> Vec<f64> {
+    rest.positions()
+        .iter()
+        .flat_map(|p| {
+            let z = 0.1 * (3.0 * p.x).sin() * (2.0 * p.y).cos();
+            [
+                sx * p.x + rng.uniform(-noise, noise),
+                p.y + rng.uniform(-noise, noise),
+                z + rng.uniform(-noise, noise),
+            ]
+        })
+        .collect()
+}
+
+fn max_edge_ratio(layer: &InextensibilityLayer, x: &[f64]) -> f64 {
+    let rest = layer.rest();
+    rest.edges()
+        .iter()
+        .zip(rest.rest_lengths())
+        .map(|(&[a, b], l0)| {
+            let d = Vector3::new(
+                x[3 * a] - x[3 * b],
+                x[3 * a + 1] - x[3 * b + 1],
+                x[3 * a + 2] - x[3 * b + 2],
+            );
+            d.norm() / l0
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Dykstra's alternating projections in the `K`-weighted norm: converges to the
+/// `K`-weighted projection of `pred` onto the intersection of the convex edge sets
+/// `‖r_a − r_b‖ ≤ l^max` — an independent solver for Geng et al. Eq. 1.
+fn dykstra(layer: &InextensibilityLayer, pred: &[f64], sweeps: usize) -> Vec<f64> {
+    let rest = layer.rest();
+    let k = rest.weights();
+    let eps = layer.epsilon();
+    let mut x = pred.to_vec();
+    let mut incr = vec![[0.0; 6]; rest.edges().len()];
+    for _ in 0..sweeps {
+        for (e, (&[a, b], &l0)) in rest.edges().iter().zip(rest.rest_lengths()).enumerate() {
+            let lmax = (1.0 + eps) * l0;
+            let mut y = [0.0; 6];
+            for c in 0..3 {
+                y[c] = x[3 * a + c] + incr[e][c];
+                y[3 + c] = x[3 * b + c] + incr[e][3 + c];
+            }
+            let d = Vector3::new(y[0] - y[3], y[1] - y[4], y[2] - y[5]);
+            let l = d.norm();
+            let mut p = y;
+            if l > lmax {
+                // Weighted projection: the mass-weighted centre stays, the length becomes lmax.
+                let (ka, kb) = (k[a], k[b]);
+                let u = d / l;
+                for c in 0..3 {
+                    let centre = (ka * y[c] + kb * y[3 + c]) / (ka + kb);
+                    p[c] = centre + kb / (ka + kb) * lmax * u[c];
+                    p[3 + c] = centre - ka / (ka + kb) * lmax * u[c];
+                }
+            }
+            for c in 0..6 {
+                incr[e][c] = y[c] - p[c];
+            }
+            for c in 0..3 {
+                x[3 * a + c] = p[c];
+                x[3 * b + c] = p[3 + c];
+            }
+        }
+    }
+    x
+}
+
+#[test]
+fn socp_forward_meets_bounds_and_kkt_on_a_stretched_sheet() {
+    let mut rng = TestRng::new(1);
+    let rest = random_sheet(12, &mut rng);
+    let pred = predict(&rest, 1.25, 0.01, &mut rng);
+    let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
+    assert!(
+        max_edge_ratio(&layer, &pred) > 1.2,
+        "the prediction must violate the bounds"
+    );
+    let (sol, report) = layer.forward(&pred).unwrap();
+    assert!(max_edge_ratio(&layer, sol.positions()) <= 1.1 * (1.0 + 1e-6));
+    assert!(report.max_violation <= 1e-6, "{report:?}");
+    assert!(report.kkt_residual < 1e-6, "{report:?}");
+    assert!(report.active_constraints > 0 && report.active_constraints < report.num_constraints);
+    assert_eq!(report.status, "Solved");
+}
+
+#[test]
+fn socp_forward_matches_dykstra_projection() {
+    let mut rng = TestRng::new(2);
+    let rest = random_sheet(5, &mut rng);
+    let pred = predict(&rest, 1.3, 0.03, &mut rng);
+    let layer = InextensibilityLayer::new(&rest, 0.05, SocpSettings::tight()).unwrap();
+    let (sol, _) = layer.forward(&pred).unwrap();
+    let reference = dykstra(&layer, &pred, 20_000);
+    let err = max_norm_rel_error(sol.positions(), &reference);
+    assert!(err < 1e-7, "SOCP vs Dykstra: relative error {err:e}");
+}
+
+#[test]
+fn socp_leaves_a_feasible_prediction_alone_and_backward_is_identity() {
+    let rest = generators::sheet(6, 1.0).unwrap();
+    let pred: Vec<f64> = rest.flat_positions().iter().map(|x| 0.9 * x).collect();
+    let layer = InextensibilityLayer::new(&rest, 0.0, SocpSettings::tight()).unwrap();
+    let (sol, report) = layer.forward(&pred).unwrap();
+    assert_eq!(report.active_constraints, 0);
+    assert!(max_norm_rel_error(sol.positions(), &pred) < 1e-9);
+    let g: Vec<f64> = (0..pred.len()).map(|i| (i as f64 * 0.37).sin()).collect();
+    let gi = layer.backward(&sol, &g).unwrap();
+    assert!(max_norm_rel_error(&gi, &g) < 1e-8);
+}
+
+/// Checks `∂(gᵀ r*)/∂r̂` from the backward pass against central differences of forward.
+fn check_socp_backward(layer: &InextensibilityLayer, pred: &[f64], seed: u64) -> (usize, usize) {
+    let mut rng = TestRng::new(seed);
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    let (sol, report) = layer.forward(pred).unwrap();
+    let (analytic, back) = layer.backward_with_report(&sol, &g).unwrap();
+    assert!(back.linear_residual < 1e-8, "{back:?}");
+    let loss = |x: &[f64]| {
+        let (s, _) = layer.forward(x).unwrap();
+        s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+    };
+    let fd = fd_gradient(loss, pred, 1e-5);
+    let err = max_norm_rel_error(&analytic, &fd);
+    assert!(err < 1e-4, "SOCP backward vs FD: relative error {err:e} ({report:?})");
+    (report.active_constraints, report.num_constraints)
+}
+
+#[test]
+fn socp_backward_matches_finite_differences_on_random_meshes() {
+    for seed in 0..3 {
+        let mut rng = TestRng::new(10 + seed);
+        let rest = random_sheet(5, &mut rng);
+        let pred = predict(&rest, 1.15, 0.05, &mut rng);
+        let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
+        let (active, total) = check_socp_backward(&layer, &pred, seed);
+        assert!(
+            active > 0 && active < total,
+            "mixed active set expected: {active}/{total}"
+        );
+    }
+}
+
+#[test]
+fn socp_backward_matches_finite_differences_with_most_constraints_active() {
+    let mut rng = TestRng::new(20);
+    let rest = random_sheet(5, &mut rng);
+    let pred: Vec<f64> = predict(&rest, 1.0, 0.02, &mut rng)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 2 { *x } else { 1.6 * x })
+        .collect();
+    let layer = InextensibilityLayer::new(&rest, 0.05, SocpSettings::tight()).unwrap();
+    let (active, total) = check_socp_backward(&layer, &pred, 21);
+    assert!(
+        active * 10 >= total * 8,
+        "most constraints should be active: {active}/{total}"
+    );
+}
+
+/// Geng et al. Fig. 11 / Appendix A: three collinear, maximally stretched edges whose
+/// multipliers are not unique (a null space of Eq. 7). The rest mesh has a zero-area
+/// face (0, 2, 1) so that l̄_02 = l̄_01 + l̄_12, and the prediction is collinear too.
+/// Along the line the derivative is independent of the multiplier split and the
+/// regularised LDLᵀ must reproduce it; perpendicular to the line it is not (see
+/// docs/PROJECTION.md), so the finite-difference check covers the in-line coordinates
+/// of the degenerate triangle and every coordinate of the other two vertices.
+#[test]
+fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
+    let p = vec![
+        Vector3::new(-1.0, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, 0.0),
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, -1.0, 0.0),
+    ];
+    let rest = TriMesh::new(p, vec![[0, 1, 3], [1, 2, 3], [0, 2, 1], [0, 4, 2]]).unwrap();
+    let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
+    let pred = vec![
+        -1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0,
+    ];
+    let (sol, report) = layer.forward(&pred).unwrap();
+    let x = sol.positions();
+    let len = |a: usize, b: usize| {
+        Vector3::new(
+            x[3 * a] - x[3 * b],
+            x[3 * a + 1] - x[3 * b + 1],
+            x[3 * a + 2] - x[3 * b + 2],
+        )
+        .norm()
+    };
+    // All three edges of the degenerate triangle sit at their bounds.
+    assert_close!(len(0, 1), 1.1, rtol = 1e-9, atol = 0.0);
+    assert_close!(len(1, 2), 1.1, rtol = 1e-9, atol = 0.0);
+    assert_close!(len(0, 2), 2.2, rtol = 1e-9, atol = 0.0);
+    assert!(report.active_constraints >= 3, "{report:?}");
+    assert!(report.kkt_residual < 1e-9, "{report:?}");
+
+    let mut rng = TestRng::new(30);
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    let (analytic, back) = layer.backward_with_report(&sol, &g).unwrap();
+    assert!(analytic.iter().all(|v| v.is_finite()));
+    assert!(back.linear_residual < 1e-8, "{back:?}");
+    let loss = |y: &[f64]| {
+        let (s, _) = layer.forward(y).unwrap();
+        s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+    };
+    let dofs = [0, 3, 6, 9, 10, 11, 12, 13, 14];
+    let mut fd = Vec::new();
+    let mut an = Vec::new();
+    for &i in &dofs {
+        let mut e = vec![0.0; pred.len()];
+        e[i] = 1.0;
+        fd.push(weft_testkit::fd_directional(|y: &[f64]| vec![loss(y)], &pred, &e, 1e-5)[0]);
+        an.push(analytic[i]);
+    }
+    let err = max_norm_rel_error(&an, &fd);
+    assert!(
+        err < 1e-4,
+        "degenerate SOCP backward vs FD: relative error {err:e}: {an:?} vs {fd:?}"
+    );
+}
+
+#[test]
+fn socp_batch_matches_serial() {
+    let mut rng = TestRng::new(40);
+    let rest = random_sheet(6, &mut rng);
+    let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
+    let preds: Vec<Vec<f64>> = (0..4).map(|_| predict(&rest, 1.2, 0.02, &mut rng)).collect();
+    let grads: Vec<Vec<f64>> = (0..4).map(|_| rng.vec(preds[0].len(), -1.0, 1.0)).collect();
+    let batch: Vec<_> = layer.forward_batch(&preds).into_iter().map(|r| r.unwrap().0).collect();
+    let batch_grads = layer.backward_batch(&batch, &grads).unwrap();
+    for i in 0..4 {
+        let (serial, _) = layer.forward(&preds[i]).unwrap();
+        assert_eq!(serial.positions(), batch[i].positions());
+        assert_eq!(layer.backward(&serial, &grads[i]).unwrap(), batch_grads[i]);
+    }
+}
+
+#[test]
+fn socp_rejects_bad_input() {
+    let rest = generators::sheet(4, 1.0).unwrap();
+    assert!(matches!(
+        InextensibilityLayer::new(&rest, -0.1, SocpSettings::default()),
+        Err(Error::InvalidParameter { name: "epsilon", .. })
+    ));
+    assert!(matches!(
+        InextensibilityLayer::new(&rest, f64::NAN, SocpSettings::default()),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
+    let mut pred = rest.flat_positions();
+    pred[7] = f64::NAN;
+    assert!(matches!(layer.forward(&pred), Err(Error::NonFinite { index: 7, .. })));
+    assert!(matches!(layer.forward(&pred[..9]), Err(Error::LengthMismatch { .. })));
+    let good = rest.flat_positions();
+    let (sol, _) = layer.forward(&good).unwrap();
+    let mut g = vec![1.0; good.len()];
+    g[0] = f64::INFINITY;
+    assert!(matches!(layer.backward(&sol, &g), Err(Error::NonFinite { .. })));
+    assert!(matches!(
+        layer.backward(&sol, &g[..3]),
+        Err(Error::LengthMismatch { .. })
+    ));
+
+    // Two coincident rest vertices joined by an edge.
+    let mut p = rest.positions().to_vec();
+    p[1] = p[0];
+    let degenerate = rest.with_positions(p).unwrap();
+    assert!(matches!(
+        InextensibilityLayer::new(&degenerate, 0.1, SocpSettings::default()),
+        Err(Error::DegenerateRestEdge { .. })
+    ));
+    assert!(matches!(
+        QuasistaticLayer::new(&degenerate, QuasistaticParams::default()),
+        Err(Error::DegenerateRestEdge { .. })
+    ));
+}
+
+fn tight_quasistatic() -> QuasistaticParams {
+    QuasistaticParams {
+        tolerance: 1e-11,
+        ..QuasistaticParams::default()
+    }
+}
+
+#[test]
+fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
+    let mut rng = TestRng::new(50);
+    let rest = random_sheet(10, &mut rng);
+    let layer = QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap();
+    let (ne, nb, na) = layer.spring_counts();
+    assert_eq!(ne, layer.rest().edges().len());
+    assert_eq!(nb, layer.rest().topology().hinges.len());
+    assert_eq!(na, nb);
+    // Mirrored in x (every triangle inverted) and stretched 3×, with noise.
+    let inverted: Vec<f64> = predict(&rest, -3.0, 0.02, &mut rng)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 1 { 1.5 * x } else { *x })
+        .collect();
+    let before = strain_summary(layer.rest(), &inverted, 1.0).unwrap();
+    for mu in [1.0, 0.1, 0.01] {
+        let (sol, report) = layer.forward(&inverted, &ZeroLengthScaling::Global(mu)).unwrap();
+        assert!(sol.positions().iter().all(|x| x.is_finite()));
+        assert!(report.residual <= report.initial_residual);
+        let after = strain_summary(layer.rest(), sol.positions(), 1.0).unwrap();
+        // Stiff anchors (μ = 1) keep r* near the bad prediction; weak ones relax it.
+        let factor = if mu < 0.05 { 0.1 } else { 0.6 };
+        assert!(
+            after.stretching_energy < factor * before.stretching_energy,
+            "mu = {mu}: {before:?} → {after:?}"
+        );
+        assert_eq!(report.adjoint_shifts, 0, "r* should be a strict local minimum");
+    }
+    // Weaker anchors let the cloth relax further toward its rest lengths.
+    let strain_at = |mu: f64| {
+        let (sol, _) = layer.forward(&inverted, &ZeroLengthScaling::Global(mu)).unwrap();
+        strain_summary(layer.rest(), sol.positions(), 1.0).unwrap().max_strain
+    };
+    assert!(strain_at(0.01) < strain_at(1.0));
+}
+
+#[test]
+fn quasistatic_equilibrium_has_zero_net_force() {
+    let mut rng = TestRng::new(55);
+    let rest = random_sheet(6, &mut rng);
+    let params = tight_quasistatic();
+    let layer = QuasistaticLayer::new(&rest, params).unwrap();
+    let pred = predict(&rest, 1.3, 0.05, &mut rng);
+    let (sol, _) = layer.forward(&pred, &ZeroLengthScaling::Global(0.1)).unwrap();
+    // Rebuild the energy independently from weft-sim's terms and check ∇E(r*) = 0.
+    let x = sol.positions();
+    let edges =
+        weft_sim::energies::Springs::at_rest("e", rest.positions(), layer.rest().edges().to_vec(), 1.0).unwrap();
+    let hinges = &layer.rest().topology().hinges;
+    let bends =
+        weft_sim::energies::Springs::at_rest("b", rest.positions(), hinges.iter().map(|h| h.opposite).collect(), 0.1)
+            .unwrap();
+    let axial = weft_proj::AxialSprings::new(layer.rest(), 0.1).unwrap();
+    let w: Vec<f64> = layer.zero_length_base().iter().map(|k| 0.1 * k).collect();
+    let anchors = weft_sim::energies::ZeroLengthSprings::new("z", w, pred.clone()).unwrap();
+    let mut grad = vec![0.0; x.len()];
+    for t in [&edges as &dyn Energy, &bends, &axial, &anchors] {
+        t.add_gradient(x, &mut grad);
+    }
+    let max = grad.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+    assert!(max < 1e-11, "residual force {max:e}");
+}
+
+#[test]
+fn quasistatic_backward_matches_finite_differences() {
+    for (seed, mu) in [(60, 1.0), (61, 0.1), (62, 0.01)] {
+        let mut rng = TestRng::new(seed);
+        let rest = random_sheet(5, &mut rng);
+        let layer = QuasistaticLayer::new(&rest, tight_quasistatic()).unwrap();
+        let pred = predict(&rest, 1.4, 0.05, &mut rng);
+        let g = rng.vec(pred.len(), -1.0, 1.0);
+        let scaling = ZeroLengthScaling::Global(mu);
+        let (sol, _) = layer.forward(&pred, &scaling).unwrap();
+        let grad = layer.backward(&sol, &g).unwrap();
+        let loss_pred = |x: &[f64]| {
+            let (s, _) = layer.forward(x, &scaling).unwrap();
+            s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+        };
+        let fd = fd_gradient(loss_pred, &pred, 1e-6);
+        let err = max_norm_rel_error(&grad.pred, &fd);
+        assert!(err < 1e-4, "mu = {mu}: ∂E/∂r̂ vs FD relative error {err:e}");
+        // ∂E/∂μ for a global μ (Eq. 16).
+        let loss_mu = |m: &[f64]| {
+            let (s, _) = layer.forward(&pred, &ZeroLengthScaling::Global(m[0])).unwrap();
+            s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+        };
+        let fd_mu = fd_gradient(loss_mu, &[mu], 1e-6 * mu)[0];
+        assert_close!(grad.mu, fd_mu, rtol = 1e-4, atol = 1e-10);
+    }
+}
+
+#[test]
+fn quasistatic_per_vertex_mu_gradient_matches_finite_differences() {
+    let mut rng = TestRng::new(70);
+    let rest = random_sheet(5, &mut rng);
+    let layer = QuasistaticLayer::new(&rest, tight_quasistatic()).unwrap();
+    let pred = predict(&rest, 1.3, 0.05, &mut rng);
+    let mu = rng.vec(layer.num_vertices(), 0.02, 0.2);
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    let (sol, _) = layer.forward(&pred, &ZeroLengthScaling::PerVertex(mu.clone())).unwrap();
+    let grad = layer.backward(&sol, &g).unwrap();
+    let loss = |m: &[f64]| {
+        let (s, _) = layer.forward(&pred, &ZeroLengthScaling::PerVertex(m.to_vec())).unwrap();
+        s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+    };
+    let fd = fd_gradient(loss, &mu, 1e-7);
+    let err = max_norm_rel_error(&grad.mu_per_vertex, &fd);
+    assert!(err < 1e-4, "∂E/∂μ_i vs FD relative error {err:e}");
+    assert_close!(grad.mu, fd.iter().sum::<f64>(), rtol = 1e-4, atol = 1e-10);
+}
+
+#[test]
+fn quasistatic_batch_matches_serial() {
+    let mut rng = TestRng::new(80);
+    let rest = random_sheet(6, &mut rng);
+    let layer = QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap();
+    let preds: Vec<Vec<f64>> = (0..4).map(|_| predict(&rest, 1.2, 0.02, &mut rng)).collect();
+    let grads: Vec<Vec<f64>> = (0..4).map(|_| rng.vec(preds[0].len(), -1.0, 1.0)).collect();
+    let scaling = ZeroLengthScaling::Global(0.1);
+    let batch: Vec<_> = layer
+        .forward_batch(&preds, &scaling)
+        .into_iter()
+        .map(|r| r.unwrap().0)
+        .collect();
+    let batch_grads = layer.backward_batch(&batch, &grads).unwrap();
+    for i in 0..4 {
+        let (serial, _) = layer.forward(&preds[i], &scaling).unwrap();
+        assert_eq!(serial.positions(), batch[i].positions());
+        assert_eq!(layer.backward(&serial, &grads[i]).unwrap(), batch_grads[i]);
+    }
+}
+
+#[test]
+fn quasistatic_rejects_bad_input() {
+    let rest = generators::sheet(4, 1.0).unwrap();
+    let layer = QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap();
+    let good = rest.flat_positions();
+    let mut nan = good.clone();
+    nan[4] = f64::NAN;
+    let mu = ZeroLengthScaling::Global(0.1);
+    assert!(matches!(
+        layer.forward(&nan, &mu),
+        Err(Error::NonFinite { index: 4, .. })
+    ));
+    assert!(matches!(
+        layer.forward(&good[..6], &mu),
+        Err(Error::LengthMismatch { .. })
+    ));
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(matches!(
+            layer.forward(&good, &ZeroLengthScaling::Global(bad)),
+            Err(Error::InvalidParameter { .. })
+        ));
+    }
+    let n = layer.num_vertices();
+    assert!(matches!(
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.1; n - 1])),
+        Err(Error::LengthMismatch { .. })
+    ));
+    assert!(matches!(
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(vec![0.0; n])),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let mut neg = vec![0.1; n];
+    neg[3] = -0.1;
+    assert!(matches!(
+        layer.forward(&good, &ZeroLengthScaling::PerVertex(neg)),
+        Err(Error::InvalidParameter { .. })
+    ));
+    assert!(matches!(
+        QuasistaticLayer::new(
+            &rest,
+            QuasistaticParams {
+                stretch_stiffness: -1.0,
+                ..QuasistaticParams::default()
+            }
+        ),
+        Err(Error::InvalidParameter { .. })
+    ));
+    let (sol, _) = layer.forward(&good, &mu).unwrap();
+    assert!(matches!(
+        layer.backward(&sol, &good[..3]),
+        Err(Error::LengthMismatch { .. })
+    ));
+}
+
+#[test]
+fn axial_springs_gradient_and_hessian_match_finite_differences() {
+    let mut rng = TestRng::new(90);
+    let rest = random_sheet(4, &mut rng);
+    let shape = weft_proj::RestShape::new(&rest).unwrap();
+    let axial = weft_proj::AxialSprings::new(&shape, 2.0).unwrap();
+    // Zero energy at the flat rest state: the segments cross.
+    assert!(axial.value(&rest.flat_positions()) < 1e-28);
+    let x = predict(&rest, 1.2, 0.1, &mut rng);
+    let mut grad = vec![0.0; x.len()];
+    axial.add_gradient(&x, &mut grad);
+    let fd = fd_gradient(|y: &[f64]| axial.value(y), &x, 1e-6);
+    assert!(max_norm_rel_error(&grad, &fd) < 1e-7);
+    let mut pairs = Vec::new();
+    axial.hessian_pairs(&mut pairs);
+    let pattern = std::sync::Arc::new(weft_linalg::SymmetricPattern::from_vertex_pairs(
+        shape.num_vertices(),
+        pairs,
+    ));
+    let mut h = weft_linalg::SymmetricMatrix::zeros(pattern);
+    axial.add_hessian(&x, false, &mut h);
+    let v = rng.vec(x.len(), -1.0, 1.0);
+    let mut hv = vec![0.0; x.len()];
+    h.mul_vec(&v, &mut hv);
+    let grad_at = |y: &[f64]| {
+        let mut g = vec![0.0; y.len()];
+        axial.add_gradient(y, &mut g);
+        g
+    };
+    let fd_hv = weft_testkit::fd_directional(grad_at, &x, &v, 1e-6);
+    assert!(max_norm_rel_error(&hv, &fd_hv) < 1e-7);
+}
