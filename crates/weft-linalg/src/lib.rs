@@ -80,6 +80,16 @@ fn single_threaded() {
 pub struct SymmetricPattern {
     n: usize,
     symbolic: SymbolicSparseColMat<usize>,
+    /// For patterns of `3 × 3` vertex blocks: per column vertex `v`, the row vertices
+    /// `u ≤ v` (sorted) and the slot of row `3u` in each of the columns `3v..3v+3`.
+    blocks: Option<VertexBlocks>,
+}
+
+#[derive(Debug, Clone)]
+struct VertexBlocks {
+    offsets: Vec<usize>,
+    rows: Vec<usize>,
+    slots: Vec<[usize; 3]>,
 }
 
 impl SymmetricPattern {
@@ -102,7 +112,7 @@ impl SymmetricPattern {
             col_ptr.push(row_idx.len());
         }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        Self { n, symbolic }
+        Self { n, symbolic, blocks: None }
     }
 
     /// Builds the pattern of a matrix made of dense `3 × 3` blocks coupling vertex pairs
@@ -123,7 +133,27 @@ impl SymmetricPattern {
                 }
             }
         }
-        Self::new(3 * num_vertices, entries)
+        let mut pattern = Self::new(3 * num_vertices, entries);
+        // Index the vertex blocks so assembly needs one short search per block.
+        let mut offsets = vec![0];
+        let mut rows = Vec::new();
+        let mut slots = Vec::new();
+        for v in 0..num_vertices {
+            let c = 3 * v;
+            let (start, end) = (pattern.col_ptr()[c], pattern.col_ptr()[c + 1]);
+            for k in start..end {
+                let r = pattern.row_idx()[k];
+                if r % 3 == 0 {
+                    let u = r / 3;
+                    let base = |j: usize| pattern.slot(3 * u, c + j).unwrap_or(usize::MAX);
+                    rows.push(u);
+                    slots.push([base(0), base(1), base(2)]);
+                }
+            }
+            offsets.push(rows.len());
+        }
+        pattern.blocks = Some(VertexBlocks { offsets, rows, slots });
+        pattern
     }
 
     pub fn dim(&self) -> usize {
@@ -215,12 +245,21 @@ impl SymmetricMatrix {
         if u > v {
             return;
         }
-        for j in 0..3 {
-            let c = 3 * v + j;
-            let base = self
-                .pattern
-                .slot(3 * u, c)
-                .unwrap_or_else(|| panic!("vertex block ({u}, {v}) is not in the pattern"));
+        let bases = match &self.pattern.blocks {
+            Some(b) => {
+                let range = b.offsets[v]..b.offsets[v + 1];
+                let k = b.rows[range.clone()]
+                    .binary_search(&u)
+                    .unwrap_or_else(|_| panic!("vertex block ({u}, {v}) is not in the pattern"));
+                b.slots[range.start + k]
+            }
+            None => [0, 1, 2].map(|j| {
+                self.pattern
+                    .slot(3 * u, 3 * v + j)
+                    .unwrap_or_else(|| panic!("vertex block ({u}, {v}) is not in the pattern"))
+            }),
+        };
+        for (j, &base) in bases.iter().enumerate() {
             let rows = if u == v { j + 1 } else { 3 };
             for i in 0..rows {
                 self.values[base + i] += block[i][j];

@@ -127,3 +127,26 @@ fn pattern_slots_are_symmetric_and_include_the_diagonal() {
     assert!(p.slot(0, 4).is_none(), "vertices 0 and 1 are not coupled");
     assert!((0..9).all(|i| p.slot(i, i).is_some()));
 }
+
+#[test]
+fn vertex_block_assembly_matches_entrywise_assembly() {
+    let mut rng = TestRng::new(8);
+    let pairs = [(0, 1), (1, 3), (2, 3), (0, 3)];
+    let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(4, pairs));
+    let mut by_block = SymmetricMatrix::zeros(pattern.clone());
+    let mut by_entry = SymmetricMatrix::zeros(pattern);
+    for &(u, v) in pairs.iter().chain(&[(2, 2), (3, 3)]) {
+        let block = [0; 3].map(|_| [0; 3].map(|_| rng.uniform(-1.0, 1.0)));
+        // Off-diagonal pairs given in both orders: the lower one must be ignored.
+        by_block.add_vertex_block(u, v, &block);
+        if u != v {
+            by_block.add_vertex_block(v, u, &block);
+        }
+        for i in 0..3 {
+            for j in 0..3 {
+                by_entry.add(3 * u + i, 3 * v + j, block[i][j]);
+            }
+        }
+    }
+    assert_eq!(by_block.values(), by_entry.values());
+}
