@@ -5,7 +5,7 @@
 
 use std::cell::RefCell;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{Criterion, criterion_group, criterion_main};
 use weft_acap::{AcapFeatures, AcapSettings, PoissonPseudoInverse};
 use weft_mesh::unflatten;
 use weft_sim::{ClothSimulation, Scene};
@@ -24,9 +24,13 @@ fn decode_vs_ground_truth(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("sheet-ms-4225");
     group.sample_size(10);
-    group.bench_function("ground-truth frame (implicit Euler)", |b| b.iter(|| sim.borrow_mut().step().unwrap()));
+    group.bench_function("ground-truth frame (implicit Euler)", |b| {
+        b.iter(|| sim.borrow_mut().step().unwrap())
+    });
     group.bench_function("acap encode", |b| b.iter(|| features.encode(&frame).unwrap()));
-    group.bench_function("acap decode", |b| b.iter(|| inverse.decode(&encoded, &pin_positions).unwrap()));
+    group.bench_function("acap decode", |b| {
+        b.iter(|| inverse.decode(&encoded, &pin_positions).unwrap())
+    });
     group.finish();
 }
 

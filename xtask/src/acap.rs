@@ -62,6 +62,18 @@ pub enum AcapCommand {
         #[arg(long, value_name = "DIR")]
         out_dir: PathBuf,
     },
+    /// Measure the ACAP⁻¹(ACAP(p)) round trip on a `simulate` output directory: encode every
+    /// frame, decode it with only the pins fixed, and print max and RMS vertex error over the
+    /// bounding-box diagonal as JSON (per frame and worst case).
+    Roundtrip {
+        /// A `simulate` output directory (rest.obj, frames.safetensors).
+        #[arg(long, value_name = "DIR")]
+        sim: PathBuf,
+        /// Pinned vertices, comma-separated (default: the scene's grasp vertices from the
+        /// safetensors metadata).
+        #[arg(long, value_name = "I,J,...", value_delimiter = ',')]
+        pin: Vec<usize>,
+    },
 }
 
 /// Runs one `acap` subcommand.
@@ -81,7 +93,56 @@ pub fn run(cmd: AcapCommand) -> Result<()> {
             pin_positions,
             out_dir,
         } => decode(&rest, &features, &pin, pin_positions.as_deref(), &out_dir),
+        AcapCommand::Roundtrip { sim, pin } => roundtrip(&sim, &pin),
     }
+}
+
+fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
+    let rest = rest_mesh(dir)?;
+    let path = dir.join("frames.safetensors");
+    let frames = read_safetensors_frames(&path, rest.num_vertices())?;
+    let pins: Vec<usize> = if pins.is_empty() {
+        let bytes = fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+            .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+        let text = meta
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get("grasp_vertices").cloned())
+            .context("no --pin given and no grasp_vertices in the frames' metadata")?;
+        serde_json::from_str(&text).with_context(|| format!("grasp_vertices metadata {text:?}"))?
+    } else {
+        pins.to_vec()
+    };
+    let features = AcapFeatures::new(&rest, AcapSettings::default())?;
+    let inverse = PoissonPseudoInverse::new(&features, &pins)?;
+    let bar = progress(frames.len() as u64, "round trip");
+    let mut per_frame = Vec::with_capacity(frames.len());
+    for p in &frames {
+        let f = features.encode(p)?;
+        let pin_positions: Vec<_> = pins.iter().map(|&i| p[i]).collect();
+        let back = inverse.decode(&f, &pin_positions)?;
+        let e = weft_acap::ReconstructionError::between(p, &back)?;
+        per_frame.push((e.max_relative(), e.rms_relative()));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let worst_max = per_frame.iter().map(|e| e.0).fold(0.0, f64::max);
+    let worst_rms = per_frame.iter().map(|e| e.1).fold(0.0, f64::max);
+    let mean_rms = per_frame.iter().map(|e| e.1).sum::<f64>() / per_frame.len().max(1) as f64;
+    let report = serde_json::json!({
+        "sim": dir,
+        "vertices": rest.num_vertices(),
+        "frames": frames.len(),
+        "pins": pins,
+        "units": "fractions of the frame's bounding-box diagonal",
+        "worst_max_error": worst_max,
+        "worst_rms_error": worst_rms,
+        "mean_rms_error": mean_rms,
+        "per_frame_max_rms": per_frame,
+    });
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(())
 }
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]

@@ -155,7 +155,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(","),
     );
-    meta.insert("grasp_vertices".into(), format!("{:?}", sim.grasp_vertices()));
+    meta.insert("grasp_vertices".into(), serde_json::to_string(sim.grasp_vertices())?);
     write_safetensors(
         &args.out.join("frames.safetensors"),
         &[

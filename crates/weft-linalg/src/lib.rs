@@ -112,7 +112,11 @@ impl SymmetricPattern {
             col_ptr.push(row_idx.len());
         }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        Self { n, symbolic, blocks: None }
+        Self {
+            n,
+            symbolic,
+            blocks: None,
+        }
     }
 
     /// Builds the pattern of a matrix made of dense `3 × 3` blocks coupling vertex pairs
