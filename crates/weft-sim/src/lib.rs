@@ -27,13 +27,20 @@
 //! # Ok::<(), weft_sim::Error>(())
 //! ```
 
+pub mod anchors;
 pub mod energies;
 pub mod energy;
 pub mod error;
 pub mod implicit_euler;
+pub mod newmark;
 pub mod newton;
+pub mod prefactorized;
+pub mod quasistatic;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
 pub use implicit_euler::{ImplicitEuler, StepReport};
+pub use newmark::{Newmark, NewmarkReport};
 pub use newton::{NewtonReport, NewtonSettings, NewtonSolver};
+pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};
+pub use quasistatic::{Quasistatic, QuasistaticReport};
