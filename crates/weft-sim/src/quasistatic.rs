@@ -92,6 +92,8 @@ impl Quasistatic {
                     report.newton.push(newton);
                     last_good.copy_from_slice(x);
                     halvings = 0;
+                    // Grow back towards the nominal increment after a success.
+                    increment = (2.0 * increment).min(1.0 / load_steps as f64);
                 }
                 Err(e @ (Error::NotConverged { .. } | Error::NonFinite { .. } | Error::Linalg(_))) => {
                     x.copy_from_slice(&last_good);

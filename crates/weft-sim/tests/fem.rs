@@ -7,6 +7,7 @@ use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use weft_mesh::generators::{beam, BeamParams};
 use weft_mesh::TetMesh;
 use weft_sim::anchors::{fixed_dofs, hold, nodes_at_min};
+use weft_sim::StepReport;
 use weft_sim::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use weft_sim::{
     Energy, Error, ImplicitEuler, LinearSolve, Newmark, PrefactorizedLinear, Quasistatic, RayleighDamping,
@@ -287,5 +288,286 @@ fn cantilever_matches_euler_bernoulli_and_converges_under_refinement() {
     for material in [Material::StVK, Material::NeoHookean, Material::CoRotational] {
         let nonlinear = cantilever_deflection(2, young, force, Some(material));
         assert_close!(nonlinear, coarse, rtol = 1e-3, atol = 0.0);
+    }
+}
+
+/// A clamped `[4, 1, 1]`-cell beam 0.4 × 0.1 × 0.1 m: mesh, lumped masses (1000 kg/m³),
+/// anchored nodes and fixed mask.
+fn oscillator() -> (TetMesh, Vec<f64>, Vec<usize>, Vec<bool>) {
+    let mesh = beam(&BeamParams { cells: [4, 1, 1], size: [0.4, 0.1, 0.1] }).unwrap();
+    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), 1000.0);
+    let anchors = nodes_at_min(mesh.positions(), 0, 1e-9).unwrap();
+    let fixed = fixed_dofs(mesh.num_vertices(), &anchors).unwrap();
+    (mesh, masses, anchors, fixed)
+}
+
+/// Largest relative deviation of the total energy from its initial value over `time` s
+/// of undamped Newmark with step `dt`, starting from a bending velocity field.
+fn newmark_energy_drift(material: Material, dt: f64, time: f64) -> f64 {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let x0 = mesh.flat_positions();
+    // Tip speed 2 m/s, growing quadratically from the clamp: a large bending swing.
+    let v0: Vec<f64> = (0..x0.len()).map(|d| if d % 3 == 2 { 2.0 * (x0[d - 2] / 0.4).powi(2) } else { 0.0 }).collect();
+    let energy = TetElasticity::new(&mesh, material, lame(1e5, 0.3)).unwrap();
+    let mut nm =
+        Newmark::new(masses, dt, x0.clone(), v0, vec![Box::new(energy)], fixed, RayleighDamping::NONE).unwrap();
+    nm.settings.tolerance = 1e-9;
+    let h0 = nm.kinetic_energy() + nm.potential_energy();
+    let hold_anchors = hold(&anchors, &x0);
+    let mut drift = 0.0f64;
+    for _ in 0..(time / dt).round() as usize {
+        let r = nm.step(&hold_anchors).unwrap();
+        drift = drift.max((r.kinetic_energy + r.potential_energy - h0).abs() / h0);
+    }
+    drift
+}
+
+#[test]
+fn newmark_conserves_energy_to_second_order() {
+    for material in [Material::NeoHookean, Material::StVK] {
+        let coarse = newmark_energy_drift(material, 0.01, 0.6);
+        let fine = newmark_energy_drift(material, 0.005, 0.6);
+        println!("{material:?}: Newmark energy drift Δt = 0.01: {coarse:e}, Δt = 0.005: {fine:e}, ratio {}", coarse / fine);
+        assert!(coarse < 0.05, "drift {coarse}");
+        let ratio = coarse / fine;
+        assert!((3.0..5.5).contains(&ratio), "{material:?}: drift ratio {ratio} is not ≈ 4 (O(Δt²))");
+    }
+    // Linear elasticity: the trapezoidal rule conserves a quadratic energy exactly.
+    let linear = newmark_energy_drift(Material::Linear, 0.01, 0.6);
+    assert!(linear < 1e-8, "linear drift {linear:e}");
+}
+
+#[test]
+fn rayleigh_damping_dissipates_energy_monotonically() {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let x0 = mesh.flat_positions();
+    let v0: Vec<f64> = (0..x0.len()).map(|d| if d % 3 == 2 { (x0[d - 2] / 0.4).powi(2) } else { 0.0 }).collect();
+    let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.3)).unwrap();
+    let damping = RayleighDamping { mass: 0.5, stiffness: 1e-3 };
+    let mut nm = Newmark::new(masses, 0.01, x0.clone(), v0, vec![Box::new(energy)], fixed, damping).unwrap();
+    let mut last = nm.kinetic_energy() + nm.potential_energy();
+    let first = last;
+    for _ in 0..100 {
+        let r = nm.step(&hold(&anchors, &x0)).unwrap();
+        let h = r.kinetic_energy + r.potential_energy;
+        assert!(h <= last * (1.0 + 1e-9), "energy rose from {last} to {h}");
+        last = h;
+    }
+    assert!(last < 0.5 * first, "damping removed too little: {first} → {last}");
+}
+
+#[test]
+fn prefactorized_dynamics_match_implicit_euler_on_linear_elasticity() {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let x0 = mesh.flat_positions();
+    let dt = 0.01;
+    let energy = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
+    let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
+    let mut pre = PrefactorizedLinear::new(
+        &x0,
+        &[&energy],
+        masses.clone(),
+        fixed.clone(),
+        LinearSolve::Dynamic { dt, damping: RayleighDamping::NONE },
+    )
+    .unwrap();
+    assert!(pre.factorization_seconds() > 0.0);
+    let energy2 = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
+    let mut ie =
+        ImplicitEuler::new(masses, dt, x0.clone(), vec![Box::new(energy2), Box::new(gravity.clone())], fixed).unwrap();
+    ie.settings.tolerance = 1e-12;
+    for _ in 0..30 {
+        pre.step(gravity.forces(), &[]).unwrap();
+        ie.step(&hold(&anchors, &x0)).unwrap();
+    }
+    let sag = x0[x0.len() - 1] - ie.positions()[x0.len() - 1];
+    assert!(sag > 1e-4, "the beam should sag under gravity ({sag})");
+    let err = max_norm_rel_error(&pre.positions(), ie.positions());
+    assert!(err < 1e-9, "pre-factorised vs Newton: {err:e}");
+}
+
+#[test]
+fn prefactorized_static_handles_moving_anchors_and_force_fields() {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let x0 = mesh.flat_positions();
+    let energy = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
+    let mut pre = PrefactorizedLinear::new(&x0, &[&energy], masses.clone(), fixed.clone(), LinearSolve::Static).unwrap();
+    // Translating the anchors rigidly with no load translates the whole body.
+    let shifted: Vec<(usize, f64)> = hold(&anchors, &x0).into_iter().map(|(d, v)| (d, v + 0.01)).collect();
+    pre.step(&vec![0.0; x0.len()], &shifted).unwrap();
+    assert!(pre.displacements().iter().all(|u| (u - 0.01).abs() < 1e-12));
+    // Equilibrium under a circular field: K u = f on free DOFs.
+    let field = ConstantForce::circular(&masses, &x0, [0.0, 0.05, 0.05], [1.0, 0.0, 0.0], 50.0).unwrap();
+    pre.reset();
+    pre.step(field.forces(), &[]).unwrap();
+    let mut ku = vec![0.0; x0.len()];
+    pre.stiffness().mul_vec(pre.displacements(), &mut ku);
+    for d in (0..x0.len()).filter(|&d| !fixed[d]) {
+        assert_close!(ku[d], field.forces()[d], rtol = 1e-8, atol = 1e-10);
+    }
+    // The field twists the beam about its axis: the tip's y and z move opposite ways
+    // on opposite corners.
+    let u = pre.displacements();
+    assert!(u.iter().any(|v| v.abs() > 1e-6));
+    // Without anchors the static system is singular: a clear error, not NaN.
+    let free = vec![false; x0.len()];
+    assert!(matches!(
+        PrefactorizedLinear::new(&x0, &[&energy], masses, free, LinearSolve::Static),
+        Err(Error::Linalg(_))
+    ));
+}
+
+#[test]
+fn force_fields_have_the_documented_directions() {
+    let (mesh, masses, _, _) = oscillator();
+    let x0 = mesh.flat_positions();
+    let dir = weft_sim::energies::hemisphere_direction(0.3, 0.7);
+    assert_close!(Vector3::from(dir).norm(), 1.0, rtol = 1e-14, atol = 0.0);
+    let f = ConstantForce::directional(&masses, [0.0, 2.0, 0.0], 3.0).unwrap();
+    let total_mass: f64 = masses.iter().sum();
+    assert_close!(f.forces().chunks(3).map(|c| c[1]).sum::<f64>(), 3.0 * total_mass, rtol = 1e-12, atol = 0.0);
+    assert!(ConstantForce::directional(&masses, [0.0; 3], 1.0).is_err());
+    let axis = Vector3::new(1.0, 0.0, 0.0);
+    let c = Vector3::new(0.0, 0.05, 0.05);
+    let f = ConstantForce::circular(&masses, &x0, c.into(), axis.into(), 2.0).unwrap();
+    for (i, m) in masses.iter().enumerate() {
+        let p = Vector3::new(x0[3 * i], x0[3 * i + 1], x0[3 * i + 2]);
+        let fi = Vector3::new(f.forces()[3 * i], f.forces()[3 * i + 1], f.forces()[3 * i + 2]);
+        let r = p - c - axis * axis.dot(&(p - c));
+        if r.norm() > 1e-9 {
+            assert_close!(fi.norm(), 2.0 * m, rtol = 1e-12, atol = 0.0);
+            assert!(fi.dot(&r).abs() < 1e-12 && fi.dot(&axis).abs() < 1e-12);
+            assert!(axis.dot(&r.cross(&fi)) > 0.0, "counter-clockwise about the axis");
+        }
+    }
+}
+
+/// Ok with finite positions, or a typed solver error — never NaN.
+fn check_outcome(what: &str, result: Result<StepReport, Error>, x: &[f64]) -> bool {
+    match result {
+        Ok(r) => {
+            assert!(x.iter().all(|v| v.is_finite()), "{what}: non-finite positions");
+            assert!(r.newton.residual.is_finite() && r.potential_energy.is_finite(), "{what}: {r:?}");
+            true
+        }
+        Err(e @ (Error::NotConverged { .. } | Error::NonFinite { .. } | Error::Linalg(_))) => {
+            println!("{what}: clear error: {e}");
+            false
+        }
+        Err(e) => panic!("{what}: unexpected error {e}"),
+    }
+}
+
+fn run_extreme(material: Material, young: f64, poisson: f64, dt: f64, invert: bool, steps: usize) -> bool {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let rest = mesh.flat_positions();
+    let mut x0 = rest.clone();
+    if invert {
+        // Push one free tip vertex through the body: the tets around it invert.
+        let tip = mesh.num_vertices() - 1;
+        x0[3 * tip + 2] -= 0.15;
+    }
+    let energy = TetElasticity::new(&mesh, material, lame(young, poisson)).unwrap();
+    let inverted = (0..mesh.num_tets()).filter(|&e| energy.deformation_gradient(&x0, e).determinant() <= 0.0).count();
+    assert_eq!(inverted > 0, invert);
+    let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
+    let mut ie = ImplicitEuler::new(masses, dt, x0, vec![Box::new(energy), Box::new(gravity)], fixed).unwrap();
+    let what = format!("{material:?} E={young:e} ν={poisson} Δt={dt:e} inverted={invert}");
+    let mut ok = true;
+    for _ in 0..steps {
+        let r = ie.step(&hold(&anchors, &rest));
+        ok &= check_outcome(&what, r, ie.positions());
+        if !ok {
+            break;
+        }
+    }
+    ok
+}
+
+#[test]
+fn stable_across_poisson_ratio_and_young_modulus_extremes() {
+    for material in Material::ALL {
+        for poisson in [0.0, 0.3, 0.45, 0.49, 0.499] {
+            for young in [1e3, 1e6, 1e9] {
+                let ok = run_extreme(material, young, poisson, 1e-2, false, 3);
+                // These are well-posed problems: they must converge, not merely fail cleanly.
+                assert!(ok, "{material:?} E={young:e} ν={poisson} did not converge");
+            }
+        }
+    }
+}
+
+#[test]
+fn stable_across_time_steps_and_from_an_inverted_state() {
+    for material in Material::ALL {
+        for dt in [1e-5, 1e-3, 1e-1] {
+            assert!(run_extreme(material, 1e5, 0.4, dt, false, 3), "{material:?} Δt={dt:e}");
+        }
+        // An initially inverted element: converged steps or a clear error, never NaN.
+        run_extreme(material, 1e5, 0.4, 1e-2, true, 5);
+    }
+    // Neo-Hookean recovers from the inversion (the extension pushes elements back).
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let rest = mesh.flat_positions();
+    let mut x0 = rest.clone();
+    let tip = mesh.num_vertices() - 1;
+    x0[3 * tip + 2] -= 0.15;
+    let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.4)).unwrap();
+    let mut ie = ImplicitEuler::new(masses, 1e-2, x0, vec![Box::new(energy)], fixed).unwrap();
+    for _ in 0..50 {
+        ie.step(&hold(&anchors, &rest)).unwrap();
+    }
+    let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.4)).unwrap();
+    let min_j = (0..mesh.num_tets()).map(|e| energy.deformation_gradient(ie.positions(), e).determinant()).fold(f64::INFINITY, f64::min);
+    assert!(min_j > 0.0, "still inverted after 50 steps (min J = {min_j})");
+}
+
+#[test]
+fn newmark_and_quasistatic_are_stable_at_extremes() {
+    let (mesh, masses, anchors, fixed) = oscillator();
+    let rest = mesh.flat_positions();
+    for (young, poisson, dt) in [(1e3, 0.499, 1e-1), (1e9, 0.0, 1e-5), (1e9, 0.499, 1e-1), (1e3, 0.0, 1e-5)] {
+        let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(young, poisson)).unwrap();
+        let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
+        let mut nm = Newmark::new(
+            masses.clone(),
+            dt,
+            rest.clone(),
+            vec![0.0; rest.len()],
+            vec![Box::new(energy), Box::new(gravity.clone())],
+            fixed.clone(),
+            RayleighDamping { mass: 0.1, stiffness: 0.0 },
+        )
+        .unwrap();
+        for _ in 0..3 {
+            nm.step(&hold(&anchors, &rest)).unwrap_or_else(|e| panic!("Newmark E={young:e} ν={poisson}: {e}"));
+            assert!(nm.positions().iter().all(|v| v.is_finite()));
+        }
+        let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(young, poisson)).unwrap();
+        let mut qs = Quasistatic::new(rest.len(), &[&energy], fixed.clone()).unwrap();
+        let mut x = rest.clone();
+        let report = qs.solve(&[&energy], gravity.forces(), &mut x, 4).unwrap();
+        assert_eq!(report.load_factors.last(), Some(&1.0));
+        assert!(x.iter().all(|v| v.is_finite()));
+    }
+}
+
+#[test]
+fn quasistatic_load_stepping_reaches_large_deformation() {
+    // A very soft beam under gravity bends far past the linear regime; load stepping
+    // with increment halving still gets there, and the result is an equilibrium.
+    let (mesh, masses, _, fixed) = oscillator();
+    let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(2e3, 0.3)).unwrap();
+    let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
+    let mut qs = Quasistatic::new(3 * mesh.num_vertices(), &[&energy], fixed.clone()).unwrap();
+    let mut x = mesh.flat_positions();
+    let report = qs.solve(&[&energy], gravity.forces(), &mut x, 5).unwrap();
+    assert!(report.load_factors.len() >= 5);
+    let tip_drop = mesh.flat_positions().last().unwrap() - x.last().unwrap();
+    assert!(tip_drop > 0.1, "tip dropped only {tip_drop} m");
+    let mut g = vec![0.0; x.len()];
+    energy.add_gradient(&x, &mut g);
+    for d in (0..x.len()).filter(|&d| !fixed[d]) {
+        assert_close!(g[d], gravity.forces()[d], rtol = 0.0, atol = 1e-6 * 9.81 * 1.0);
     }
 }

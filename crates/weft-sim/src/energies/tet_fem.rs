@@ -112,24 +112,35 @@ impl Material {
 
     /// Energy density `Ψ(F)` (J/m³).
     pub fn energy_density(self, lame: &LameParameters, F: &Matrix3<f64>) -> f64 {
+        self.energy_density_of_displacement_gradient(lame, &(F - Matrix3::identity()))
+    }
+
+    /// `Ψ(I + G)` evaluated from the displacement gradient `G = F − I` without the
+    /// cancellations of `‖F‖² − 3` and `ln det F` near the rest state: their round-off
+    /// (of order `μ ε_machine` per unit volume) would otherwise swamp the energy changes
+    /// Newton's line search compares when the strain is small and the material stiff.
+    pub fn energy_density_of_displacement_gradient(self, lame: &LameParameters, G: &Matrix3<f64>) -> f64 {
         let (mu, lambda) = (lame.mu, lame.lambda);
         match self {
             Material::Linear => {
-                let eps = 0.5 * (F + F.transpose()) - Matrix3::identity();
+                let eps = 0.5 * (G + G.transpose());
                 mu * eps.norm_squared() + 0.5 * lambda * eps.trace().powi(2)
             }
             Material::CoRotational => {
-                let s = signed_singular_values(F);
+                let s = signed_singular_values(&(G + Matrix3::identity()));
                 let tr = s.sum() - 3.0;
                 mu * (s - Vector3::repeat(1.0)).norm_squared() + 0.5 * lambda * tr * tr
             }
             Material::StVK => {
-                let E = 0.5 * (F.transpose() * F - Matrix3::identity());
+                let E = 0.5 * (G + G.transpose() + G.transpose() * G);
                 mu * E.norm_squared() + 0.5 * lambda * E.trace().powi(2)
             }
             Material::NeoHookean => {
-                let (l, _, _) = extended_log(F.determinant());
-                0.5 * mu * (F.norm_squared() - 3.0) - mu * l + 0.5 * lambda * l * l
+                // det(I + G) − 1 = tr G + ½(tr²G − tr G²) + det G; ‖F‖² − 3 = 2 tr G + ‖G‖².
+                let tr = G.trace();
+                let j_minus_1 = tr + 0.5 * (tr * tr - (G * G).trace()) + G.determinant();
+                let l = extended_log_1p(j_minus_1);
+                0.5 * mu * (2.0 * tr + G.norm_squared()) - mu * l + 0.5 * lambda * l * l
             }
         }
     }
@@ -228,6 +239,11 @@ fn extended_log(J: f64) -> (f64, f64, f64) {
     }
 }
 
+/// `L(1 + d)` of [`extended_log`], accurate for small `d = J − 1`.
+fn extended_log_1p(d: f64) -> f64 {
+    if 1.0 + d >= NEO_HOOKEAN_J_MIN { d.ln_1p() } else { extended_log(1.0 + d).0 }
+}
+
 /// `cof F = ∂ det F / ∂F`: columns `f₁×f₂, f₂×f₀, f₀×f₁` of `F = [f₀ f₁ f₂]`.
 fn cofactor(F: &Matrix3<f64>) -> Matrix3<f64> {
     let (f0, f1, f2) = (F.column(0), F.column(1), F.column(2));
@@ -309,6 +325,7 @@ pub struct TetElasticity {
     material: Material,
     lame: LameParameters,
     tets: Vec<[usize; 4]>,
+    rest: Vec<Vector3<f64>>,
     /// Rows `b_a` of the `4 × 3` gradient operator: `F = Σ_a x_a b_aᵀ`.
     shape_gradients: Vec<[Vector3<f64>; 4]>,
     volumes: Vec<f64>,
@@ -366,6 +383,7 @@ impl TetElasticity {
             material,
             lame,
             tets: tets.to_vec(),
+            rest: rest.to_vec(),
             shape_gradients,
             volumes,
             parallel: true,
@@ -393,16 +411,24 @@ impl TetElasticity {
 
     /// Deformation gradient of element `e` at positions `x`.
     pub fn deformation_gradient(&self, x: &[f64], e: usize) -> Matrix3<f64> {
-        let mut F = Matrix3::zeros();
+        self.displacement_gradient(x, e) + Matrix3::identity()
+    }
+
+    /// Displacement gradient `G = F − I = Σ_a (x_a − x̄_a) b_aᵀ` of element `e`, formed
+    /// from displacements so that it keeps full relative precision at small strain.
+    pub fn displacement_gradient(&self, x: &[f64], e: usize) -> Matrix3<f64> {
+        let mut G = Matrix3::zeros();
         for (&v, b) in self.tets[e].iter().zip(&self.shape_gradients[e]) {
-            F += vertex(x, v) * b.transpose();
+            G += (vertex(x, v) - self.rest[v]) * b.transpose();
         }
-        F
+        G
     }
 
     /// Per-element energies (J) at `x`.
     pub fn element_energies(&self, x: &[f64]) -> Vec<f64> {
-        let f = |e: usize| self.volumes[e] * self.material.energy_density(&self.lame, &self.deformation_gradient(x, e));
+        let f = |e: usize| {
+            self.volumes[e] * self.material.energy_density_of_displacement_gradient(&self.lame, &self.displacement_gradient(x, e))
+        };
         if self.parallel {
             (0..self.tets.len()).into_par_iter().map(f).collect()
         } else {
