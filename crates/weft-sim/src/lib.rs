@@ -36,6 +36,7 @@ pub mod newmark;
 pub mod newton;
 pub mod prefactorized;
 pub mod quasistatic;
+pub mod soft_tissue;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
