@@ -15,7 +15,7 @@
 use nalgebra::Vector3;
 
 use crate::error::{Error, Result};
-use crate::generators::{beam, BeamParams};
+use crate::generators::{BeamParams, beam};
 use crate::tetmesh::TetMesh;
 
 /// Shape and resolution of a [`Limb`].
@@ -60,17 +60,30 @@ impl LimbParams {
     /// A small body for tests: 4 × 4 × 12 cells, 1152 tets; the bone takes the inner
     /// half of the radius so that it is more than the axis line at this resolution.
     pub fn quick() -> Self {
-        Self { cells_across: 4, cells_along: 12, bone_radius: 0.5, ..Self::default() }
+        Self {
+            cells_across: 4,
+            cells_along: 12,
+            bone_radius: 0.5,
+            ..Self::default()
+        }
     }
     /// The speed-measurement body: 14 × 14 × 116 cells, whose boundary surface has
     /// exactly **6890 vertices** (SMPL's count; 4·14·117 lateral + 2·13² cap vertices)
     /// and 136 416 tets.
     pub fn smpl_resolution() -> Self {
-        Self { cells_across: 14, cells_along: 116, ..Self::default() }
+        Self {
+            cells_across: 14,
+            cells_along: 116,
+            ..Self::default()
+        }
     }
     /// The benchmark body: 10 × 10 × 84 cells, 50 400 tets (NNWarp Table 1's ~52k).
     pub fn benchmark() -> Self {
-        Self { cells_across: 10, cells_along: 84, ..Self::default() }
+        Self {
+            cells_across: 10,
+            cells_along: 84,
+            ..Self::default()
+        }
     }
 
     /// The tissue radius at `x` (m).
@@ -90,19 +103,30 @@ impl LimbParams {
             ("bone radius fraction", self.bone_radius),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(Error::InvalidParameter(format!("{what} must be positive and finite, got {v}")));
+                return Err(Error::InvalidParameter(format!(
+                    "{what} must be positive and finite, got {v}"
+                )));
             }
         }
         if !(self.joint > 0.0 && self.joint < 1.0) {
-            return Err(Error::InvalidParameter(format!("joint fraction must lie in (0, 1), got {}", self.joint)));
+            return Err(Error::InvalidParameter(format!(
+                "joint fraction must lie in (0, 1), got {}",
+                self.joint
+            )));
         }
-        if !(self.bone_radius < 1.0) {
-            return Err(Error::InvalidParameter(format!("bone radius fraction must be below 1, got {}", self.bone_radius)));
+        if self.bone_radius >= 1.0 {
+            return Err(Error::InvalidParameter(format!(
+                "bone radius fraction must be below 1, got {}",
+                self.bone_radius
+            )));
         }
         if !(self.joint_gap.is_finite() && self.joint_gap >= 0.0) {
-            return Err(Error::InvalidParameter(format!("joint gap must be non-negative, got {}", self.joint_gap)));
+            return Err(Error::InvalidParameter(format!(
+                "joint gap must be non-negative, got {}",
+                self.joint_gap
+            )));
         }
-        if self.cells_across < 2 || self.cells_across % 2 != 0 || self.cells_along < 2 {
+        if self.cells_across < 2 || !self.cells_across.is_multiple_of(2) || self.cells_along < 2 {
             return Err(Error::InvalidParameter(format!(
                 "a limb needs an even number ≥ 2 of cells across and ≥ 2 along, got {} and {}",
                 self.cells_across, self.cells_along
@@ -138,7 +162,10 @@ pub fn limb(params: &LimbParams) -> Result<Limb> {
     params.validate()?;
     let n = params.cells_across;
     // A unit-spaced grid over [0, L] × [−1, 1]² mapped onto the tapered cylinder.
-    let grid = beam(&BeamParams { cells: [params.cells_along, n, n], size: [params.length, 2.0, 2.0] })?;
+    let grid = beam(&BeamParams {
+        cells: [params.cells_along, n, n],
+        size: [params.length, 2.0, 2.0],
+    })?;
     let map = |p: &Vector3<f64>| {
         let (s, t) = (p.y - 1.0, p.z - 1.0);
         let r2 = (s * s + t * t).sqrt();
@@ -165,7 +192,11 @@ pub fn limb(params: &LimbParams) -> Result<Limb> {
         })
         .collect();
     let mesh = TetMesh::new(positions, grid.tets().to_vec())?;
-    Ok(Limb { mesh, bone, params: *params })
+    Ok(Limb {
+        mesh,
+        bone,
+        params: *params,
+    })
 }
 
 #[cfg(test)]
@@ -220,10 +251,22 @@ mod tests {
     #[test]
     fn rejects_bad_parameters() {
         for p in [
-            LimbParams { cells_across: 3, ..LimbParams::quick() },
-            LimbParams { joint: 1.0, ..LimbParams::quick() },
-            LimbParams { length: -1.0, ..LimbParams::quick() },
-            LimbParams { bone_radius: 1.5, ..LimbParams::quick() },
+            LimbParams {
+                cells_across: 3,
+                ..LimbParams::quick()
+            },
+            LimbParams {
+                joint: 1.0,
+                ..LimbParams::quick()
+            },
+            LimbParams {
+                length: -1.0,
+                ..LimbParams::quick()
+            },
+            LimbParams {
+                bone_radius: 1.5,
+                ..LimbParams::quick()
+            },
         ] {
             assert!(matches!(limb(&p), Err(Error::InvalidParameter(_))), "{p:?}");
         }

@@ -21,10 +21,10 @@ use std::time::Instant;
 use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 
 use crate::energies::ZeroLengthSprings;
-use crate::energy::{total_gradient, Energy};
-use crate::error::{check_nonnegative, check_positive, Error, Result};
+use crate::energy::{Energy, total_gradient};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
 use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
-use crate::prefactorized::{assemble_hessian, pattern_of, RayleighDamping};
+use crate::prefactorized::{RayleighDamping, assemble_hessian, pattern_of};
 
 /// What one Newmark step did.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -66,19 +66,28 @@ impl Energy for QuadraticForm {
     }
     fn value(&self, x: &[f64]) -> f64 {
         let ad = self.apply(x);
-        0.5 * self.scale * ad.iter().zip(x.iter().zip(&self.center)).map(|(a, (x, c))| a * (x - c)).sum::<f64>()
+        0.5 * self.scale
+            * ad.iter()
+                .zip(x.iter().zip(&self.center))
+                .map(|(a, (x, c))| a * (x - c))
+                .sum::<f64>()
     }
     fn add_gradient(&self, x: &[f64], grad: &mut [f64]) {
         let ad = self.apply(x);
         grad.iter_mut().zip(&ad).for_each(|(g, a)| *g += self.scale * a);
     }
     fn add_hessian(&self, _x: &[f64], _project: bool, hessian: &mut SymmetricMatrix) {
-        if Arc::ptr_eq(hessian.pattern(), self.matrix.pattern()) || hessian.pattern().nnz() == self.matrix.pattern().nnz()
+        if Arc::ptr_eq(hessian.pattern(), self.matrix.pattern())
+            || hessian.pattern().nnz() == self.matrix.pattern().nnz()
         {
             // The target pattern contains this one (our pairs are in it) and has the same
             // size, so the layouts coincide.
             let s = self.scale;
-            hessian.values_mut().iter_mut().zip(self.matrix.values()).for_each(|(h, a)| *h += s * a);
+            hessian
+                .values_mut()
+                .iter_mut()
+                .zip(self.matrix.values())
+                .for_each(|(h, a)| *h += s * a);
         } else {
             for (slot, r, c) in self.matrix.pattern().entries() {
                 hessian.add(r, c, self.scale * self.matrix.values()[slot]);
@@ -121,16 +130,27 @@ impl Newmark {
         check_positive("time step", dt)?;
         damping.validate()?;
         let n = 3 * masses.len();
-        for (what, len) in [("initial positions", x0.len()), ("initial velocities", v0.len()), ("fixed-DOF mask", fixed.len())] {
+        for (what, len) in [
+            ("initial positions", x0.len()),
+            ("initial velocities", v0.len()),
+            ("fixed-DOF mask", fixed.len()),
+        ] {
             if len != n {
-                return Err(Error::LengthMismatch { what, expected: n, got: len });
+                return Err(Error::LengthMismatch {
+                    what,
+                    expected: n,
+                    got: len,
+                });
             }
         }
         for &m in &masses {
             check_nonnegative("vertex mass", m)?;
         }
         if let Some(i) = x0.iter().chain(&v0).position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "initial state", dof: i % n });
+            return Err(Error::NonFinite {
+                what: "initial state",
+                dof: i % n,
+            });
         }
         let refs: Vec<&dyn Energy> = terms.iter().map(|t| t.as_ref()).collect();
         let stiffness_damping = if damping.stiffness > 0.0 {
@@ -138,7 +158,12 @@ impl Newmark {
             let mut pairs = Vec::new();
             refs.iter().for_each(|t| t.hessian_pairs(&mut pairs));
             let matrix = assemble_hessian(&pattern, &refs, &x0, true)?;
-            Some(QuadraticForm { matrix, pairs, scale: 0.0, center: x0.clone() })
+            Some(QuadraticForm {
+                matrix,
+                pairs,
+                scale: 0.0,
+                center: x0.clone(),
+            })
         } else {
             None
         };
@@ -162,14 +187,24 @@ impl Newmark {
         let a: Vec<f64> = (0..n)
             .map(|d| {
                 let m = masses[d / 3];
-                if fixed[d] || m == 0.0 { 0.0 } else { -(force[d] + damping.mass * m * v0[d]) / m }
+                if fixed[d] || m == 0.0 {
+                    0.0
+                } else {
+                    -(force[d] + damping.mass * m * v0[d]) / m
+                }
             })
             .collect();
         if let Some(i) = a.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "initial acceleration", dof: i });
+            return Err(Error::NonFinite {
+                what: "initial acceleration",
+                dof: i,
+            });
         }
         let max_weight = masses.iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
-        let settings = NewtonSettings { tolerance: 1e-6 * max_weight.max(1e-12), ..NewtonSettings::default() };
+        let settings = NewtonSettings {
+            tolerance: 1e-6 * max_weight.max(1e-12),
+            ..NewtonSettings::default()
+        };
         Ok(Self {
             masses,
             dt,
@@ -207,7 +242,11 @@ impl Newmark {
 
     /// Kinetic energy `½ vᵀ M v` (J).
     pub fn kinetic_energy(&self) -> f64 {
-        self.v.iter().enumerate().map(|(d, v)| 0.5 * self.masses[d / 3] * v * v).sum()
+        self.v
+            .iter()
+            .enumerate()
+            .map(|(d, v)| 0.5 * self.masses[d / 3] * v * v)
+            .sum()
     }
     /// Total potential of the terms at the current positions (J).
     pub fn potential_energy(&self) -> f64 {
@@ -221,15 +260,21 @@ impl Newmark {
         let n = self.x.len();
         for &(dof, value) in prescribed {
             if dof >= n || !self.fixed[dof] {
-                return Err(Error::Scene(format!("DOF {dof} is prescribed but not in the fixed set")));
+                return Err(Error::Scene(format!(
+                    "DOF {dof} is prescribed but not in the fixed set"
+                )));
             }
             if !value.is_finite() {
-                return Err(Error::NonFinite { what: "prescribed position", dof });
+                return Err(Error::NonFinite {
+                    what: "prescribed position",
+                    dof,
+                });
             }
         }
         let (dt, alpha) = (self.dt, self.damping.mass);
-        let y: Vec<f64> =
-            (0..n).map(|d| self.x[d] + dt * self.v[d] + 0.25 * dt * dt * self.a[d]).collect();
+        let y: Vec<f64> = (0..n)
+            .map(|d| self.x[d] + dt * self.v[d] + 0.25 * dt * dt * self.a[d])
+            .collect();
         // Diagonal part ½W(x − t)²: W = 4m/Δt² + 2αm/Δt, t = (4m/Δt² y + 2αm/Δt x_n + αm v_n)/W.
         let mut weights = vec![0.0; self.masses.len()];
         let mut targets = vec![0.0; n];

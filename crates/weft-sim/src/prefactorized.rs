@@ -24,7 +24,7 @@ use std::time::Instant;
 use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
 use crate::energy::Energy;
-use crate::error::{check_nonnegative, check_positive, Error, Result};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
 
 /// Rayleigh damping `C = α M + β K` (Rayleigh 1877; standard in structural dynamics):
 /// `mass` is `α` (1/s), `stiffness` is `β` (s).
@@ -36,7 +36,10 @@ pub struct RayleighDamping {
 }
 
 impl RayleighDamping {
-    pub const NONE: Self = Self { mass: 0.0, stiffness: 0.0 };
+    pub const NONE: Self = Self {
+        mass: 0.0,
+        stiffness: 0.0,
+    };
 
     pub(crate) fn validate(&self) -> Result<()> {
         check_nonnegative("Rayleigh mass damping α", self.mass)?;
@@ -51,7 +54,11 @@ pub(crate) fn pattern_of(num_vertices: usize, terms: &[&dyn Energy]) -> Result<A
         t.hessian_pairs(&mut pairs);
     }
     if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= num_vertices || b >= num_vertices) {
-        return Err(Error::VertexOutOfRange { what: "energy term", index: a.max(b), num_vertices });
+        return Err(Error::VertexOutOfRange {
+            what: "energy term",
+            index: a.max(b),
+            num_vertices,
+        });
     }
     Ok(Arc::new(SymmetricPattern::from_vertex_pairs(num_vertices, pairs)))
 }
@@ -68,7 +75,10 @@ pub(crate) fn assemble_hessian(
         t.add_hessian(x, project, &mut h);
     }
     if let Some(i) = h.values().iter().position(|v| !v.is_finite()) {
-        return Err(Error::NonFinite { what: "stiffness matrix entry", dof: i });
+        return Err(Error::NonFinite {
+            what: "stiffness matrix entry",
+            dof: i,
+        });
     }
     Ok(h)
 }
@@ -126,17 +136,32 @@ impl PrefactorizedLinear {
         mode: LinearSolve,
     ) -> Result<Self> {
         let n = rest.len();
-        if n % 3 != 0 {
-            return Err(Error::LengthMismatch { what: "rest positions (3 per vertex)", expected: n / 3 * 3, got: n });
+        if !n.is_multiple_of(3) {
+            return Err(Error::LengthMismatch {
+                what: "rest positions (3 per vertex)",
+                expected: n / 3 * 3,
+                got: n,
+            });
         }
         if masses.len() != n / 3 {
-            return Err(Error::LengthMismatch { what: "vertex masses", expected: n / 3, got: masses.len() });
+            return Err(Error::LengthMismatch {
+                what: "vertex masses",
+                expected: n / 3,
+                got: masses.len(),
+            });
         }
         if fixed.len() != n {
-            return Err(Error::LengthMismatch { what: "fixed-DOF mask", expected: n, got: fixed.len() });
+            return Err(Error::LengthMismatch {
+                what: "fixed-DOF mask",
+                expected: n,
+                got: fixed.len(),
+            });
         }
         if let Some(i) = rest.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "rest position", dof: i });
+            return Err(Error::NonFinite {
+                what: "rest position",
+                dof: i,
+            });
         }
         for &m in &masses {
             check_nonnegative("vertex mass", m)?;
@@ -148,7 +173,10 @@ impl PrefactorizedLinear {
             check_positive("time step", dt)?;
             damping.validate()?;
             // M/Δt² + (αM + βK)/Δt + K.
-            system.values_mut().iter_mut().for_each(|v| *v *= 1.0 + damping.stiffness / dt);
+            system
+                .values_mut()
+                .iter_mut()
+                .for_each(|v| *v *= 1.0 + damping.stiffness / dt);
             for (i, m) in masses.iter().enumerate() {
                 for k in 0..3 {
                     system.add(3 * i + k, 3 * i + k, m / (dt * dt) + damping.mass * m / dt);
@@ -213,17 +241,29 @@ impl PrefactorizedLinear {
         let start = Instant::now();
         let n = self.u.len();
         if forces.len() != n {
-            return Err(Error::LengthMismatch { what: "external forces", expected: n, got: forces.len() });
+            return Err(Error::LengthMismatch {
+                what: "external forces",
+                expected: n,
+                got: forces.len(),
+            });
         }
         if let Some(i) = forces.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite { what: "external force", dof: i });
+            return Err(Error::NonFinite {
+                what: "external force",
+                dof: i,
+            });
         }
         for &(dof, value) in prescribed {
             if dof >= n || !self.fixed[dof] {
-                return Err(Error::Scene(format!("DOF {dof} is prescribed but not in the fixed set")));
+                return Err(Error::Scene(format!(
+                    "DOF {dof} is prescribed but not in the fixed set"
+                )));
             }
             if !value.is_finite() {
-                return Err(Error::NonFinite { what: "prescribed position", dof });
+                return Err(Error::NonFinite {
+                    what: "prescribed position",
+                    dof,
+                });
             }
         }
         // Anchor displacements g: current values, overridden by the prescribed ones.
@@ -240,13 +280,17 @@ impl PrefactorizedLinear {
             for (i, m) in self.masses.iter().enumerate() {
                 for k in 0..3 {
                     let d = 3 * i + k;
-                    self.rhs[d] += m * (2.0 * self.u[d] - self.u_prev[d]) / (dt * dt) + damping.mass * m * self.u[d] / dt;
+                    self.rhs[d] +=
+                        m * (2.0 * self.u[d] - self.u_prev[d]) / (dt * dt) + damping.mass * m * self.u[d] / dt;
                 }
             }
             if damping.stiffness > 0.0 {
                 let mut ku = vec![0.0; n];
                 self.stiffness.mul_vec(&self.u, &mut ku);
-                self.rhs.iter_mut().zip(&ku).for_each(|(r, k)| *r += damping.stiffness * k / dt);
+                self.rhs
+                    .iter_mut()
+                    .zip(&ku)
+                    .for_each(|(r, k)| *r += damping.stiffness * k / dt);
             }
         }
         if g.iter().any(|&v| v != 0.0) {
@@ -265,11 +309,17 @@ impl PrefactorizedLinear {
         let solve_seconds = solve_start.elapsed().as_secs_f64();
         if let Some(i) = self.rhs.iter().position(|v| !v.is_finite()) {
             self.scratch = g;
-            return Err(Error::NonFinite { what: "linear solve result", dof: i });
+            return Err(Error::NonFinite {
+                what: "linear solve result",
+                dof: i,
+            });
         }
         std::mem::swap(&mut self.u_prev, &mut self.u);
         self.u.copy_from_slice(&self.rhs);
         self.scratch = g;
-        Ok(LinearStepReport { seconds: start.elapsed().as_secs_f64(), solve_seconds })
+        Ok(LinearStepReport {
+            seconds: start.elapsed().as_secs_f64(),
+            solve_seconds,
+        })
     }
 }

@@ -65,17 +65,30 @@ impl Quasistatic {
     ) -> Result<QuasistaticReport> {
         let start = Instant::now();
         if load_steps == 0 {
-            return Err(Error::InvalidParameter { name: "load steps", value: 0.0, reason: "must be at least 1" });
+            return Err(Error::InvalidParameter {
+                name: "load steps",
+                value: 0.0,
+                reason: "must be at least 1",
+            });
         }
         if load.len() != x.len() {
-            return Err(Error::LengthMismatch { what: "load", expected: x.len(), got: load.len() });
+            return Err(Error::LengthMismatch {
+                what: "load",
+                expected: x.len(),
+                got: load.len(),
+            });
         }
         let max_load = load.iter().fold(0.0f64, |m, f| m.max(f.abs()));
         let mut settings = self.settings;
         if max_load > 0.0 {
             settings.tolerance = self.relative_tolerance * max_load;
         }
-        let mut report = QuasistaticReport { load_factors: Vec::new(), newton: Vec::new(), subdivisions: 0, seconds: 0.0 };
+        let mut report = QuasistaticReport {
+            load_factors: Vec::new(),
+            newton: Vec::new(),
+            subdivisions: 0,
+            seconds: 0.0,
+        };
         let mut reached = 0.0;
         let mut increment = 1.0 / load_steps as f64;
         let mut halvings = 0;

@@ -12,12 +12,12 @@
 //! Units: metres, seconds, kilograms, pascals.
 
 use nalgebra::{Rotation3, Vector3};
-use weft_mesh::limb::{limb, Limb, LimbParams};
 use weft_mesh::BoundarySurface;
+use weft_mesh::limb::{Limb, LimbParams, limb};
 
 use crate::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use crate::energy::Energy;
-use crate::error::{check_nonnegative, check_positive, Error, Result};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
 use crate::implicit_euler::{ImplicitEuler, StepReport};
 use crate::newton::{NewtonSettings, NewtonSolver};
 
@@ -68,7 +68,11 @@ pub struct Sinusoids {
 impl Sinusoids {
     pub fn at(&self, t: f64) -> f64 {
         self.offset
-            + self.terms.iter().map(|(a, f, p)| a * (2.0 * std::f64::consts::PI * f * t + p).sin()).sum::<f64>()
+            + self
+                .terms
+                .iter()
+                .map(|(a, f, p)| a * (2.0 * std::f64::consts::PI * f * t + p).sin())
+                .sum::<f64>()
     }
     /// Three terms with frequencies in `[f_lo, f_hi)` Hz and amplitudes summing to
     /// `total` (so the signal stays within `offset ± total`).
@@ -77,7 +81,13 @@ impl Sinusoids {
         let sum: f64 = raw.iter().sum();
         let terms = raw
             .iter()
-            .map(|w| (total * w / sum, rng.uniform(f_lo, f_hi), rng.uniform(0.0, 2.0 * std::f64::consts::PI)))
+            .map(|w| {
+                (
+                    total * w / sum,
+                    rng.uniform(f_lo, f_hi),
+                    rng.uniform(0.0, 2.0 * std::f64::consts::PI),
+                )
+            })
             .collect();
         Self { offset, terms }
     }
@@ -125,10 +135,16 @@ impl SkeletalMotion {
         let r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction.at(t))
             * Rotation3::from_axis_angle(&Vector3::y_axis(), self.shoulder_flexion.at(t));
         let t0 = Vector3::new(0.0, 0.0, self.bounce.at(t));
-        let upper = BoneTransform { rotation: r0, translation: t0 };
+        let upper = BoneTransform {
+            rotation: r0,
+            translation: t0,
+        };
         // Elbow flexion bends the forearm towards −Z (palm down) about the elbow.
         let re = Rotation3::from_axis_angle(&Vector3::y_axis(), self.elbow_flexion.at(t));
-        let fore = BoneTransform { rotation: r0 * re, translation: r0 * (elbow - re * elbow) + t0 };
+        let fore = BoneTransform {
+            rotation: r0 * re,
+            translation: r0 * (elbow - re * elbow) + t0,
+        };
         [upper, fore]
     }
 }
@@ -199,7 +215,11 @@ impl SoftTissue {
         check_positive("frame time step", params.frame_dt)?;
         check_nonnegative("motion amplitude", params.motion_amplitude)?;
         if params.substeps == 0 {
-            return Err(Error::InvalidParameter { name: "substeps per frame", value: 0.0, reason: "must be at least 1" });
+            return Err(Error::InvalidParameter {
+                name: "substeps per frame",
+                value: 0.0,
+                reason: "must be at least 1",
+            });
         }
         let lame = LameParameters::from_young_poisson(params.young, params.poisson)?;
         let mesh = &limb.mesh;
@@ -232,7 +252,10 @@ impl SoftTissue {
             let terms: [&dyn Energy; 2] = [&elastic, &gravity];
             let mut solver = NewtonSolver::new(3 * nv, &terms, fixed.clone())?;
             let weight = masses.iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
-            let settings = NewtonSettings { tolerance: 1e-6 * weight.max(1e-12), ..NewtonSettings::default() };
+            let settings = NewtonSettings {
+                tolerance: 1e-6 * weight.max(1e-12),
+                ..NewtonSettings::default()
+            };
             solver.minimize(&terms, &mut this_x, &settings)?;
         }
         let integrator = ImplicitEuler::new(
@@ -242,7 +265,17 @@ impl SoftTissue {
             vec![Box::new(elastic), Box::new(gravity)],
             fixed,
         )?;
-        Ok(Self { limb, surface, params, motion, forearm_weight, bone_nodes, rest, integrator, frame: 0 })
+        Ok(Self {
+            limb,
+            surface,
+            params,
+            motion,
+            forearm_weight,
+            bone_nodes,
+            rest,
+            integrator,
+            frame: 0,
+        })
     }
 
     pub fn limb(&self) -> &Limb {
@@ -272,7 +305,9 @@ impl SoftTissue {
 
     /// `X_t`: the linear-blend-skinned surface at the current frame.
     pub fn skinned_surface(&self) -> Vec<f64> {
-        let transforms = self.motion.bone_transforms(self.time(), &self.limb.params.joint_position());
+        let transforms = self
+            .motion
+            .bone_transforms(self.time(), &self.limb.params.joint_position());
         let mut out = vec![0.0; 3 * self.surface.volume_vertex.len()];
         for (i, &v) in self.surface.volume_vertex.iter().enumerate() {
             let x = blend(&self.limb.mesh.positions()[v], self.forearm_weight[v], &transforms);
@@ -284,7 +319,11 @@ impl SoftTissue {
     /// `Y_t`: the simulated surface at the current frame (same vertex order as `X_t`).
     pub fn simulated_surface(&self) -> Vec<f64> {
         let x = self.integrator.positions();
-        self.surface.volume_vertex.iter().flat_map(|&v| [x[3 * v], x[3 * v + 1], x[3 * v + 2]]).collect()
+        self.surface
+            .volume_vertex
+            .iter()
+            .flat_map(|&v| [x[3 * v], x[3 * v + 1], x[3 * v + 2]])
+            .collect()
     }
 
     /// Advances one frame (`substeps` implicit-Euler steps with the bones moved to
@@ -310,7 +349,10 @@ impl SoftTissue {
             steps.push(self.integrator.step(&prescribed)?);
         }
         self.frame += 1;
-        Ok(FrameReport { steps, seconds: start.elapsed().as_secs_f64() })
+        Ok(FrameReport {
+            steps,
+            seconds: start.elapsed().as_secs_f64(),
+        })
     }
 
     /// Rest positions of all nodes (flat, m).

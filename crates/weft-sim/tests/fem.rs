@@ -4,22 +4,24 @@ use std::sync::Arc;
 
 use nalgebra::{Rotation3, Vector3};
 use weft_linalg::{SymmetricMatrix, SymmetricPattern};
-use weft_mesh::generators::{beam, BeamParams};
 use weft_mesh::TetMesh;
-use weft_sim::anchors::{fixed_dofs, hold, nodes_at_min};
+use weft_mesh::generators::{BeamParams, beam};
 use weft_sim::StepReport;
+use weft_sim::anchors::{fixed_dofs, hold, nodes_at_min};
 use weft_sim::energies::{ConstantForce, LameParameters, Material, TetElasticity};
-use weft_sim::{
-    Energy, Error, ImplicitEuler, LinearSolve, Newmark, PrefactorizedLinear, Quasistatic, RayleighDamping,
-};
-use weft_testkit::{assert_close, fd_gradient, fd_jacobian, max_norm_rel_error, TestRng};
+use weft_sim::{Energy, Error, ImplicitEuler, LinearSolve, Newmark, PrefactorizedLinear, Quasistatic, RayleighDamping};
+use weft_testkit::{TestRng, assert_close, fd_gradient, fd_jacobian, max_norm_rel_error};
 
 fn lame(young: f64, poisson: f64) -> LameParameters {
     LameParameters::from_young_poisson(young, poisson).unwrap()
 }
 
 fn small_beam() -> TetMesh {
-    beam(&BeamParams { cells: [2, 1, 1], size: [0.2, 0.1, 0.1] }).unwrap()
+    beam(&BeamParams {
+        cells: [2, 1, 1],
+        size: [0.2, 0.1, 0.1],
+    })
+    .unwrap()
 }
 
 fn gradient(e: &dyn Energy, x: &[f64]) -> Vec<f64> {
@@ -34,13 +36,18 @@ fn dense_hessian(e: &dyn Energy, x: &[f64], project: bool) -> Vec<Vec<f64>> {
     let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(x.len() / 3, pairs));
     let mut h = SymmetricMatrix::zeros(pattern);
     e.add_hessian(x, project, &mut h);
-    (0..x.len()).map(|r| (0..x.len()).map(|c| h.get(r, c)).collect()).collect()
+    (0..x.len())
+        .map(|r| (0..x.len()).map(|c| h.get(r, c)).collect())
+        .collect()
 }
 
 /// Rest positions plus a random deformation of relative size `scale`.
 fn deformed(mesh: &TetMesh, scale: f64, seed: u64) -> Vec<f64> {
     let mut rng = TestRng::new(seed);
-    mesh.flat_positions().iter().map(|x| x + scale * rng.uniform(-0.1, 0.1)).collect()
+    mesh.flat_positions()
+        .iter()
+        .map(|x| x + scale * rng.uniform(-0.1, 0.1))
+        .collect()
 }
 
 #[test]
@@ -50,8 +57,21 @@ fn lame_conversion_and_validation() {
     assert_close!(l.lambda, 1e5 * 0.3 / (1.3 * 0.4), rtol = 1e-14, atol = 0.0);
     assert_close!(l.young(), 1e5, rtol = 1e-12, atol = 0.0);
     assert_close!(l.poisson(), 0.3, rtol = 1e-12, atol = 0.0);
-    for (e, nu) in [(0.0, 0.3), (-1.0, 0.3), (f64::NAN, 0.3), (1e5, 0.5), (1e5, -0.1), (1e5, f64::INFINITY)] {
-        assert!(matches!(LameParameters::from_young_poisson(e, nu), Err(Error::InvalidParameter { .. })), "E {e} ν {nu}");
+    for (e, nu) in [
+        (0.0, 0.3),
+        (-1.0, 0.3),
+        (f64::NAN, 0.3),
+        (1e5, 0.5),
+        (1e5, -0.1),
+        (1e5, f64::INFINITY),
+    ] {
+        assert!(
+            matches!(
+                LameParameters::from_young_poisson(e, nu),
+                Err(Error::InvalidParameter { .. })
+            ),
+            "E {e} ν {nu}"
+        );
     }
     let zero = lame(1e5, 0.0);
     assert_eq!(zero.lambda, 0.0);
@@ -93,13 +113,19 @@ fn projected_hessians_are_positive_semidefinite() {
     for material in Material::ALL {
         let energy = TetElasticity::new(&mesh, material, lame(1e4, 0.45)).unwrap();
         // A strong compression makes StVK, co-rotational and Neo-Hookean indefinite.
-        let x: Vec<f64> = deformed(&mesh, 0.5, 3).chunks(3).flat_map(|p| [0.4 * p[0], p[1], p[2]]).collect();
+        let x: Vec<f64> = deformed(&mesh, 0.5, 3)
+            .chunks(3)
+            .flat_map(|p| [0.4 * p[0], p[1], p[2]])
+            .collect();
         let h = dense_hessian(&energy, &x, true);
         let n = x.len();
         let m = nalgebra::DMatrix::from_fn(n, n, |r, c| h[r][c]);
         let scale = m.amax();
         let min = m.symmetric_eigen().eigenvalues.min();
-        assert!(min > -1e-10 * scale, "{material:?}: projected Hessian has eigenvalue {min:e} (scale {scale:e})");
+        assert!(
+            min > -1e-10 * scale,
+            "{material:?}: projected Hessian has eigenvalue {min:e} (scale {scale:e})"
+        );
     }
 }
 
@@ -116,7 +142,10 @@ fn all_materials_agree_with_linear_elasticity_for_infinitesimal_strain() {
         let energy = TetElasticity::new(&mesh, material, lame(1e4, 0.3)).unwrap();
         // Same stiffness at rest …
         let k = dense_hessian(&energy, &rest, false).concat();
-        assert!(max_norm_rel_error(&k, &k_lin) < 1e-10, "{material:?}: rest stiffness differs");
+        assert!(
+            max_norm_rel_error(&k, &k_lin) < 1e-10,
+            "{material:?}: rest stiffness differs"
+        );
         // … and the same energy and forces up to O(strain) relative error.
         assert_close!(energy.value(&x), e_lin, rtol = 1e-4, atol = 0.0);
         let err = max_norm_rel_error(&gradient(&energy, &x), &g_lin);
@@ -128,7 +157,9 @@ fn all_materials_agree_with_linear_elasticity_for_infinitesimal_strain() {
 }
 
 fn rotate(x: &[f64], r: &Rotation3<f64>) -> Vec<f64> {
-    x.chunks(3).flat_map(|p| (r * Vector3::new(p[0], p[1], p[2])).iter().copied().collect::<Vec<_>>()).collect()
+    x.chunks(3)
+        .flat_map(|p| (r * Vector3::new(p[0], p[1], p[2])).iter().copied().collect::<Vec<_>>())
+        .collect()
 }
 
 #[test]
@@ -144,9 +175,17 @@ fn nonlinear_energies_are_rotation_invariant() {
         // Forces rotate with the body.
         let g_rot = gradient(&energy, &rotate(&x, &r));
         let g = rotate(&gradient(&energy, &x), &r);
-        assert!(max_norm_rel_error(&g_rot, &g) < 1e-9, "{material:?}: forces not equivariant");
+        assert!(
+            max_norm_rel_error(&g_rot, &g) < 1e-9,
+            "{material:?}: forces not equivariant"
+        );
         // A rigid rotation of the rest shape costs nothing.
-        assert_close!(energy.value(&rotate(&mesh.flat_positions(), &r)), 0.0, rtol = 0.0, atol = 1e-9 * e);
+        assert_close!(
+            energy.value(&rotate(&mesh.flat_positions(), &r)),
+            0.0,
+            rtol = 0.0,
+            atol = 1e-9 * e
+        );
     }
 }
 
@@ -158,7 +197,10 @@ fn linear_elasticity_shows_its_rotation_artefact() {
     let l = lame(1e4, 0.3);
     let energy = TetElasticity::new(&mesh, Material::Linear, l).unwrap();
     for theta in [0.1f64, 0.5, 1.5] {
-        let x = rotate(&mesh.flat_positions(), &Rotation3::from_axis_angle(&Vector3::z_axis(), theta));
+        let x = rotate(
+            &mesh.flat_positions(),
+            &Rotation3::from_axis_angle(&Vector3::z_axis(), theta),
+        );
         let expected = mesh.volume() * (2.0 * l.mu + 2.0 * l.lambda) * (1.0 - theta.cos()).powi(2);
         assert!(expected > 0.0);
         assert_close!(energy.value(&x), expected, rtol = 1e-10, atol = 0.0);
@@ -166,7 +208,12 @@ fn linear_elasticity_shows_its_rotation_artefact() {
 }
 
 fn single_tet(flip: bool) -> (TetMesh, Vec<f64>) {
-    let rest = vec![Vector3::zeros(), Vector3::new(1.0, 0.0, 0.0), Vector3::new(0.0, 1.0, 0.0), Vector3::new(0.0, 0.0, 1.0)];
+    let rest = vec![
+        Vector3::zeros(),
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, 0.0, 1.0),
+    ];
     let mesh = TetMesh::new(rest, vec![[0, 1, 2, 3]]).unwrap();
     let mut x = mesh.flat_positions();
     if flip {
@@ -187,7 +234,12 @@ fn inverted_tet_gives_finite_energy_forces_and_stiffness() {
         let g = gradient(&energy, &x);
         assert!(g.iter().all(|v| v.is_finite()), "{material:?}: gradient {g:?}");
         for project in [false, true] {
-            assert!(dense_hessian(&energy, &x, project).concat().iter().all(|v| v.is_finite()));
+            assert!(
+                dense_hessian(&energy, &x, project)
+                    .concat()
+                    .iter()
+                    .all(|v| v.is_finite())
+            );
         }
         // A completely flat element (det F = 0) too.
         let mut flat = x.clone();
@@ -219,12 +271,20 @@ fn neo_hookean_extension_is_smooth_and_pushes_towards_uninversion() {
 
 #[test]
 fn serial_and_parallel_assembly_are_bit_identical() {
-    let mesh = beam(&BeamParams { cells: [12, 4, 4], size: [1.0, 0.3, 0.3] }).unwrap();
+    let mesh = beam(&BeamParams {
+        cells: [12, 4, 4],
+        size: [1.0, 0.3, 0.3],
+    })
+    .unwrap();
     let x = deformed(&mesh, 0.2, 9);
     for material in Material::ALL {
         let mut energy = TetElasticity::new(&mesh, material, lame(1e5, 0.4)).unwrap();
         energy.set_parallel(false);
-        let (e0, g0, h0) = (energy.value(&x), gradient(&energy, &x), dense_hessian(&energy, &x, true));
+        let (e0, g0, h0) = (
+            energy.value(&x),
+            gradient(&energy, &x),
+            dense_hessian(&energy, &x, true),
+        );
         energy.set_parallel(true);
         assert_eq!(energy.value(&x).to_bits(), e0.to_bits());
         assert_eq!(gradient(&energy, &x), g0);
@@ -235,14 +295,23 @@ fn serial_and_parallel_assembly_are_bit_identical() {
 /// Tip deflection of a clamped cantilever `[8n, n, n]` cells over 1 × 0.1 × 0.1 m with
 /// total tip load `force` (N) along −z spread over the tip face by area.
 fn cantilever_deflection(n: usize, young: f64, force: f64, material: Option<Material>) -> f64 {
-    let mesh = beam(&BeamParams { cells: [8 * n, n, n], size: [1.0, 0.1, 0.1] }).unwrap();
+    let mesh = beam(&BeamParams {
+        cells: [8 * n, n, n],
+        size: [1.0, 0.1, 0.1],
+    })
+    .unwrap();
     let nv = mesh.num_vertices();
     let anchors = nodes_at_min(mesh.positions(), 0, 1e-9).unwrap();
     let fixed = fixed_dofs(nv, &anchors).unwrap();
-    let tip: Vec<usize> = (0..nv).filter(|&i| (mesh.positions()[i].x - 1.0).abs() < 1e-9).collect();
+    let tip: Vec<usize> = (0..nv)
+        .filter(|&i| (mesh.positions()[i].x - 1.0).abs() < 1e-9)
+        .collect();
     let mut load = vec![0.0; 3 * nv];
-    let tip_faces: Vec<[usize; 3]> =
-        mesh.boundary_faces().into_iter().filter(|f| f.iter().all(|v| tip.contains(v))).collect();
+    let tip_faces: Vec<[usize; 3]> = mesh
+        .boundary_faces()
+        .into_iter()
+        .filter(|f| f.iter().all(|v| tip.contains(v)))
+        .collect();
     for f in &tip_faces {
         let p = f.map(|v| mesh.positions()[v]);
         let area = weft_mesh::geometry::triangle_area(&p[0], &p[1], &p[2]);
@@ -294,7 +363,11 @@ fn cantilever_matches_euler_bernoulli_and_converges_under_refinement() {
 /// A clamped `[4, 1, 1]`-cell beam 0.4 × 0.1 × 0.1 m: mesh, lumped masses (1000 kg/m³),
 /// anchored nodes and fixed mask.
 fn oscillator() -> (TetMesh, Vec<f64>, Vec<usize>, Vec<bool>) {
-    let mesh = beam(&BeamParams { cells: [4, 1, 1], size: [0.4, 0.1, 0.1] }).unwrap();
+    let mesh = beam(&BeamParams {
+        cells: [4, 1, 1],
+        size: [0.4, 0.1, 0.1],
+    })
+    .unwrap();
     let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), 1000.0);
     let anchors = nodes_at_min(mesh.positions(), 0, 1e-9).unwrap();
     let fixed = fixed_dofs(mesh.num_vertices(), &anchors).unwrap();
@@ -307,10 +380,26 @@ fn newmark_energy_drift(material: Material, dt: f64, time: f64) -> f64 {
     let (mesh, masses, anchors, fixed) = oscillator();
     let x0 = mesh.flat_positions();
     // Tip speed 2 m/s, growing quadratically from the clamp: a large bending swing.
-    let v0: Vec<f64> = (0..x0.len()).map(|d| if d % 3 == 2 { 2.0 * (x0[d - 2] / 0.4).powi(2) } else { 0.0 }).collect();
+    let v0: Vec<f64> = (0..x0.len())
+        .map(|d| {
+            if d % 3 == 2 {
+                2.0 * (x0[d - 2] / 0.4).powi(2)
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let energy = TetElasticity::new(&mesh, material, lame(1e5, 0.3)).unwrap();
-    let mut nm =
-        Newmark::new(masses, dt, x0.clone(), v0, vec![Box::new(energy)], fixed, RayleighDamping::NONE).unwrap();
+    let mut nm = Newmark::new(
+        masses,
+        dt,
+        x0.clone(),
+        v0,
+        vec![Box::new(energy)],
+        fixed,
+        RayleighDamping::NONE,
+    )
+    .unwrap();
     nm.settings.tolerance = 1e-9;
     let h0 = nm.kinetic_energy() + nm.potential_energy();
     let hold_anchors = hold(&anchors, &x0);
@@ -327,10 +416,16 @@ fn newmark_conserves_energy_to_second_order() {
     for material in [Material::NeoHookean, Material::StVK] {
         let coarse = newmark_energy_drift(material, 0.01, 0.6);
         let fine = newmark_energy_drift(material, 0.005, 0.6);
-        println!("{material:?}: Newmark energy drift Δt = 0.01: {coarse:e}, Δt = 0.005: {fine:e}, ratio {}", coarse / fine);
+        println!(
+            "{material:?}: Newmark energy drift Δt = 0.01: {coarse:e}, Δt = 0.005: {fine:e}, ratio {}",
+            coarse / fine
+        );
         assert!(coarse < 0.05, "drift {coarse}");
         let ratio = coarse / fine;
-        assert!((3.0..5.5).contains(&ratio), "{material:?}: drift ratio {ratio} is not ≈ 4 (O(Δt²))");
+        assert!(
+            (3.0..5.5).contains(&ratio),
+            "{material:?}: drift ratio {ratio} is not ≈ 4 (O(Δt²))"
+        );
     }
     // Linear elasticity: the trapezoidal rule conserves a quadratic energy exactly.
     let linear = newmark_energy_drift(Material::Linear, 0.01, 0.6);
@@ -341,9 +436,14 @@ fn newmark_conserves_energy_to_second_order() {
 fn rayleigh_damping_dissipates_energy_monotonically() {
     let (mesh, masses, anchors, fixed) = oscillator();
     let x0 = mesh.flat_positions();
-    let v0: Vec<f64> = (0..x0.len()).map(|d| if d % 3 == 2 { (x0[d - 2] / 0.4).powi(2) } else { 0.0 }).collect();
+    let v0: Vec<f64> = (0..x0.len())
+        .map(|d| if d % 3 == 2 { (x0[d - 2] / 0.4).powi(2) } else { 0.0 })
+        .collect();
     let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.3)).unwrap();
-    let damping = RayleighDamping { mass: 0.5, stiffness: 1e-3 };
+    let damping = RayleighDamping {
+        mass: 0.5,
+        stiffness: 1e-3,
+    };
     let mut nm = Newmark::new(masses, 0.01, x0.clone(), v0, vec![Box::new(energy)], fixed, damping).unwrap();
     let mut last = nm.kinetic_energy() + nm.potential_energy();
     let first = last;
@@ -368,13 +468,22 @@ fn prefactorized_dynamics_match_implicit_euler_on_linear_elasticity() {
         &[&energy],
         masses.clone(),
         fixed.clone(),
-        LinearSolve::Dynamic { dt, damping: RayleighDamping::NONE },
+        LinearSolve::Dynamic {
+            dt,
+            damping: RayleighDamping::NONE,
+        },
     )
     .unwrap();
     assert!(pre.factorization_seconds() > 0.0);
     let energy2 = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
-    let mut ie =
-        ImplicitEuler::new(masses, dt, x0.clone(), vec![Box::new(energy2), Box::new(gravity.clone())], fixed).unwrap();
+    let mut ie = ImplicitEuler::new(
+        masses,
+        dt,
+        x0.clone(),
+        vec![Box::new(energy2), Box::new(gravity.clone())],
+        fixed,
+    )
+    .unwrap();
     ie.settings.tolerance = 1e-12;
     for _ in 0..30 {
         pre.step(gravity.forces(), &[]).unwrap();
@@ -391,7 +500,8 @@ fn prefactorized_static_handles_moving_anchors_and_force_fields() {
     let (mesh, masses, anchors, fixed) = oscillator();
     let x0 = mesh.flat_positions();
     let energy = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
-    let mut pre = PrefactorizedLinear::new(&x0, &[&energy], masses.clone(), fixed.clone(), LinearSolve::Static).unwrap();
+    let mut pre =
+        PrefactorizedLinear::new(&x0, &[&energy], masses.clone(), fixed.clone(), LinearSolve::Static).unwrap();
     // Translating the anchors rigidly with no load translates the whole body.
     let shifted: Vec<(usize, f64)> = hold(&anchors, &x0).into_iter().map(|(d, v)| (d, v + 0.01)).collect();
     pre.step(&vec![0.0; x0.len()], &shifted).unwrap();
@@ -425,7 +535,12 @@ fn force_fields_have_the_documented_directions() {
     assert_close!(Vector3::from(dir).norm(), 1.0, rtol = 1e-14, atol = 0.0);
     let f = ConstantForce::directional(&masses, [0.0, 2.0, 0.0], 3.0).unwrap();
     let total_mass: f64 = masses.iter().sum();
-    assert_close!(f.forces().chunks(3).map(|c| c[1]).sum::<f64>(), 3.0 * total_mass, rtol = 1e-12, atol = 0.0);
+    assert_close!(
+        f.forces().chunks(3).map(|c| c[1]).sum::<f64>(),
+        3.0 * total_mass,
+        rtol = 1e-12,
+        atol = 0.0
+    );
     assert!(ConstantForce::directional(&masses, [0.0; 3], 1.0).is_err());
     let axis = Vector3::new(1.0, 0.0, 0.0);
     let c = Vector3::new(0.0, 0.05, 0.05);
@@ -447,7 +562,10 @@ fn check_outcome(what: &str, result: Result<StepReport, Error>, x: &[f64]) -> bo
     match result {
         Ok(r) => {
             assert!(x.iter().all(|v| v.is_finite()), "{what}: non-finite positions");
-            assert!(r.newton.residual.is_finite() && r.potential_energy.is_finite(), "{what}: {r:?}");
+            assert!(
+                r.newton.residual.is_finite() && r.potential_energy.is_finite(),
+                "{what}: {r:?}"
+            );
             true
         }
         Err(e @ (Error::NotConverged { .. } | Error::NonFinite { .. } | Error::Linalg(_))) => {
@@ -468,7 +586,9 @@ fn run_extreme(material: Material, young: f64, poisson: f64, dt: f64, invert: bo
         x0[3 * tip + 2] -= 0.15;
     }
     let energy = TetElasticity::new(&mesh, material, lame(young, poisson)).unwrap();
-    let inverted = (0..mesh.num_tets()).filter(|&e| energy.deformation_gradient(&x0, e).determinant() <= 0.0).count();
+    let inverted = (0..mesh.num_tets())
+        .filter(|&e| energy.deformation_gradient(&x0, e).determinant() <= 0.0)
+        .count();
     assert_eq!(inverted > 0, invert);
     let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
     let mut ie = ImplicitEuler::new(masses, dt, x0, vec![Box::new(energy), Box::new(gravity)], fixed).unwrap();
@@ -518,7 +638,9 @@ fn stable_across_time_steps_and_from_an_inverted_state() {
         ie.step(&hold(&anchors, &rest)).unwrap();
     }
     let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.4)).unwrap();
-    let min_j = (0..mesh.num_tets()).map(|e| energy.deformation_gradient(ie.positions(), e).determinant()).fold(f64::INFINITY, f64::min);
+    let min_j = (0..mesh.num_tets())
+        .map(|e| energy.deformation_gradient(ie.positions(), e).determinant())
+        .fold(f64::INFINITY, f64::min);
     assert!(min_j > 0.0, "still inverted after 50 steps (min J = {min_j})");
 }
 
@@ -526,7 +648,12 @@ fn stable_across_time_steps_and_from_an_inverted_state() {
 fn newmark_and_quasistatic_are_stable_at_extremes() {
     let (mesh, masses, anchors, fixed) = oscillator();
     let rest = mesh.flat_positions();
-    for (young, poisson, dt) in [(1e3, 0.499, 1e-1), (1e9, 0.0, 1e-5), (1e9, 0.499, 1e-1), (1e3, 0.0, 1e-5)] {
+    for (young, poisson, dt) in [
+        (1e3, 0.499, 1e-1),
+        (1e9, 0.0, 1e-5),
+        (1e9, 0.499, 1e-1),
+        (1e3, 0.0, 1e-5),
+    ] {
         let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(young, poisson)).unwrap();
         let gravity = ConstantForce::gravity(&masses, [0.0, 0.0, -9.81]).unwrap();
         let mut nm = Newmark::new(
@@ -536,11 +663,15 @@ fn newmark_and_quasistatic_are_stable_at_extremes() {
             vec![0.0; rest.len()],
             vec![Box::new(energy), Box::new(gravity.clone())],
             fixed.clone(),
-            RayleighDamping { mass: 0.1, stiffness: 0.0 },
+            RayleighDamping {
+                mass: 0.1,
+                stiffness: 0.0,
+            },
         )
         .unwrap();
         for _ in 0..3 {
-            nm.step(&hold(&anchors, &rest)).unwrap_or_else(|e| panic!("Newmark E={young:e} ν={poisson}: {e}"));
+            nm.step(&hold(&anchors, &rest))
+                .unwrap_or_else(|e| panic!("Newmark E={young:e} ν={poisson}: {e}"));
             assert!(nm.positions().iter().all(|v| v.is_finite()));
         }
         let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(young, poisson)).unwrap();
@@ -575,8 +706,11 @@ fn quasistatic_load_stepping_reaches_large_deformation() {
 #[test]
 fn limb_sequences_pair_skinned_and_simulated_surfaces_deterministically() {
     use weft_mesh::limb::LimbParams;
-    use weft_sim::soft_tissue::{simulate_soft_tissue, SoftTissueParams};
-    let params = SoftTissueParams { seed: 7, ..SoftTissueParams::default() };
+    use weft_sim::soft_tissue::{SoftTissueParams, simulate_soft_tissue};
+    let params = SoftTissueParams {
+        seed: 7,
+        ..SoftTissueParams::default()
+    };
     let frames = 5;
     let a = simulate_soft_tissue(&LimbParams::quick(), &params, frames).unwrap();
     assert_eq!(a.skinned.len(), frames + 1);
@@ -598,7 +732,10 @@ fn limb_sequences_pair_skinned_and_simulated_surfaces_deterministically() {
     println!("limb: max |Y − X| = {max_gap:.4} m");
     assert!(max_gap > 1e-4 && max_gap < 0.05, "max |Y − X| = {max_gap} m");
     // The limb actually moves (the skeleton is animated).
-    let travel = a.skinned[0].iter().zip(&a.skinned[frames]).fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
+    let travel = a.skinned[0]
+        .iter()
+        .zip(&a.skinned[frames])
+        .fold(0.0f64, |m, (p, q)| m.max((p - q).abs()));
     assert!(travel > 0.01, "skinned surface moved only {travel} m");
     // Bit-for-bit determinism for a seed; another seed gives another motion.
     let b = simulate_soft_tissue(&LimbParams::quick(), &params, frames).unwrap();

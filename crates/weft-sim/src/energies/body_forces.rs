@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 
 use super::ConstantForce;
 use crate::energy::vertex;
-use crate::error::{check_nonnegative, Error, Result};
+use crate::error::{Error, Result, check_nonnegative};
 
 impl ConstantForce {
     /// A directional field: every vertex feels `m_i a ê` (N), `ê = direction/‖direction‖`,
@@ -17,10 +17,17 @@ impl ConstantForce {
     pub fn directional(masses: &[f64], direction: [f64; 3], acceleration: f64) -> Result<Self> {
         let e = unit("force direction", Vector3::from(direction))?;
         if !acceleration.is_finite() {
-            return Err(Error::InvalidParameter { name: "field acceleration", value: acceleration, reason: "must be finite" });
+            return Err(Error::InvalidParameter {
+                name: "field acceleration",
+                value: acceleration,
+                reason: "must be finite",
+            });
         }
         let g = e * acceleration;
-        Self::new("directional force field", masses.iter().flat_map(|m| [m * g.x, m * g.y, m * g.z]).collect())
+        Self::new(
+            "directional force field",
+            masses.iter().flat_map(|m| [m * g.x, m * g.y, m * g.z]).collect(),
+        )
     }
 
     /// A circular field about the axis through `center` along `axis`: vertex `i` at rest
@@ -30,19 +37,29 @@ impl ConstantForce {
     /// (3 per vertex, m); `acceleration` `a` in m/s² (non-negative; flip `axis` to reverse).
     pub fn circular(masses: &[f64], rest: &[f64], center: [f64; 3], axis: [f64; 3], acceleration: f64) -> Result<Self> {
         if rest.len() != 3 * masses.len() {
-            return Err(Error::LengthMismatch { what: "rest positions", expected: 3 * masses.len(), got: rest.len() });
+            return Err(Error::LengthMismatch {
+                what: "rest positions",
+                expected: 3 * masses.len(),
+                got: rest.len(),
+            });
         }
         check_nonnegative("field acceleration", acceleration)?;
         let a = unit("circular field axis", Vector3::from(axis))?;
         let c = Vector3::from(center);
         // Distances below this fraction of the body's extent count as "on the axis".
-        let extent = (0..masses.len()).map(|i| (vertex(rest, i) - c).norm()).fold(0.0f64, f64::max);
+        let extent = (0..masses.len())
+            .map(|i| (vertex(rest, i) - c).norm())
+            .fold(0.0f64, f64::max);
         let tiny = 1e-12 * extent.max(f64::MIN_POSITIVE);
         let mut forces = Vec::with_capacity(rest.len());
         for (i, m) in masses.iter().enumerate() {
             let d = vertex(rest, i) - c;
             let r = d - a * a.dot(&d);
-            let t = if r.norm() > tiny { a.cross(&r) / r.norm() } else { Vector3::zeros() };
+            let t = if r.norm() > tiny {
+                a.cross(&r) / r.norm()
+            } else {
+                Vector3::zeros()
+            };
             forces.extend((m * acceleration * t).iter());
         }
         Self::new("circular force field", forces)
@@ -60,6 +77,10 @@ fn unit(name: &'static str, v: Vector3<f64>) -> Result<Vector3<f64>> {
     if n.is_finite() && n > 0.0 {
         Ok(v / n)
     } else {
-        Err(Error::InvalidParameter { name, value: n, reason: "must be a non-zero finite vector" })
+        Err(Error::InvalidParameter {
+            name,
+            value: n,
+            reason: "must be a non-zero finite vector",
+        })
     }
 }

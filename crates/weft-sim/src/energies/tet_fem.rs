@@ -33,7 +33,7 @@ use rayon::prelude::*;
 use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TetMesh;
 
-use crate::energy::{element_pairs, vertex, Energy};
+use crate::energy::{Energy, element_pairs, vertex};
 use crate::error::{Error, Result};
 
 /// `J₀` below which Neo-Hookean's `ln J` is replaced by its quadratic Taylor expansion.
@@ -99,7 +99,12 @@ pub enum Material {
 }
 
 impl Material {
-    pub const ALL: [Material; 4] = [Material::Linear, Material::CoRotational, Material::StVK, Material::NeoHookean];
+    pub const ALL: [Material; 4] = [
+        Material::Linear,
+        Material::CoRotational,
+        Material::StVK,
+        Material::NeoHookean,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -175,7 +180,8 @@ impl Material {
         let (mu, lambda) = (lame.mu, lame.lambda);
         let I = Matrix3::identity();
         let mut A = SMatrix::<f64, 9, 9>::zeros();
-        let mut put = |k: usize, dP: Matrix3<f64>| A.set_column(k, &SVector::<f64, 9>::from_column_slice(dP.as_slice()));
+        let mut put =
+            |k: usize, dP: Matrix3<f64>| A.set_column(k, &SVector::<f64, 9>::from_column_slice(dP.as_slice()));
         match self {
             Material::Linear => {
                 for k in 0..9 {
@@ -192,7 +198,10 @@ impl Material {
                 let c = lambda * (svd.sigma.sum() - 3.0) - 2.0 * mu;
                 for k in 0..9 {
                     let dF = basis(k);
-                    put(k, 2.0 * mu * dF + c * svd.rotation_differential(&dF) + lambda * R.dot(&dF) * R);
+                    put(
+                        k,
+                        2.0 * mu * dF + c * svd.rotation_differential(&dF) + lambda * R.dot(&dF) * R,
+                    );
                 }
             }
             Material::StVK => {
@@ -235,13 +244,21 @@ fn extended_log(J: f64) -> (f64, f64, f64) {
         (J.ln(), 1.0 / J, -1.0 / (J * J))
     } else {
         let d = J - J0;
-        (J0.ln() + d / J0 - d * d / (2.0 * J0 * J0), 1.0 / J0 - d / (J0 * J0), -1.0 / (J0 * J0))
+        (
+            J0.ln() + d / J0 - d * d / (2.0 * J0 * J0),
+            1.0 / J0 - d / (J0 * J0),
+            -1.0 / (J0 * J0),
+        )
     }
 }
 
 /// `L(1 + d)` of [`extended_log`], accurate for small `d = J − 1`.
 fn extended_log_1p(d: f64) -> f64 {
-    if 1.0 + d >= NEO_HOOKEAN_J_MIN { d.ln_1p() } else { extended_log(1.0 + d).0 }
+    if 1.0 + d >= NEO_HOOKEAN_J_MIN {
+        d.ln_1p()
+    } else {
+        extended_log(1.0 + d).0
+    }
 }
 
 /// `cof F = ∂ det F / ∂F`: columns `f₁×f₂, f₂×f₀, f₀×f₁` of `F = [f₀ f₁ f₂]`.
@@ -254,7 +271,11 @@ fn cofactor(F: &Matrix3<f64>) -> Matrix3<f64> {
 fn cofactor_differential(F: &Matrix3<f64>, dF: &Matrix3<f64>) -> Matrix3<f64> {
     let (f0, f1, f2) = (F.column(0), F.column(1), F.column(2));
     let (d0, d1, d2) = (dF.column(0), dF.column(1), dF.column(2));
-    Matrix3::from_columns(&[d1.cross(&f2) + f1.cross(&d2), d2.cross(&f0) + f2.cross(&d0), d0.cross(&f1) + f0.cross(&d1)])
+    Matrix3::from_columns(&[
+        d1.cross(&f2) + f1.cross(&d2),
+        d2.cross(&f0) + f2.cross(&d0),
+        d0.cross(&f1) + f0.cross(&d1),
+    ])
 }
 
 /// `F = U diag(σ) Vᵀ` with `det U = det V = +1`; the smallest singular value carries the
@@ -370,7 +391,11 @@ impl TetElasticity {
         lame: LameParameters,
     ) -> Result<Self> {
         if !(lame.mu.is_finite() && lame.mu > 0.0) {
-            return Err(Error::InvalidParameter { name: "Lamé μ", value: lame.mu, reason: "must be positive and finite" });
+            return Err(Error::InvalidParameter {
+                name: "Lamé μ",
+                value: lame.mu,
+                reason: "must be positive and finite",
+            });
         }
         if !(lame.lambda.is_finite() && lame.lambda >= 0.0) {
             return Err(Error::InvalidParameter {
@@ -380,7 +405,11 @@ impl TetElasticity {
             });
         }
         if let Some(&v) = tets.iter().flatten().find(|&&v| v >= rest.len()) {
-            return Err(Error::VertexOutOfRange { what: "tetrahedron", index: v, num_vertices: rest.len() });
+            return Err(Error::VertexOutOfRange {
+                what: "tetrahedron",
+                index: v,
+                num_vertices: rest.len(),
+            });
         }
         let inverses = weft_mesh::geometry::tet_rest_inverses(rest, tets)?;
         let volumes = weft_mesh::geometry::tet_volumes(rest, tets);
@@ -441,7 +470,10 @@ impl TetElasticity {
     /// Per-element energies (J) at `x`.
     pub fn element_energies(&self, x: &[f64]) -> Vec<f64> {
         let f = |e: usize| {
-            self.volumes[e] * self.material.energy_density_of_displacement_gradient(&self.lame, &self.displacement_gradient(x, e))
+            self.volumes[e]
+                * self
+                    .material
+                    .energy_density_of_displacement_gradient(&self.lame, &self.displacement_gradient(x, e))
         };
         if self.parallel {
             (0..self.tets.len()).into_par_iter().map(f).collect()
@@ -501,7 +533,10 @@ impl TetElasticity {
         let mut guard = self.slots.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let stale = guard.as_ref().is_none_or(|t| !Arc::ptr_eq(&t.pattern, pattern));
         if stale {
-            assert!(pattern.nnz() < u32::MAX as usize, "matrix pattern too large for 32-bit slots");
+            assert!(
+                pattern.nnz() < u32::MAX as usize,
+                "matrix pattern too large for 32-bit slots"
+            );
             let mut slots = Vec::with_capacity(144 * self.tets.len());
             for t in &self.tets {
                 for p in 0..12 {
@@ -509,7 +544,9 @@ impl TetElasticity {
                         let (r, c) = (3 * t[p / 3] + p % 3, 3 * t[q / 3] + q % 3);
                         let slot = if r <= c {
                             pattern.slot(r, c).unwrap_or_else(|| {
-                                panic!("entry ({r}, {c}) of a tet block is not in the pattern: hessian_pairs was not used")
+                                panic!(
+                                    "entry ({r}, {c}) of a tet block is not in the pattern: hessian_pairs was not used"
+                                )
                             }) as u32
                         } else {
                             u32::MAX
@@ -518,7 +555,10 @@ impl TetElasticity {
                     }
                 }
             }
-            *guard = Some(SlotTable { pattern: pattern.clone(), slots });
+            *guard = Some(SlotTable {
+                pattern: pattern.clone(),
+                slots,
+            });
         }
         guard
     }
