@@ -29,6 +29,7 @@ pub mod generators;
 pub mod geodesic;
 pub mod geometry;
 pub mod io;
+pub mod limb;
 pub mod tetmesh;
 pub mod topology;
 pub mod trimesh;

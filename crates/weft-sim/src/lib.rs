@@ -27,15 +27,23 @@
 //! # Ok::<(), weft_sim::Error>(())
 //! ```
 
+pub mod anchors;
 pub mod energies;
 pub mod energy;
 pub mod error;
 pub mod implicit_euler;
+pub mod newmark;
 pub mod newton;
+pub mod prefactorized;
+pub mod quasistatic;
 pub mod scene;
+pub mod soft_tissue;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
 pub use implicit_euler::{ImplicitEuler, StepReport};
+pub use newmark::{Newmark, NewmarkReport};
 pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
+pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};
+pub use quasistatic::{Quasistatic, QuasistaticReport};
 pub use scene::{BUILTIN_SCENES, ClothSimulation, Frame, MotionLabel, Scene};

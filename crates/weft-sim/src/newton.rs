@@ -9,6 +9,10 @@ use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
 use crate::energy::{Energy, total_gradient, total_value};
 use crate::error::{Error, Result};
 
+/// Armijo steps shorter than this fraction of the Newton step are not trusted: steps are
+/// then judged by their residual force instead (see [`NewtonSolver::minimize`]).
+const MIN_TRUSTED_STEP: f64 = 1e-6;
+
 /// Settings of [`NewtonSolver`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -280,26 +284,29 @@ impl NewtonSolver {
                 let slope: f64 = self.dir.iter().zip(&grad).map(|(d, g)| d * g).sum();
                 let mut alpha = 1.0;
                 let mut accepted = false;
+                let mut trial_energy = energy;
                 for _ in 0..=settings.max_line_search {
                     for i in 0..n {
                         self.trial[i] = x[i] + alpha * self.dir[i];
                     }
                     let e = total_value(terms, &self.trial);
-                    // Armijo with round-off slack: near the minimiser the true decrease
-                    // falls below the rounding error of E itself.
-                    let slack = 64.0 * f64::EPSILON * energy.abs();
-                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope + slack {
-                        energy = e;
+                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope {
+                        trial_energy = e;
                         accepted = true;
                         break;
                     }
                     alpha *= 0.5;
                     report.line_search_halvings += 1;
                 }
-                if !accepted {
-                    // Near the minimiser the energy decrease can drop below the round-off
-                    // of E itself, so Armijo fails although the direction is good: fall
-                    // back to a line search on the residual force instead.
+                // An Armijo step that is vanishingly short, or whose predicted decrease is
+                // below the round-off of E, "passes" by noise and Newton stalls: near the
+                // minimiser of a stiff problem energy comparisons carry no information.
+                // Then judge steps by the residual force instead (backtracking from the
+                // full Newton step), keeping the tiny Armijo step only if that fails too.
+                let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy.abs();
+                if !accepted || alpha < MIN_TRUSTED_STEP || !measurable {
+                    let tiny = accepted.then(|| (self.trial.clone(), trial_energy));
+                    accepted = false;
                     let mut beta = 1.0;
                     for _ in 0..12 {
                         for i in 0..n {
@@ -309,14 +316,20 @@ impl NewtonSolver {
                         let e = total_value(terms, &self.trial);
                         let r = self.free_residual(&grad);
                         if e.is_finite() && r.is_finite() && r < residual {
-                            energy = e;
+                            trial_energy = e;
                             accepted = true;
                             break;
                         }
                         beta *= 0.5;
                     }
                     if !accepted {
-                        total_gradient(terms, x, &mut grad);
+                        if let Some((t, e)) = tiny {
+                            self.trial.copy_from_slice(&t);
+                            trial_energy = e;
+                            accepted = true;
+                        } else {
+                            total_gradient(terms, x, &mut grad);
+                        }
                     }
                 }
                 if !accepted {
@@ -328,6 +341,7 @@ impl NewtonSolver {
                         tolerance: settings.tolerance,
                     });
                 }
+                energy = trial_energy;
                 x.copy_from_slice(&self.trial);
                 total_gradient(terms, x, &mut grad);
                 if let Some(i) = grad.iter().position(|v| !v.is_finite()) {

@@ -1,0 +1,400 @@
+//! The soft-tissue dataset generator of design §6 (the Alt-ConvLSTM setting): a
+//! [`weft_mesh::limb::Limb`] whose bone nodes follow two rigid bones driven by a smooth
+//! random skeletal motion, with Neo-Hookean tissue (NNWarp Eq. 8) integrated by implicit
+//! Euler under gravity.
+//!
+//! Each frame yields two surfaces in the same vertex order (the limb's boundary surface):
+//! - `X_t`, the *skinned* surface: linear-blend skinning of the rest surface by the bone
+//!   transforms — kinematics only, the SMPL analogue;
+//! - `Y_t`, the *simulated* surface: the FEM solution with dynamics — the scanned-tissue
+//!   analogue, which lags, sags and jiggles around `X_t`.
+//!
+//! Units: metres, seconds, kilograms, pascals.
+
+use nalgebra::{Rotation3, Vector3};
+use weft_mesh::BoundarySurface;
+use weft_mesh::limb::{Limb, LimbParams, limb};
+
+use crate::energies::{ConstantForce, LameParameters, Material, TetElasticity};
+use crate::energy::Energy;
+use crate::error::{Error, Result, check_nonnegative, check_positive};
+use crate::implicit_euler::{ImplicitEuler, StepReport};
+use crate::newton::{NewtonSettings, NewtonSolver};
+
+/// Material, timing and motion settings of a soft-tissue sequence.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SoftTissueParams {
+    /// Young's modulus of the tissue (Pa); soft tissue is of order 10⁴.
+    pub young: f64,
+    pub poisson: f64,
+    /// Tissue density (kg/m³).
+    pub density: f64,
+    /// Time between stored frames (s).
+    pub frame_dt: f64,
+    /// Implicit-Euler steps per frame.
+    pub substeps: usize,
+    /// Gravitational acceleration (m/s²).
+    pub gravity: [f64; 3],
+    /// Seed of the random skeletal motion.
+    pub seed: u64,
+    /// Scales every joint angle and the bounce of the motion (1 = the documented ranges).
+    pub motion_amplitude: f64,
+}
+
+impl Default for SoftTissueParams {
+    fn default() -> Self {
+        Self {
+            young: 3e4,
+            poisson: 0.45,
+            density: 1070.0,
+            frame_dt: 1.0 / 30.0,
+            substeps: 2,
+            gravity: [0.0, 0.0, -9.81],
+            seed: 0,
+            motion_amplitude: 1.0,
+        }
+    }
+}
+
+/// A smooth random signal `c + Σ_k a_k sin(2π f_k t + φ_k)`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Sinusoids {
+    pub offset: f64,
+    /// `(amplitude, frequency Hz, phase rad)` per term.
+    pub terms: Vec<(f64, f64, f64)>,
+}
+
+impl Sinusoids {
+    pub fn at(&self, t: f64) -> f64 {
+        self.offset
+            + self
+                .terms
+                .iter()
+                .map(|(a, f, p)| a * (2.0 * std::f64::consts::PI * f * t + p).sin())
+                .sum::<f64>()
+    }
+    /// Three terms with frequencies in `[f_lo, f_hi)` Hz and amplitudes summing to
+    /// `total` (so the signal stays within `offset ± total`).
+    fn random(rng: &mut SplitMix64, offset: f64, total: f64, f_lo: f64, f_hi: f64) -> Self {
+        let raw: Vec<f64> = (0..3).map(|_| rng.uniform(0.2, 1.0)).collect();
+        let sum: f64 = raw.iter().sum();
+        let terms = raw
+            .iter()
+            .map(|w| {
+                (
+                    total * w / sum,
+                    rng.uniform(f_lo, f_hi),
+                    rng.uniform(0.0, 2.0 * std::f64::consts::PI),
+                )
+            })
+            .collect();
+        Self { offset, terms }
+    }
+}
+
+/// A rigid transform `x ↦ R x + t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoneTransform {
+    pub rotation: Rotation3<f64>,
+    pub translation: Vector3<f64>,
+}
+
+impl BoneTransform {
+    pub fn apply(&self, x: &Vector3<f64>) -> Vector3<f64> {
+        self.rotation * x + self.translation
+    }
+}
+
+/// Smooth random skeletal motion of the two-bone limb: shoulder flexion (about Y) and
+/// abduction (about Z) within ±0.5 rad, elbow flexion in [0.1, 1.3] rad, and a vertical
+/// bounce of the shoulder within ±2 cm (walking-like, 1.2–2 Hz) — all scaled by the
+/// motion amplitude. Joint frequencies are 0.2–1 Hz.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SkeletalMotion {
+    pub shoulder_flexion: Sinusoids,
+    pub shoulder_abduction: Sinusoids,
+    pub elbow_flexion: Sinusoids,
+    pub bounce: Sinusoids,
+}
+
+impl SkeletalMotion {
+    pub fn random(seed: u64, amplitude: f64) -> Self {
+        let mut rng = SplitMix64(seed ^ SEED_SALT);
+        Self {
+            shoulder_flexion: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
+            shoulder_abduction: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
+            elbow_flexion: Sinusoids::random(&mut rng, 0.7 * amplitude, 0.6 * amplitude, 0.2, 1.0),
+            bounce: Sinusoids::random(&mut rng, 0.0, 0.02 * amplitude, 1.2, 2.0),
+        }
+    }
+
+    /// The transforms of the upper arm (bone 0, about the shoulder at the origin) and
+    /// the forearm (bone 1, about the elbow at `elbow`, chained to bone 0) at time `t`.
+    pub fn bone_transforms(&self, t: f64, elbow: &Vector3<f64>) -> [BoneTransform; 2] {
+        let r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction.at(t))
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), self.shoulder_flexion.at(t));
+        let t0 = Vector3::new(0.0, 0.0, self.bounce.at(t));
+        let upper = BoneTransform {
+            rotation: r0,
+            translation: t0,
+        };
+        // Elbow flexion bends the forearm towards −Z (palm down) about the elbow.
+        let re = Rotation3::from_axis_angle(&Vector3::y_axis(), self.elbow_flexion.at(t));
+        let fore = BoneTransform {
+            rotation: r0 * re,
+            translation: r0 * (elbow - re * elbow) + t0,
+        };
+        [upper, fore]
+    }
+}
+
+/// Mixed into the user's seed so that seed 0 is not SplitMix64's all-zero state.
+const SEED_SALT: u64 = 0x5EED_0F71_55E0_0001;
+
+/// A small deterministic generator (SplitMix64) so sequences are reproducible from a
+/// seed on every machine.
+#[derive(Debug, Clone)]
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+/// Frame-by-frame simulator of a limb's soft tissue.
+#[derive(Debug)]
+pub struct SoftTissue {
+    limb: Limb,
+    surface: BoundarySurface,
+    params: SoftTissueParams,
+    motion: SkeletalMotion,
+    /// Linear-blend-skinning weight of the forearm per node (the upper arm's is `1 − w`).
+    forearm_weight: Vec<f64>,
+    bone_nodes: Vec<usize>,
+    rest: Vec<f64>,
+    integrator: ImplicitEuler,
+    frame: usize,
+}
+
+/// What one frame did: one report per implicit-Euler substep.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FrameReport {
+    pub steps: Vec<StepReport>,
+    /// Wall time of the frame (s).
+    pub seconds: f64,
+}
+
+/// A simulated sequence: the surface connectivity and, per frame, the skinned surface
+/// `X_t` and the simulated surface `Y_t` (flat, 3 per surface vertex, m).
+#[derive(Debug, Clone)]
+pub struct SoftTissueSequence {
+    /// Faces of the surface over its own vertex numbering (outward oriented).
+    pub faces: Vec<[usize; 3]>,
+    /// Rest positions of the surface (flat, m).
+    pub rest: Vec<f64>,
+    pub skinned: Vec<Vec<f64>>,
+    pub simulated: Vec<Vec<f64>>,
+    /// Per frame after the first (frame 0 is the settled start).
+    pub reports: Vec<FrameReport>,
+}
+
+impl SoftTissue {
+    /// Builds the simulation for `limb` and settles it: bones posed at `t = 0`, tissue in
+    /// static equilibrium under gravity (so a sequence starts at rest, not with a drop).
+    pub fn new(limb: Limb, params: SoftTissueParams) -> Result<Self> {
+        check_positive("tissue density", params.density)?;
+        check_positive("frame time step", params.frame_dt)?;
+        check_nonnegative("motion amplitude", params.motion_amplitude)?;
+        if params.substeps == 0 {
+            return Err(Error::InvalidParameter {
+                name: "substeps per frame",
+                value: 0.0,
+                reason: "must be at least 1",
+            });
+        }
+        let lame = LameParameters::from_young_poisson(params.young, params.poisson)?;
+        let mesh = &limb.mesh;
+        let nv = mesh.num_vertices();
+        let surface = mesh.boundary_surface()?;
+        let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), params.density);
+        let elastic = TetElasticity::new(mesh, Material::NeoHookean, lame)?;
+        let gravity = ConstantForce::gravity(&masses, params.gravity)?;
+        let bone_nodes = limb.all_bone_nodes();
+        let fixed = crate::anchors::fixed_dofs(nv, &bone_nodes)?;
+        // Skinning weights: a smoothstep across the elbow gap (at least ±5 cm wide).
+        let p = limb.params;
+        let joint_x = p.joint * p.length;
+        let half = (0.5 * p.joint_gap).max(0.05);
+        let forearm_weight: Vec<f64> = mesh
+            .positions()
+            .iter()
+            .map(|x| {
+                let s = ((x.x - (joint_x - half)) / (2.0 * half)).clamp(0.0, 1.0);
+                s * s * (3.0 - 2.0 * s)
+            })
+            .collect();
+        let motion = SkeletalMotion::random(params.seed, params.motion_amplitude);
+        let rest = mesh.flat_positions();
+        let mut this_x = vec![0.0; 3 * nv];
+        let transforms = motion.bone_transforms(0.0, &p.joint_position());
+        skin(mesh.positions(), &forearm_weight, &transforms, &mut this_x);
+        // Static settle at t = 0.
+        {
+            let terms: [&dyn Energy; 2] = [&elastic, &gravity];
+            let mut solver = NewtonSolver::new(3 * nv, &terms, fixed.clone())?;
+            let weight = masses.iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
+            let settings = NewtonSettings {
+                tolerance: 1e-6 * weight.max(1e-12),
+                ..NewtonSettings::default()
+            };
+            solver.minimize(&terms, &mut this_x, &settings)?;
+        }
+        let integrator = ImplicitEuler::new(
+            masses,
+            params.frame_dt / params.substeps as f64,
+            this_x,
+            vec![Box::new(elastic), Box::new(gravity)],
+            fixed,
+        )?;
+        Ok(Self {
+            limb,
+            surface,
+            params,
+            motion,
+            forearm_weight,
+            bone_nodes,
+            rest,
+            integrator,
+            frame: 0,
+        })
+    }
+
+    pub fn limb(&self) -> &Limb {
+        &self.limb
+    }
+    pub fn surface(&self) -> &BoundarySurface {
+        &self.surface
+    }
+    pub fn motion(&self) -> &SkeletalMotion {
+        &self.motion
+    }
+    pub fn params(&self) -> &SoftTissueParams {
+        &self.params
+    }
+    /// Frames advanced so far.
+    pub fn frame(&self) -> usize {
+        self.frame
+    }
+    /// Time of the current frame (s).
+    pub fn time(&self) -> f64 {
+        self.frame as f64 * self.params.frame_dt
+    }
+    /// All simulated node positions (flat, m).
+    pub fn positions(&self) -> &[f64] {
+        self.integrator.positions()
+    }
+
+    /// `X_t`: the linear-blend-skinned surface at the current frame.
+    pub fn skinned_surface(&self) -> Vec<f64> {
+        let transforms = self
+            .motion
+            .bone_transforms(self.time(), &self.limb.params.joint_position());
+        let mut out = vec![0.0; 3 * self.surface.volume_vertex.len()];
+        for (i, &v) in self.surface.volume_vertex.iter().enumerate() {
+            let x = blend(&self.limb.mesh.positions()[v], self.forearm_weight[v], &transforms);
+            out[3 * i..3 * i + 3].copy_from_slice(x.as_slice());
+        }
+        out
+    }
+
+    /// `Y_t`: the simulated surface at the current frame (same vertex order as `X_t`).
+    pub fn simulated_surface(&self) -> Vec<f64> {
+        let x = self.integrator.positions();
+        self.surface
+            .volume_vertex
+            .iter()
+            .flat_map(|&v| [x[3 * v], x[3 * v + 1], x[3 * v + 2]])
+            .collect()
+    }
+
+    /// Advances one frame (`substeps` implicit-Euler steps with the bones moved to
+    /// their poses at each substep's end time).
+    pub fn step_frame(&mut self) -> Result<FrameReport> {
+        let start = std::time::Instant::now();
+        let dt = self.params.frame_dt / self.params.substeps as f64;
+        let t0 = self.time();
+        let mut steps = Vec::with_capacity(self.params.substeps);
+        let positions = self.limb.mesh.positions();
+        let elbow = self.limb.params.joint_position();
+        for k in 1..=self.params.substeps {
+            let transforms = self.motion.bone_transforms(t0 + k as f64 * dt, &elbow);
+            let prescribed: Vec<(usize, f64)> = self
+                .bone_nodes
+                .iter()
+                .flat_map(|&v| {
+                    let b = self.limb.bone[v].expect("bone node without a bone");
+                    let x = transforms[b].apply(&positions[v]);
+                    [(3 * v, x.x), (3 * v + 1, x.y), (3 * v + 2, x.z)]
+                })
+                .collect();
+            steps.push(self.integrator.step(&prescribed)?);
+        }
+        self.frame += 1;
+        Ok(FrameReport {
+            steps,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Rest positions of all nodes (flat, m).
+    pub fn rest_positions(&self) -> &[f64] {
+        &self.rest
+    }
+}
+
+/// Linear blend skinning of one point.
+fn blend(x: &Vector3<f64>, w: f64, transforms: &[BoneTransform; 2]) -> Vector3<f64> {
+    transforms[0].apply(x) * (1.0 - w) + transforms[1].apply(x) * w
+}
+
+fn skin(rest: &[Vector3<f64>], weights: &[f64], transforms: &[BoneTransform; 2], out: &mut [f64]) {
+    for (v, (x, &w)) in rest.iter().zip(weights).enumerate() {
+        out[3 * v..3 * v + 3].copy_from_slice(blend(x, w, transforms).as_slice());
+    }
+}
+
+/// Simulates `frames` frames after the settled start of the limb of `limb_params`,
+/// returning `frames + 1` skinned and simulated surfaces (frame 0 = the settled start)
+/// and the per-frame step reports.
+pub fn simulate_soft_tissue(
+    limb_params: &LimbParams,
+    params: &SoftTissueParams,
+    frames: usize,
+) -> Result<SoftTissueSequence> {
+    let mut sim = SoftTissue::new(limb(limb_params)?, *params)?;
+    let surface = sim.surface();
+    let faces = surface.mesh.faces().to_vec();
+    let rest = weft_mesh::flatten(surface.mesh.positions());
+    let mut seq = SoftTissueSequence {
+        faces,
+        rest,
+        skinned: vec![sim.skinned_surface()],
+        simulated: vec![sim.simulated_surface()],
+        reports: Vec::with_capacity(frames),
+    };
+    for _ in 0..frames {
+        seq.reports.push(sim.step_frame()?);
+        seq.skinned.push(sim.skinned_surface());
+        seq.simulated.push(sim.simulated_surface());
+    }
+    Ok(seq)
+}
