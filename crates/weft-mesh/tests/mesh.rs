@@ -534,3 +534,27 @@ fn read_mesh_dispatches_on_extension() {
     let e = read_mesh(Path::new("x.stl")).unwrap_err();
     assert!(matches!(e, Error::UnsupportedFormat { .. }), "{e}");
 }
+
+#[test]
+fn vtk_tet_round_trip_and_bad_files() {
+    let beam = generators::bent_beam(
+        &generators::BeamParams {
+            cells: [4, 2, 2],
+            size: [1.0, 0.2, 0.2],
+        },
+        0.8,
+    )
+    .unwrap();
+    let path = tmp("bent.vtk");
+    write_vtk_tets(&path, beam.positions(), beam.tets(), &[]).unwrap();
+    let back = read_vtk_tets(&path).unwrap();
+    assert_eq!(back, beam);
+    assert!(matches!(read_mesh(&path), Ok(AnyMesh::Volume(_))));
+    let tri = tmp("tri.vtk");
+    write_vtk_triangles(&tri, square().positions(), square().faces(), &[]).unwrap();
+    let e = read_vtk_tets(&tri).unwrap_err();
+    assert!(e.to_string().contains("no tetrahedra"), "{e}");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&tri, &text[..text.len() / 3]).unwrap();
+    assert!(matches!(read_vtk_tets(&tri), Err(Error::Parse { .. })));
+}

@@ -38,6 +38,7 @@ pub mod prefactorized;
 pub mod quasistatic;
 pub mod scene;
 pub mod soft_tissue;
+pub mod volume_scene;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
@@ -47,3 +48,4 @@ pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};
 pub use quasistatic::{Quasistatic, QuasistaticReport};
 pub use scene::{BUILTIN_SCENES, ClothSimulation, Frame, MotionLabel, Scene};
+pub use volume_scene::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene, VolumeSimulation};

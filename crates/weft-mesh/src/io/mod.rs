@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 pub use obj::{parse_obj, read_obj, write_obj};
 pub use ply::write_ply;
 pub use tetgen::{read_tetgen, write_tetgen};
-pub use vtk::{write_vtk_tets, write_vtk_triangles};
+pub use vtk::{read_vtk_tets, write_vtk_tets, write_vtk_triangles};
 
 use crate::error::{Error, Result};
 use crate::tetmesh::TetMesh;
@@ -30,7 +30,7 @@ pub enum AnyMesh {
     Volume(TetMesh),
 }
 
-const READABLE: &str = ".obj, .node, .ele";
+const READABLE: &str = ".obj, .node, .ele, .vtk (tetrahedra)";
 const WRITABLE: &str = ".obj, .ply, .vtk, .node";
 
 fn extension(path: &Path) -> String {
@@ -40,11 +40,13 @@ fn extension(path: &Path) -> String {
         .to_ascii_lowercase()
 }
 
-/// Reads a mesh, choosing the format by extension (`.obj` surface, `.node`/`.ele` TetGen volume).
+/// Reads a mesh, choosing the format by extension (`.obj` surface, `.node`/`.ele` TetGen or
+/// `.vtk` legacy unstructured-grid volume).
 pub fn read_mesh(path: &Path) -> Result<AnyMesh> {
     match extension(path).as_str() {
         "obj" => read_obj(path).map(AnyMesh::Surface),
         "node" | "ele" => read_tetgen(path).map(AnyMesh::Volume),
+        "vtk" => read_vtk_tets(path).map(AnyMesh::Volume),
         e => Err(Error::UnsupportedFormat {
             path: path.into(),
             extension: e.into(),

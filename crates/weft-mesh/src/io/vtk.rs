@@ -2,8 +2,9 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 
-use super::write_atomically;
+use super::{io_err, parse_err, write_atomically};
 use crate::error::{Error, Result};
+use crate::tetmesh::TetMesh;
 
 /// A named per-vertex field for VTK output: 1 component (scalars) or 3 (vectors).
 pub type PointField<'a> = (&'a str, usize, &'a [f64]);
@@ -78,4 +79,78 @@ pub fn write_vtk_triangles(
     fields: &[PointField<'_>],
 ) -> Result<()> {
     write_vtk(path, positions, faces, 5, fields)
+}
+
+/// Reads the tetrahedra (cell type 10) of a legacy ASCII VTK unstructured grid, as written
+/// by [`write_vtk_tets`], ParaView or gmsh. Other cell types are skipped; a file without
+/// tetrahedra is an error.
+pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    // Tokens with their line numbers: legacy VTK lets numbers wrap across lines.
+    let tokens: Vec<(usize, &str)> = text
+        .lines()
+        .enumerate()
+        .flat_map(|(i, l)| l.split_whitespace().map(move |t| (i + 1, t)))
+        .collect();
+    let last_line = text.lines().count();
+    let find = |key: &str| tokens.iter().position(|(_, t)| t.eq_ignore_ascii_case(key));
+    let number = |k: usize, what: &str| -> Result<f64> {
+        let (line, tok) = tokens
+            .get(k)
+            .ok_or_else(|| parse_err(path, last_line, format!("file ends inside {what}")))?;
+        tok.parse()
+            .map_err(|_| parse_err(path, *line, format!("bad {what} {tok:?}")))
+    };
+    let count = |k: usize, what: &str| -> Result<usize> {
+        let v = number(k, what)?;
+        if v >= 0.0 && v.fract() == 0.0 {
+            Ok(v as usize)
+        } else {
+            Err(parse_err(path, tokens[k].0, format!("bad {what} {v}")))
+        }
+    };
+    if !text.contains("UNSTRUCTURED_GRID") {
+        return Err(parse_err(path, 1, "not a legacy VTK UNSTRUCTURED_GRID file"));
+    }
+    let p = find("POINTS").ok_or_else(|| parse_err(path, 1, "no POINTS section"))?;
+    let np = count(p + 1, "point count")?;
+    let mut positions = Vec::with_capacity(np);
+    for i in 0..np {
+        let base = p + 3 + 3 * i;
+        positions.push(nalgebra::Vector3::new(
+            number(base, "coordinate")?,
+            number(base + 1, "coordinate")?,
+            number(base + 2, "coordinate")?,
+        ));
+    }
+    let c = find("CELLS").ok_or_else(|| parse_err(path, 1, "no CELLS section"))?;
+    let nc = count(c + 1, "cell count")?;
+    let mut cells = Vec::with_capacity(nc);
+    let mut k = c + 3;
+    for _ in 0..nc {
+        let n = count(k, "cell size")?;
+        let ids = (1..=n)
+            .map(|j| count(k + j, "cell index"))
+            .collect::<Result<Vec<_>>>()?;
+        cells.push((tokens[k].0, ids));
+        k += n + 1;
+    }
+    let t = find("CELL_TYPES").ok_or_else(|| parse_err(path, 1, "no CELL_TYPES section"))?;
+    let mut tets = Vec::new();
+    for (i, (line, ids)) in cells.iter().enumerate() {
+        if count(t + 2 + i, "cell type")? == 10 {
+            if ids.len() != 4 {
+                return Err(parse_err(
+                    path,
+                    *line,
+                    format!("tetrahedron with {} indices", ids.len()),
+                ));
+            }
+            tets.push([ids[0], ids[1], ids[2], ids[3]]);
+        }
+    }
+    if tets.is_empty() {
+        return Err(parse_err(path, 1, "no tetrahedra (VTK cell type 10) in the file"));
+    }
+    TetMesh::new(positions, tets)
 }
