@@ -42,8 +42,9 @@ use std::sync::Arc;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::{LdltParams, LdltRegularization};
+use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LdltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side, Spec};
@@ -90,6 +91,36 @@ struct VertexBlocks {
     offsets: Vec<usize>,
     rows: Vec<usize>,
     slots: Vec<[usize; 3]>,
+}
+
+impl VertexBlocks {
+    /// A fill-reducing DOF ordering from AMD on the *vertex* graph, each vertex's three
+    /// DOFs kept together: a third of the graph to order, and supernodes aligned with the
+    /// 3 × 3 blocks.
+    fn dof_ordering(&self) -> Result<(Vec<usize>, Vec<usize>)> {
+        let nv = self.offsets.len() - 1;
+        let col_ptr = self.offsets.clone();
+        let row_idx = self.rows.clone();
+        let graph = SymbolicSparseColMat::new_checked(nv, nv, col_ptr, None, row_idx);
+        let mut perm = vec![0usize; nv];
+        let mut perm_inv = vec![0usize; nv];
+        let nnz = graph.row_idx().len();
+        let mut mem = MemBuffer::new(faer::sparse::linalg::amd::order_scratch::<usize>(nv, nnz));
+        faer::sparse::linalg::amd::order(
+            &mut perm,
+            &mut perm_inv,
+            graph.as_ref(),
+            faer::sparse::linalg::amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|e| Error::Setup(format!("AMD ordering failed: {e:?}")))?;
+        let fwd: Vec<usize> = perm.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        let mut inv = vec![0usize; fwd.len()];
+        for (i, &f) in fwd.iter().enumerate() {
+            inv[f] = i;
+        }
+        Ok((fwd, inv))
+    }
 }
 
 impl SymmetricPattern {
@@ -338,44 +369,70 @@ impl SymmetricMatrix {
     }
 }
 
-/// Sparse Cholesky `A = L Lᵀ` with the symbolic analysis (AMD ordering, elimination
-/// tree) done once per pattern.
+/// Sparse Cholesky `A = L Lᵀ` with the symbolic analysis (fill-reducing ordering,
+/// elimination tree, supernodes) done once per pattern. Patterns of `3 × 3` vertex blocks
+/// are ordered by AMD on the vertex graph, others by AMD on the scalar graph.
 #[derive(Debug, Clone)]
 pub struct CholeskySolver {
     pattern: Arc<SymmetricPattern>,
-    symbolic: faer::sparse::linalg::solvers::SymbolicLlt<usize>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
 }
 
 /// A numeric Cholesky factor, ready for solves.
 #[derive(Debug, Clone)]
 pub struct CholeskyFactor {
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
     n: usize,
 }
 
 impl CholeskySolver {
     pub fn new(pattern: Arc<SymmetricPattern>) -> Result<Self> {
         single_threaded();
-        let symbolic = faer::sparse::linalg::solvers::SymbolicLlt::try_new(pattern.symbolic.as_ref(), Side::Upper)
-            .map_err(|e| Error::Setup(format!("{e:?}")))?;
-        Ok(Self { pattern, symbolic })
+        let ordering = match &pattern.blocks {
+            Some(b) => Some(b.dof_ordering()?),
+            None => None,
+        };
+        let perm = ordering.as_ref().map(|(f, i)| faer::perm::PermRef::new_checked(f, i, pattern.dim()));
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.symbolic.as_ref(),
+            Side::Upper,
+            perm.map_or(SymmetricOrdering::Amd, SymmetricOrdering::Custom),
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| Error::Setup(format!("{e:?}")))?;
+        Ok(Self { pattern, symbolic: Arc::new(symbolic) })
     }
 
     pub fn pattern(&self) -> &Arc<SymmetricPattern> {
         &self.pattern
     }
 
+    /// Number of stored entries of the factor `L` (a measure of fill).
+    pub fn factor_nnz(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
     /// The numeric factorisation of `a`, whose pattern must be this solver's.
     pub fn factorize(&self, a: &SymmetricMatrix) -> Result<CholeskyFactor> {
-        assert!(
-            Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(),
-            "pattern mismatch"
-        );
+        assert!(Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(), "pattern mismatch");
         a.check_finite()?;
-        let llt =
-            faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(self.symbolic.clone(), a.as_faer(), Side::Upper)
-                .map_err(|_| Error::NotPositiveDefinite)?;
-        Ok(CholeskyFactor { llt, n: a.dim() })
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let par = Par::Seq;
+        let params: Spec<LltParams, f64> = Default::default();
+        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(par, params));
+        self.symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut values,
+                a.as_faer(),
+                Side::Upper,
+                LltRegularization::default(),
+                par,
+                MemStack::new(&mut mem),
+                params,
+            )
+            .map_err(|_| Error::NotPositiveDefinite)?;
+        Ok(CholeskyFactor { symbolic: self.symbolic.clone(), values, n: a.dim() })
     }
 }
 
@@ -385,19 +442,20 @@ impl CholeskyFactor {
     }
     /// Solves `A x = b` in place (`rhs` holds `b` on entry, `x` on exit).
     pub fn solve_in_place(&self, rhs: &mut [f64]) {
-        use faer::linalg::solvers::SolveCore;
         assert_eq!(rhs.len(), self.n, "right-hand side length");
-        let n = self.n;
-        self.llt
-            .solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1));
+        self.solve_many_in_place(rhs, 1);
     }
     /// Solves for several right-hand sides stored column-major (`n × k`).
     pub fn solve_many_in_place(&self, rhs: &mut [f64], k: usize) {
-        use faer::linalg::solvers::SolveCore;
         assert_eq!(rhs.len(), self.n * k, "right-hand side length");
-        let n = self.n;
-        self.llt
-            .solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, k));
+        let par = Par::Seq;
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, par));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, self.n, k),
+            par,
+            MemStack::new(&mut mem),
+        );
     }
 }
 
