@@ -393,7 +393,9 @@ impl CholeskySolver {
             Some(b) => Some(b.dof_ordering()?),
             None => None,
         };
-        let perm = ordering.as_ref().map(|(f, i)| faer::perm::PermRef::new_checked(f, i, pattern.dim()));
+        let perm = ordering
+            .as_ref()
+            .map(|(f, i)| faer::perm::PermRef::new_checked(f, i, pattern.dim()));
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic.as_ref(),
             Side::Upper,
@@ -401,7 +403,10 @@ impl CholeskySolver {
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| Error::Setup(format!("{e:?}")))?;
-        Ok(Self { pattern, symbolic: Arc::new(symbolic) })
+        Ok(Self {
+            pattern,
+            symbolic: Arc::new(symbolic),
+        })
     }
 
     pub fn pattern(&self) -> &Arc<SymmetricPattern> {
@@ -415,7 +420,10 @@ impl CholeskySolver {
 
     /// The numeric factorisation of `a`, whose pattern must be this solver's.
     pub fn factorize(&self, a: &SymmetricMatrix) -> Result<CholeskyFactor> {
-        assert!(Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(), "pattern mismatch");
+        assert!(
+            Arc::ptr_eq(&self.pattern, &a.pattern) || self.pattern.nnz() == a.pattern.nnz(),
+            "pattern mismatch"
+        );
         a.check_finite()?;
         let mut values = vec![0.0; self.symbolic.len_val()];
         let par = Par::Seq;
@@ -432,7 +440,11 @@ impl CholeskySolver {
                 params,
             )
             .map_err(|_| Error::NotPositiveDefinite)?;
-        Ok(CholeskyFactor { symbolic: self.symbolic.clone(), values, n: a.dim() })
+        Ok(CholeskyFactor {
+            symbolic: self.symbolic.clone(),
+            values,
+            n: a.dim(),
+        })
     }
 }
 
