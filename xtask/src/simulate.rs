@@ -275,20 +275,24 @@ fn run_volume(mut scene: VolumeScene, base: Option<PathBuf>, args: &SimulateArgs
         ],
         meta,
     )?;
-    let stats = SolveStats::new(&scene.name, nv, per_frame, start.elapsed().as_secs_f64(), error.clone());
-    write_json(&args.out.join("stats.json"), &stats)?;
+    let stats = SolveStats::new(&scene.name, nv, per_frame, start.elapsed().as_secs_f64(), error);
+    finish(args, &stats, &format!("{nv} nodes / {} tets", mesh.num_tets()))
+}
+
+/// Writes `stats.json`, reports, and turns an early stop into an error (after the frames
+/// before it were written).
+fn finish(args: &SimulateArgs, stats: &SolveStats, what: &str) -> anyhow::Result<()> {
+    write_json(&args.out.join("stats.json"), stats)?;
     eprintln!(
-        "{}: {} frames of {} nodes / {} tets in {:.1} s ({:.1} ms/frame, {:.2} Newton iterations/frame) → {}",
-        scene.name,
+        "{}: {} frames of {what} in {:.1} s ({:.1} ms/frame, {:.2} Newton iterations/frame) → {}",
+        stats.scene,
         stats.frames,
-        nv,
-        mesh.num_tets(),
         stats.total_seconds,
         stats.mean_ms_per_frame,
         stats.mean_newton_iterations,
         args.out.display()
     );
-    if let Some(e) = error {
+    if let Some(e) = &stats.error {
         anyhow::bail!("simulation stopped early at {e}; the frames before it were written");
     }
     Ok(())
@@ -355,21 +359,8 @@ fn run_soft_tissue(mut scene: SoftTissueScene, args: &SimulateArgs) -> anyhow::R
         ],
         meta,
     )?;
-    let stats = SolveStats::new(&scene.name, nv, per_frame, start.elapsed().as_secs_f64(), error.clone());
-    write_json(&args.out.join("stats.json"), &stats)?;
-    eprintln!(
-        "{}: {} frames, {} surface vertices, in {:.1} s ({:.1} ms/frame) → {}",
-        scene.name,
-        stats.frames,
-        nv,
-        stats.total_seconds,
-        stats.mean_ms_per_frame,
-        args.out.display()
-    );
-    if let Some(e) = error {
-        anyhow::bail!("simulation stopped early at {e}; the frames before it were written");
-    }
-    Ok(())
+    let stats = SolveStats::new(&scene.name, nv, per_frame, start.elapsed().as_secs_f64(), error);
+    finish(args, &stats, &format!("{nv} surface vertices"))
 }
 
 fn run_cloth(mut scene: Scene, base: Option<PathBuf>, args: &SimulateArgs) -> anyhow::Result<()> {

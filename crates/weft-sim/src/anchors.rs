@@ -77,3 +77,22 @@ pub fn hold(nodes: &[usize], x: &[f64]) -> Vec<(usize, f64)> {
         .flat_map(|&v| (3 * v..3 * v + 3).map(|d| (d, x[d])))
         .collect()
 }
+
+/// Checks integrator input: every prescribed DOF exists, is in the `fixed` mask, and has a
+/// finite value.
+pub fn check_prescribed(prescribed: &[(usize, f64)], fixed: &[bool]) -> Result<()> {
+    for &(dof, value) in prescribed {
+        if dof >= fixed.len() || !fixed[dof] {
+            return Err(Error::Scene(format!(
+                "DOF {dof} is prescribed but not in the fixed set"
+            )));
+        }
+        if !value.is_finite() {
+            return Err(Error::NonFinite {
+                what: "prescribed position",
+                dof,
+            });
+        }
+    }
+    Ok(())
+}

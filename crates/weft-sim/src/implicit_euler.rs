@@ -124,19 +124,7 @@ impl ImplicitEuler {
     /// left unchanged, so a caller can retry with a smaller step.
     pub fn step(&mut self, prescribed: &[(usize, f64)]) -> Result<StepReport> {
         let start = Instant::now();
-        for &(dof, value) in prescribed {
-            if dof >= self.current.len() || !self.fixed[dof] {
-                return Err(Error::Scene(format!(
-                    "DOF {dof} is prescribed but not in the fixed set"
-                )));
-            }
-            if !value.is_finite() {
-                return Err(Error::NonFinite {
-                    what: "prescribed position",
-                    dof,
-                });
-            }
-        }
+        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
         self.inertia.set_history(&self.current, &self.previous)?;
         // Start from the inertial prediction (a better guess than p_{m−1} for fast
         // motion), with the prescribed DOFs moved into place.

@@ -258,19 +258,7 @@ impl Newmark {
     pub fn step(&mut self, prescribed: &[(usize, f64)]) -> Result<NewmarkReport> {
         let start = Instant::now();
         let n = self.x.len();
-        for &(dof, value) in prescribed {
-            if dof >= n || !self.fixed[dof] {
-                return Err(Error::Scene(format!(
-                    "DOF {dof} is prescribed but not in the fixed set"
-                )));
-            }
-            if !value.is_finite() {
-                return Err(Error::NonFinite {
-                    what: "prescribed position",
-                    dof,
-                });
-            }
-        }
+        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
         let (dt, alpha) = (self.dt, self.damping.mass);
         let y: Vec<f64> = (0..n)
             .map(|d| self.x[d] + dt * self.v[d] + 0.25 * dt * dt * self.a[d])

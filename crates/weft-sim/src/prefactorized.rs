@@ -253,19 +253,7 @@ impl PrefactorizedLinear {
                 dof: i,
             });
         }
-        for &(dof, value) in prescribed {
-            if dof >= n || !self.fixed[dof] {
-                return Err(Error::Scene(format!(
-                    "DOF {dof} is prescribed but not in the fixed set"
-                )));
-            }
-            if !value.is_finite() {
-                return Err(Error::NonFinite {
-                    what: "prescribed position",
-                    dof,
-                });
-            }
-        }
+        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
         // Anchor displacements g: current values, overridden by the prescribed ones.
         let mut g = std::mem::take(&mut self.scratch);
         for i in 0..n {
