@@ -28,9 +28,9 @@ enum Command {
     /// Generate a built-in mesh and write it (.obj, .ply, .vtk, .node), or inspect a mesh file.
     #[command(subcommand)]
     Mesh(mesh::MeshCommand),
-    /// Run a cloth scene (built-in name or TOML file) and write frames, controls, labels and stats.
+    /// Run a cloth, volumetric or soft-tissue scene (built-in name or TOML file) and write its frames and stats.
     Simulate(simulate::SimulateArgs),
-    /// ACAP features of deformed meshes (encode) and meshes from features (decode).
+    /// ACAP features of deformed meshes (encode), meshes from features (decode), round-trip error.
     #[command(subcommand)]
     Acap(acap::AcapCommand),
     /// Project a predicted cloth onto physics: inextensibility SOCP or quasistatic springs (Geng et al.).

@@ -24,13 +24,14 @@ pub struct SimulateArgs {
     /// Number of frames to simulate (default: the scene's).
     #[arg(long)]
     pub frames: Option<usize>,
-    /// Use the scene's small variant (coarse mesh, 30 frames) — for tests and smoke runs.
+    /// Use the scene's small variant (coarse mesh, few frames) — for tests and smoke runs.
     #[arg(long)]
     pub quick: bool,
-    /// Output directory: frames.safetensors, scene.toml, stats.json, rest.obj.
+    /// Output directory: frames.safetensors, scene.toml, stats.json, and the rest mesh (rest.obj; volume scenes
+    /// also rest.node/.ele, rest_surface.obj and final.vtk with the displacement field).
     #[arg(long)]
     pub out: PathBuf,
-    /// Also write one OBJ per frame to OUT/obj/frame_NNNNN.obj.
+    /// Also write one OBJ per frame (the surface) to OUT/obj/frame_NNNNN.obj.
     #[arg(long)]
     pub obj: bool,
     /// Hide the progress bar.
@@ -331,8 +332,15 @@ fn run_soft_tissue(mut scene: SoftTissueScene, args: &SimulateArgs) -> anyhow::R
                     residual_n: r.steps.last().map_or(0.0, |s| s.newton.residual),
                     seconds: r.seconds,
                 });
+                let y = sim.simulated_surface();
+                if args.obj {
+                    let m = per_frame.len();
+                    std::fs::create_dir_all(args.out.join("obj"))?;
+                    let p = weft_mesh::unflatten(&y);
+                    weft_mesh::io::write_obj(&args.out.join(format!("obj/frame_{m:05}.obj")), &p, surface.faces())?;
+                }
                 skinned.extend(sim.skinned_surface());
-                simulated.extend(sim.simulated_surface());
+                simulated.extend(y);
                 bar.inc(1);
             }
             Err(e) => {
