@@ -164,6 +164,36 @@ fn square_topology_by_hand() {
     assert_eq!(t.boundary_loops[0].len(), 4);
     assert_eq!(t.boundary_edges().count(), 4);
     assert_eq!(t.vertex_faces.neighbors(0), &[0, 1]);
+    // Edge → faces and face → edges agree: the diagonal has both faces, the sides one each.
+    assert_eq!(t.edge_faces[1], [Some(0), Some(1)]);
+    for e in [0, 2, 3, 4] {
+        assert!(t.edge_faces[e][0].is_some() && t.edge_faces[e][1].is_none());
+    }
+    for (f, fe) in t.face_edges.iter().enumerate() {
+        for (k, &e) in fe.iter().enumerate() {
+            let (a, b) = (m.faces()[f][k], m.faces()[f][(k + 1) % 3]);
+            assert_eq!(t.edges[e], [a.min(b), a.max(b)]);
+            assert!(t.edge_faces[e].contains(&Some(f)));
+        }
+    }
+}
+
+#[test]
+fn vertex_normals_of_a_ball_point_outward_along_the_radius() {
+    let ball = generators::ball(48, 32, 0.5).unwrap();
+    let normals = vertex_normals(ball.positions(), ball.faces());
+    for (p, n) in ball.positions().iter().zip(&normals) {
+        assert_close!(n.norm(), 1.0, rtol = 1e-12, atol = 0.0);
+        // Area-weighted normals of a fine UV sphere are within ~1° of the radius.
+        assert!(n.dot(&p.normalize()) > 0.9998, "normal {n:?} at {p:?}");
+    }
+    // A flat sheet's vertex normals are all +Z.
+    let s = generators::sheet(5, 1.0).unwrap();
+    assert!(
+        vertex_normals(s.positions(), s.faces())
+            .iter()
+            .all(|n| (n - v(0., 0., 1.)).norm() < 1e-12)
+    );
 }
 
 #[test]
