@@ -80,7 +80,7 @@ pub fn run(cmd: ProjectCommand) -> anyhow::Result<()> {
             print_report(
                 "quasistatic",
                 report.time_seconds,
-                report.iterations,
+                report.newton.iterations,
                 &before,
                 &after,
                 serde_json::to_value(report)?,

@@ -34,7 +34,7 @@ use rayon::prelude::*;
 use weft_linalg::CholeskyFactor;
 use weft_mesh::TriMesh;
 use weft_sim::energies::{Springs, ZeroLengthSprings};
-use weft_sim::{Energy, HessianProjection, NewtonSettings, NewtonSolver};
+use weft_sim::{Energy, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 
 use crate::axial::AxialSprings;
 use crate::error::{Error, Result, check_finite, check_len, check_output};
@@ -119,17 +119,11 @@ impl ZeroLengthScaling {
 }
 
 /// What one forward solve did.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct QuasistaticReport {
-    pub iterations: usize,
-    /// Final and initial max-norm residual force (N).
-    pub residual: f64,
-    pub initial_residual: f64,
-    /// Final total energy (J).
-    pub energy: f64,
-    pub line_search_halvings: usize,
-    /// Newton steps whose matrix needed a diagonal shift.
-    pub regularizations: usize,
+    /// Both Newton phases together: iterations, residuals (N), energy (J), line-search
+    /// halvings, diagonal shifts.
+    pub newton: NewtonReport,
     /// Diagonal shifts needed to factorise the true Hessian at `r*` for the backward pass
     /// (0 when `r*` is a strict local minimum, as it should be).
     pub adjoint_shifts: usize,
@@ -297,12 +291,7 @@ impl QuasistaticLayer {
         let (newton, factor, adjoint_shifts) = result?;
         check_output("quasistatic positions", &x)?;
         let report = QuasistaticReport {
-            iterations: newton.iterations,
-            residual: newton.residual,
-            initial_residual: newton.initial_residual,
-            energy: newton.energy,
-            line_search_halvings: newton.line_search_halvings,
-            regularizations: newton.regularizations,
+            newton,
             adjoint_shifts,
             time_seconds: start.elapsed().as_secs_f64(),
         };
