@@ -13,8 +13,11 @@
 //! matrices ([`LdltSolver`]). It knows nothing of meshes or physics.
 //!
 //! faer runs single-threaded here: at weft's sizes two threads made faer 2–6× slower on
-//! this project's 2-core machines (see `shared/docs/dependencies.md`); parallelism is
-//! over frames and examples instead.
+//! this project's 2-core machines (see `shared/docs/dependencies.md`) because its `Par`
+//! only splits dense blocks. Large patterns of vertex blocks are instead split by a
+//! vertex separator into two domains that faer factorises on one thread each, and whose
+//! triangular solves run in parallel ([`Substructuring`]; the `two_domain` module).
+//! Otherwise parallelism is over frames and examples.
 //!
 //! ```
 //! use weft_linalg::{CholeskySolver, SymmetricPattern, SymmetricMatrix};
@@ -41,6 +44,10 @@
 use std::sync::Arc;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+
+mod ordering;
+mod two_domain;
+
 use faer::linalg::cholesky::ldlt::factor::{LdltParams, LdltRegularization};
 use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
 use faer::sparse::linalg::cholesky::{
@@ -48,6 +55,8 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side, Spec};
+use ordering::Graph;
+use two_domain::{TwoDomain, TwoDomainFactor};
 
 /// Errors of the sparse solvers.
 #[derive(Debug, thiserror::Error)]
@@ -91,36 +100,6 @@ struct VertexBlocks {
     offsets: Vec<usize>,
     rows: Vec<usize>,
     slots: Vec<[usize; 3]>,
-}
-
-impl VertexBlocks {
-    /// A fill-reducing DOF ordering from AMD on the *vertex* graph, each vertex's three
-    /// DOFs kept together: a third of the graph to order, and supernodes aligned with the
-    /// 3 × 3 blocks.
-    fn dof_ordering(&self) -> Result<(Vec<usize>, Vec<usize>)> {
-        let nv = self.offsets.len() - 1;
-        let col_ptr = self.offsets.clone();
-        let row_idx = self.rows.clone();
-        let graph = SymbolicSparseColMat::new_checked(nv, nv, col_ptr, None, row_idx);
-        let mut perm = vec![0usize; nv];
-        let mut perm_inv = vec![0usize; nv];
-        let nnz = graph.row_idx().len();
-        let mut mem = MemBuffer::new(faer::sparse::linalg::amd::order_scratch::<usize>(nv, nnz));
-        faer::sparse::linalg::amd::order(
-            &mut perm,
-            &mut perm_inv,
-            graph.as_ref(),
-            faer::sparse::linalg::amd::Control::default(),
-            MemStack::new(&mut mem),
-        )
-        .map_err(|e| Error::Setup(format!("AMD ordering failed: {e:?}")))?;
-        let fwd: Vec<usize> = perm.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
-        let mut inv = vec![0usize; fwd.len()];
-        for (i, &f) in fwd.iter().enumerate() {
-            inv[f] = i;
-        }
-        Ok((fwd, inv))
-    }
 }
 
 impl SymmetricPattern {
@@ -196,6 +175,14 @@ impl SymmetricPattern {
     }
     pub fn nnz(&self) -> usize {
         self.symbolic.row_idx().len()
+    }
+
+    /// The vertex graph of a pattern of `3 × 3` vertex blocks.
+    fn vertex_graph(&self) -> Option<Graph> {
+        let b = self.blocks.as_ref()?;
+        let nv = b.offsets.len() - 1;
+        let edges = (0..nv).flat_map(move |v| b.rows[b.offsets[v]..b.offsets[v + 1]].iter().map(move |&u| (u, v)));
+        Some(Graph::from_edges(nv, edges))
     }
 
     /// Storage slot of entry `(row, col)` (either triangle), or `None` if not in the pattern.
@@ -369,53 +356,143 @@ impl SymmetricMatrix {
     }
 }
 
+/// Whether [`CholeskySolver`] splits the matrix into two domains factorised and solved
+/// on two threads (see the `two_domain` module: vertex-separator substructuring).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Substructuring {
+    /// Split when the pattern has vertex blocks, at least [`MIN_SPLIT_VERTICES`]
+    /// vertices, rayon has two or more threads, a level-set separator of at most 10 %
+    /// of the vertices exists, and the larger domain's factor is at most three times
+    /// the smaller's.
+    #[default]
+    Auto,
+    /// One sequential factorisation.
+    Never,
+    /// Split whenever a balanced separator exists (for tests of the split path).
+    Always,
+}
+
+/// Smallest vertex count at which [`Substructuring::Auto`] considers splitting: below
+/// it, the threads' start-up costs more than half a factorisation.
+pub const MIN_SPLIT_VERTICES: usize = 400;
+
 /// Sparse Cholesky `A = L Lᵀ` with the symbolic analysis (fill-reducing ordering,
-/// elimination tree, supernodes) done once per pattern. Patterns of `3 × 3` vertex blocks
-/// are ordered by AMD on the vertex graph, others by AMD on the scalar graph.
+/// elimination tree, supernodes) done once per pattern.
+///
+/// Patterns of `3 × 3` vertex blocks are ordered on the vertex graph by the better of
+/// AMD and a level-set (banded) order, and large ones are split into two domains that
+/// are factorised and solved in parallel ([`Substructuring`]); other patterns use AMD on
+/// the scalar graph.
 #[derive(Debug, Clone)]
 pub struct CholeskySolver {
     pattern: Arc<SymmetricPattern>,
-    symbolic: Arc<SymbolicCholesky<usize>>,
+    kind: SolverKind,
+}
+
+#[derive(Debug, Clone)]
+enum SolverKind {
+    Single(Arc<SymbolicCholesky<usize>>),
+    TwoDomain(Arc<TwoDomain>),
 }
 
 /// A numeric Cholesky factor, ready for solves.
 #[derive(Debug, Clone)]
 pub struct CholeskyFactor {
-    symbolic: Arc<SymbolicCholesky<usize>>,
-    values: Vec<f64>,
     n: usize,
+    kind: FactorKind,
+}
+
+#[derive(Debug, Clone)]
+enum FactorKind {
+    Single {
+        symbolic: Arc<SymbolicCholesky<usize>>,
+        values: Vec<f64>,
+    },
+    TwoDomain(TwoDomainFactor),
+}
+
+fn symbolic_with(
+    pattern: &SymmetricPattern,
+    ordering: SymmetricOrdering<'_, usize>,
+) -> Result<SymbolicCholesky<usize>> {
+    factorize_symbolic_cholesky(
+        pattern.symbolic.as_ref(),
+        Side::Upper,
+        ordering,
+        CholeskySymbolicParams::default(),
+    )
+    .map_err(|e| Error::Setup(format!("{e:?}")))
+}
+
+/// The symbolic factor for a vertex elimination order (each vertex's DOFs together).
+fn symbolic_for_vertex_order(pattern: &SymmetricPattern, order: &[usize]) -> Result<SymbolicCholesky<usize>> {
+    let fwd: Vec<usize> = order.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+    let mut inv = vec![0usize; fwd.len()];
+    for (i, &f) in fwd.iter().enumerate() {
+        inv[f] = i;
+    }
+    let perm = faer::perm::PermRef::new_checked(&fwd, &inv, pattern.dim());
+    symbolic_with(pattern, SymmetricOrdering::Custom(perm))
 }
 
 impl CholeskySolver {
     pub fn new(pattern: Arc<SymmetricPattern>) -> Result<Self> {
+        Self::with_substructuring(pattern, Substructuring::Auto)
+    }
+
+    pub fn with_substructuring(pattern: Arc<SymmetricPattern>, substructuring: Substructuring) -> Result<Self> {
         single_threaded();
-        let ordering = match &pattern.blocks {
-            Some(b) => Some(b.dof_ordering()?),
-            None => None,
+        let Some(graph) = pattern.vertex_graph() else {
+            let symbolic = symbolic_with(&pattern, SymmetricOrdering::Amd)?;
+            return Ok(Self {
+                pattern,
+                kind: SolverKind::Single(Arc::new(symbolic)),
+            });
         };
-        let perm = ordering
-            .as_ref()
-            .map(|(f, i)| faer::perm::PermRef::new_checked(f, i, pattern.dim()));
-        let symbolic = factorize_symbolic_cholesky(
-            pattern.symbolic.as_ref(),
-            Side::Upper,
-            perm.map_or(SymmetricOrdering::Amd, SymmetricOrdering::Custom),
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| Error::Setup(format!("{e:?}")))?;
-        Ok(Self {
-            pattern,
-            symbolic: Arc::new(symbolic),
-        })
+        let split = match substructuring {
+            Substructuring::Never => None,
+            Substructuring::Always => ordering::level_bisection(&graph, 0.5),
+            Substructuring::Auto => (graph.len() >= MIN_SPLIT_VERTICES && rayon::current_num_threads() >= 2)
+                .then(|| ordering::level_bisection(&graph, 0.1))
+                .flatten(),
+        };
+        if let Some(b) = split {
+            let (interiors, lens) = two_domain::plan(&graph, &b)?;
+            // Balanced domains (the larger at most 3× the smaller) run the two threads
+            // about equally long; otherwise one thread does most of the work anyway.
+            let worth_it = substructuring == Substructuring::Always || lens[0].max(lens[1]) <= 3 * lens[0].min(lens[1]);
+            if worth_it {
+                let two = TwoDomain::new(&pattern, interiors, &b.separator)?;
+                return Ok(Self {
+                    pattern,
+                    kind: SolverKind::TwoDomain(Arc::new(two)),
+                });
+            }
+        }
+        let (order, _) = graph.best_order()?;
+        let kind = SolverKind::Single(Arc::new(symbolic_for_vertex_order(&pattern, &order)?));
+        Ok(Self { pattern, kind })
     }
 
     pub fn pattern(&self) -> &Arc<SymmetricPattern> {
         &self.pattern
     }
 
-    /// Number of stored entries of the factor `L` (a measure of fill).
+    /// Number of stored entries of the factor (a measure of fill; for a split factor,
+    /// both domains plus the dense separator block).
     pub fn factor_nnz(&self) -> usize {
-        self.symbolic.len_val()
+        match &self.kind {
+            SolverKind::Single(s) => s.len_val(),
+            SolverKind::TwoDomain(t) => t.factor_len(),
+        }
+    }
+
+    /// Number of domains the factorisation is split into (1 or 2).
+    pub fn domains(&self) -> usize {
+        match self.kind {
+            SolverKind::Single(_) => 1,
+            SolverKind::TwoDomain(_) => 2,
+        }
     }
 
     /// The numeric factorisation of `a`, whose pattern must be this solver's.
@@ -425,26 +502,31 @@ impl CholeskySolver {
             "pattern mismatch"
         );
         a.check_finite()?;
-        let mut values = vec![0.0; self.symbolic.len_val()];
-        let par = Par::Seq;
-        let params: Spec<LltParams, f64> = Default::default();
-        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(par, params));
-        self.symbolic
-            .factorize_numeric_llt::<f64>(
-                &mut values,
-                a.as_faer(),
-                Side::Upper,
-                LltRegularization::default(),
-                par,
-                MemStack::new(&mut mem),
-                params,
-            )
-            .map_err(|_| Error::NotPositiveDefinite)?;
-        Ok(CholeskyFactor {
-            symbolic: self.symbolic.clone(),
-            values,
-            n: a.dim(),
-        })
+        let kind = match &self.kind {
+            SolverKind::Single(symbolic) => {
+                let mut values = vec![0.0; symbolic.len_val()];
+                let par = Par::Seq;
+                let params: Spec<LltParams, f64> = Default::default();
+                let mut mem = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(par, params));
+                symbolic
+                    .factorize_numeric_llt::<f64>(
+                        &mut values,
+                        a.as_faer(),
+                        Side::Upper,
+                        LltRegularization::default(),
+                        par,
+                        MemStack::new(&mut mem),
+                        params,
+                    )
+                    .map_err(|_| Error::NotPositiveDefinite)?;
+                FactorKind::Single {
+                    symbolic: symbolic.clone(),
+                    values,
+                }
+            }
+            SolverKind::TwoDomain(two) => FactorKind::TwoDomain(two.factorize(a)?),
+        };
+        Ok(CholeskyFactor { n: a.dim(), kind })
     }
 }
 
@@ -460,14 +542,24 @@ impl CholeskyFactor {
     /// Solves for several right-hand sides stored column-major (`n × k`).
     pub fn solve_many_in_place(&self, rhs: &mut [f64], k: usize) {
         assert_eq!(rhs.len(), self.n * k, "right-hand side length");
-        let par = Par::Seq;
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, par));
-        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, self.n, k),
-            par,
-            MemStack::new(&mut mem),
-        );
+        match &self.kind {
+            FactorKind::Single { symbolic, values } => {
+                let par = Par::Seq;
+                let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(k, par));
+                LltRef::new(symbolic, values).solve_in_place_with_conj(
+                    Conj::No,
+                    MatMut::from_column_major_slice_mut(rhs, self.n, k),
+                    par,
+                    MemStack::new(&mut mem),
+                );
+            }
+            FactorKind::TwoDomain(f) => {
+                debug_assert_eq!(f.dim(), self.n);
+                for column in rhs.chunks_exact_mut(self.n) {
+                    f.solve_in_place(column);
+                }
+            }
+        }
     }
 }
 

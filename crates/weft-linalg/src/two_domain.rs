@@ -1,0 +1,406 @@
+//! Two-domain substructuring: a sparse Cholesky factorisation and solve that run on
+//! both cores.
+//!
+//! faer's supernodal factorisation and solve are sequential over the elimination tree
+//! (its `Par` only splits dense blocks, which at weft's sizes is slower; see
+//! `shared/docs/dependencies.md`). A vertex separator `S` splits the unknowns into two
+//! interiors `I₁`, `I₂` with no coupling between them; ordering `[I₁, I₂, S]` gives
+//!
+//! ```text
+//!     ⎡ A₁₁   0   B₁ ⎤         ⎡ L₁₁   0    0  ⎤
+//! A = ⎢  0   A₂₂  B₂ ⎥ ,   L = ⎢  0   L₂₂   0  ⎥ ,  L_SS L_SSᵀ = A_SS − Σᵢ L_Sᵢ L_Sᵢᵀ .
+//!     ⎣ B₁ᵀ  B₂ᵀ A_SS⎦         ⎣ L_S1 L_S2 L_SS⎦
+//! ```
+//!
+//! Each domain `Mᵢ = [Aᵢᵢ Bᵢ; Bᵢᵀ A_SS]` is factorised by faer on its own thread (with the
+//! separator last, so its factor holds `Lᵢᵢ`, `L_Sᵢ` and a trailing block `L̃ᵢ` with
+//! `L̃ᵢL̃ᵢᵀ = A_SS − L_Sᵢ L_Sᵢᵀ`, which is positive definite because `A` is). The separator's
+//! Schur complement is then the small dense `L̃₁L̃₁ᵀ + L̃₂L̃₂ᵀ − A_SS`. A solve runs the
+//! forward substitutions of both interiors in parallel, the dense separator solve, then
+//! both backward substitutions in parallel — each thread streaming half of the factor,
+//! which is what bounds a solve (memory bandwidth, and it does scale to two cores).
+
+use std::sync::Arc;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
+use faer::linalg::matmul::triangular::BlockStructure;
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
+    supernodal::SymbolicSupernodalCholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Accum, Mat, Par, Side, Spec};
+
+use crate::ordering::{Bisection, Graph};
+
+/// Elimination orders of both interiors and the vertex-graph factor length of each
+/// domain (separator last). Each interior takes the better of its level-set order —
+/// running towards the separator, so the band ends next to it — and AMD.
+pub(crate) fn plan(graph: &Graph, bisection: &Bisection) -> Result<([Vec<usize>; 2], [usize; 2])> {
+    let separator = &bisection.separator;
+    let one = |part: &Vec<usize>| -> Result<(Vec<usize>, usize)> {
+        let domain_vertices: Vec<usize> = part.iter().chain(separator).copied().collect();
+        let local = graph.induced(&domain_vertices);
+        let amd_interior = graph.induced(part).amd_order()?;
+        let tail = part.len()..domain_vertices.len();
+        let banded: Vec<usize> = (0..domain_vertices.len()).collect();
+        let amd: Vec<usize> = amd_interior.iter().copied().chain(tail).collect();
+        let (lb, la) = (local.factor_len(&banded), local.factor_len(&amd));
+        Ok(if la < lb {
+            (amd_interior.iter().map(|&i| part[i]).collect(), la)
+        } else {
+            (part.clone(), lb)
+        })
+    };
+    let (a, b) = rayon::join(|| one(&bisection.parts[0]), || one(&bisection.parts[1]));
+    let ((oa, la), (ob, lb)) = (a?, b?);
+    Ok(([oa, ob], [la, lb]))
+}
+use crate::{Error, Result, SymmetricMatrix, SymmetricPattern};
+
+/// One domain `Mᵢ` over `[interior DOFs (fill-reducing order), separator DOFs]`.
+#[derive(Debug)]
+struct Domain {
+    /// Global DOF of each local DOF.
+    dofs: Vec<usize>,
+    /// Local DOFs `0..interior` are the interior; the rest are the separator's.
+    interior: usize,
+    local: SymbolicSparseColMat<usize>,
+    /// `(local slot, global slot)` pairs: the domain's values gathered from `A`'s.
+    gather: Vec<(usize, usize)>,
+    symbolic: SymbolicCholesky<usize>,
+}
+
+/// The symbolic part: domains, their symbolic factors and the separator.
+#[derive(Debug)]
+pub(crate) struct TwoDomain {
+    n: usize,
+    domains: [Domain; 2],
+    /// Global DOFs of the separator, in the order of the domains' trailing blocks.
+    separator_dofs: Vec<usize>,
+    /// `(i, j, global slot)` of the stored entries of `A_SS` (separator-local `i`, `j`).
+    separator_entries: Vec<(usize, usize, usize)>,
+}
+
+/// The numeric factor.
+#[derive(Debug, Clone)]
+pub(crate) struct TwoDomainFactor {
+    structure: Arc<TwoDomain>,
+    values: [Vec<f64>; 2],
+    schur: Arc<faer::linalg::solvers::Llt<f64>>,
+}
+
+fn supernodal(symbolic: &SymbolicCholesky<usize>) -> Result<&SymbolicSupernodalCholesky<usize>> {
+    match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(s) => Ok(s),
+        SymbolicCholeskyRaw::Simplicial(_) => Err(Error::Setup("expected a supernodal factor".into())),
+    }
+}
+
+impl Domain {
+    /// Builds the domain over `interior` vertices (already in elimination order) and the
+    /// separator vertices, with `A`'s pattern `pattern`.
+    fn new(pattern: &SymmetricPattern, interior: &[usize], separator: &[usize]) -> Result<Self> {
+        let nv = pattern.dim() / 3;
+        let mut local_vertex = vec![usize::MAX; nv];
+        for (i, &v) in interior.iter().chain(separator).enumerate() {
+            local_vertex[v] = i;
+        }
+        let dofs: Vec<usize> = interior
+            .iter()
+            .chain(separator)
+            .flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2])
+            .collect();
+        let local_dof = |g: usize| {
+            let lv = local_vertex[g / 3];
+            (lv != usize::MAX).then(|| 3 * lv + g % 3)
+        };
+        let mut pairs = Vec::new();
+        let mut globals = Vec::new();
+        for (slot, r, c) in pattern.entries() {
+            if let (Some(lr), Some(lc)) = (local_dof(r), local_dof(c)) {
+                pairs.push((lr.min(lc), lr.max(lc)));
+                globals.push(slot);
+            }
+        }
+        let local = SymmetricPattern::new(dofs.len(), pairs.iter().copied());
+        let gather = pairs
+            .iter()
+            .zip(&globals)
+            .map(|(&(r, c), &g)| {
+                let l = local.slot(r, c).unwrap_or_else(|| unreachable!("({r}, {c}) was added"));
+                (l, g)
+            })
+            .collect();
+        let symbolic = factorize_symbolic_cholesky(
+            local.symbolic.as_ref(),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| Error::Setup(format!("{e:?}")))?;
+        supernodal(&symbolic)?;
+        Ok(Self {
+            dofs,
+            interior: 3 * interior.len(),
+            local: local.symbolic,
+            gather,
+            symbolic,
+        })
+    }
+
+    fn factor_len(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
+    /// The numeric factor of `Mᵢ` and its dense trailing block `L̃ᵢ` (lower triangular).
+    fn factorize(&self, a: &SymmetricMatrix) -> Result<(Vec<f64>, Mat<f64>)> {
+        let mut local_values = vec![0.0; self.local.row_idx().len()];
+        for &(l, g) in &self.gather {
+            local_values[l] += a.values[g];
+        }
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let params: Spec<LltParams, f64> = Default::default();
+        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, params));
+        self.symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut values,
+                SparseColMatRef::new(self.local.as_ref(), &local_values),
+                Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+                params,
+            )
+            .map_err(|_| Error::NotPositiveDefinite)?;
+        let s = self.dofs.len() - self.interior;
+        let mut trailing = Mat::<f64>::zeros(s, s);
+        let sym = supernodal(&self.symbolic)?;
+        for_each_supernode(sym, &values, |begin, end, pattern, val| {
+            let (c, r) = (end - begin, end - begin + pattern.len());
+            for j in begin.max(self.interior)..end {
+                let col = &val[(j - begin) * r..][..r];
+                for (k, &l) in col.iter().enumerate().skip(j - begin) {
+                    let row = if k < c { begin + k } else { pattern[k - c] };
+                    trailing[(row - self.interior, j - self.interior)] = l;
+                }
+            }
+        });
+        Ok((values, trailing))
+    }
+
+    /// Forward substitution over the interior columns: on exit `y[..interior]` holds
+    /// `Lᵢᵢ⁻¹ bᵢ` and `y[interior..]` has had `L_Sᵢ Lᵢᵢ⁻¹ bᵢ` subtracted.
+    fn forward(&self, values: &[f64], y: &mut [f64]) {
+        let sym = supernodal(&self.symbolic).unwrap_or_else(|_| unreachable!("checked in new"));
+        let mut t = Vec::new();
+        for_each_supernode(sym, values, |begin, end, pattern, val| {
+            if begin >= self.interior {
+                return;
+            }
+            let (c, r) = (end - begin, end - begin + pattern.len());
+            t.clear();
+            t.resize(pattern.len(), 0.0);
+            for j in begin..end.min(self.interior) {
+                let col = &val[(j - begin) * r..][..r];
+                let yj = y[j] / col[j - begin];
+                y[j] = yj;
+                axpy(-yj, &col[j - begin + 1..c], &mut y[j + 1..end]);
+                axpy(yj, &col[c..], &mut t);
+            }
+            for (&row, &tk) in pattern.iter().zip(&t) {
+                y[row] -= tk;
+            }
+        });
+    }
+
+    /// Backward substitution over the interior columns, with the separator's values
+    /// already in `y[interior..]`.
+    fn backward(&self, values: &[f64], y: &mut [f64]) {
+        let sym = supernodal(&self.symbolic).unwrap_or_else(|_| unreachable!("checked in new"));
+        let mut t = Vec::new();
+        for s in (0..sym.n_supernodes()).rev() {
+            let (begin, end, pattern, val) = supernode(sym, values, s);
+            if begin >= self.interior {
+                continue;
+            }
+            let (c, r) = (end - begin, end - begin + pattern.len());
+            t.clear();
+            t.extend(pattern.iter().map(|&row| y[row]));
+            for j in (begin..end.min(self.interior)).rev() {
+                let col = &val[(j - begin) * r..][..r];
+                let acc = y[j] - dot(&col[j - begin + 1..c], &y[j + 1..end]) - dot(&col[c..], &t);
+                y[j] = acc / col[j - begin];
+            }
+        }
+    }
+}
+
+/// `y += a x` (vectorises: no reduction).
+fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, &xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+/// `xᵀy` with eight independent partial sums, so the loop is bound by memory rather
+/// than by the latency of one chain of floating-point additions (the backward
+/// substitution is a stream of such dot products).
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &y[..n]);
+    let mut acc = [0.0f64; 8];
+    let (xc, yc) = (x.chunks_exact(8), y.chunks_exact(8));
+    let (xr, yr) = (xc.remainder(), yc.remainder());
+    for (a, b) in xc.zip(yc) {
+        for k in 0..8 {
+            acc[k] += a[k] * b[k];
+        }
+    }
+    let tail: f64 = xr.iter().zip(yr).map(|(a, b)| a * b).sum();
+    acc.iter().sum::<f64>() + tail
+}
+
+/// Supernode `s`: its column range, off-diagonal row pattern and column-major values.
+fn supernode<'a>(
+    sym: &'a SymbolicSupernodalCholesky<usize>,
+    values: &'a [f64],
+    s: usize,
+) -> (usize, usize, &'a [usize], &'a [f64]) {
+    let begin = sym.supernode_begin()[s];
+    let end = sym.supernode_end()[s];
+    let pattern = sym.supernode(s).pattern();
+    let vp = sym.col_ptr_for_val();
+    (begin, end, pattern, &values[vp[s]..vp[s + 1]])
+}
+
+fn for_each_supernode(
+    sym: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    mut f: impl FnMut(usize, usize, &[usize], &[f64]),
+) {
+    for s in 0..sym.n_supernodes() {
+        let (begin, end, pattern, val) = supernode(sym, values, s);
+        f(begin, end, pattern, val);
+    }
+}
+
+impl TwoDomain {
+    /// Builds both domains from [`plan`]'s interior orders.
+    pub(crate) fn new(pattern: &SymmetricPattern, interiors: [Vec<usize>; 2], separator: &[usize]) -> Result<Self> {
+        let [i0, i1] = interiors;
+        let (d0, d1) = rayon::join(
+            || Domain::new(pattern, &i0, separator),
+            || Domain::new(pattern, &i1, separator),
+        );
+        let separator_dofs: Vec<usize> = separator.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        let nv = pattern.dim() / 3;
+        let mut sep_index = vec![usize::MAX; nv];
+        for (i, &v) in separator.iter().enumerate() {
+            sep_index[v] = i;
+        }
+        let separator_entries = pattern
+            .entries()
+            .filter_map(|(slot, r, c)| {
+                let (sr, sc) = (sep_index[r / 3], sep_index[c / 3]);
+                (sr != usize::MAX && sc != usize::MAX).then_some((3 * sr + r % 3, 3 * sc + c % 3, slot))
+            })
+            .collect();
+        Ok(Self {
+            n: pattern.dim(),
+            domains: [d0?, d1?],
+            separator_dofs,
+            separator_entries,
+        })
+    }
+
+    /// Stored entries of both domain factors plus the dense separator factor.
+    pub(crate) fn factor_len(&self) -> usize {
+        let s = self.separator_dofs.len();
+        self.domains.iter().map(Domain::factor_len).sum::<usize>() + s * (s + 1) / 2
+    }
+
+    pub(crate) fn factorize(self: &Arc<Self>, a: &SymmetricMatrix) -> Result<TwoDomainFactor> {
+        let (r0, r1) = rayon::join(|| self.domains[0].factorize(a), || self.domains[1].factorize(a));
+        let ((v0, t0), (v1, t1)) = (r0?, r1?);
+        // Schur complement of the separator: L̃₀L̃₀ᵀ + L̃₁L̃₁ᵀ − A_SS (lower triangle).
+        let s = self.separator_dofs.len();
+        let mut schur = Mat::<f64>::zeros(s, s);
+        for (t, accum) in [(&t0, Accum::Replace), (&t1, Accum::Add)] {
+            faer::linalg::matmul::triangular::matmul(
+                schur.as_mut(),
+                BlockStructure::TriangularLower,
+                accum,
+                t.as_ref(),
+                BlockStructure::TriangularLower,
+                t.transpose(),
+                BlockStructure::TriangularUpper,
+                1.0,
+                Par::Seq,
+            );
+        }
+        for &(i, j, slot) in &self.separator_entries {
+            let (i, j) = (i.max(j), i.min(j));
+            schur[(i, j)] -= a.values[slot];
+        }
+        let llt = schur.llt(Side::Lower).map_err(|_| Error::NotPositiveDefinite)?;
+        Ok(TwoDomainFactor {
+            structure: self.clone(),
+            values: [v0, v1],
+            schur: Arc::new(llt),
+        })
+    }
+}
+
+impl TwoDomainFactor {
+    pub(crate) fn dim(&self) -> usize {
+        self.structure.n
+    }
+
+    /// Solves `A x = b` in place for one right-hand side.
+    pub(crate) fn solve_in_place(&self, rhs: &mut [f64]) {
+        let st = &self.structure;
+        let gather = |d: &Domain, rhs: &[f64]| -> Vec<f64> {
+            let mut y = vec![0.0; d.dofs.len()];
+            for (k, &g) in d.dofs[..d.interior].iter().enumerate() {
+                y[k] = rhs[g];
+            }
+            y
+        };
+        let mut y0 = gather(&st.domains[0], rhs);
+        let mut y1 = gather(&st.domains[1], rhs);
+        rayon::join(
+            || st.domains[0].forward(&self.values[0], &mut y0),
+            || st.domains[1].forward(&self.values[1], &mut y1),
+        );
+        // Separator: (L_SS L_SSᵀ) x_S = b_S − Σᵢ L_Sᵢ zᵢ, the sum accumulated in the tails.
+        let s = st.separator_dofs.len();
+        let mut xs = Mat::<f64>::zeros(s, 1);
+        let (i0, i1) = (st.domains[0].interior, st.domains[1].interior);
+        for (k, &g) in st.separator_dofs.iter().enumerate() {
+            xs[(k, 0)] = rhs[g] + y0[i0 + k] + y1[i1 + k];
+        }
+        faer::linalg::solvers::Solve::solve_in_place(self.schur.as_ref(), xs.as_mut());
+        for k in 0..s {
+            y0[i0 + k] = xs[(k, 0)];
+            y1[i1 + k] = xs[(k, 0)];
+        }
+        rayon::join(
+            || st.domains[0].backward(&self.values[0], &mut y0),
+            || st.domains[1].backward(&self.values[1], &mut y1),
+        );
+        for (d, y) in st.domains.iter().zip([&y0, &y1]) {
+            for (k, &g) in d.dofs[..d.interior].iter().enumerate() {
+                rhs[g] = y[k];
+            }
+        }
+        for (k, &g) in st.separator_dofs.iter().enumerate() {
+            rhs[g] = xs[(k, 0)];
+        }
+    }
+}
