@@ -56,7 +56,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side, Spec};
 use ordering::Graph;
-use two_domain::{TwoDomain, TwoDomainFactor};
+use two_domain::{Domain, TwoDomain, TwoDomainFactor};
 
 /// Errors of the sparse solvers.
 #[derive(Debug, thiserror::Error)]
@@ -175,6 +175,24 @@ impl SymmetricPattern {
     }
     pub fn nnz(&self) -> usize {
         self.symbolic.row_idx().len()
+    }
+
+    /// Slots of the `3 × 3` block at vertex pair `(u, v)` (either order) of a pattern of
+    /// vertex blocks: `slots[i][j]` holds entry `(3u + i, 3v + j)` — one search per
+    /// block, the DOF rows of a block being contiguous in each column.
+    fn block_slots(&self, u: usize, v: usize) -> Option<[[usize; 3]; 3]> {
+        let b = self.blocks.as_ref()?;
+        let (ru, cv) = (u.min(v), u.max(v));
+        let range = b.offsets[cv]..b.offsets[cv + 1];
+        let k = b.rows[range.clone()].binary_search(&ru).ok()?;
+        let base = b.slots[range.start + k];
+        // Stored upper entry of (3u + i, 3v + j): row 3ru + r in column 3cv + c.
+        Some([0, 1, 2].map(|i| {
+            [0, 1, 2].map(|j| {
+                let (r, c) = if u < v || (u == v && i <= j) { (i, j) } else { (j, i) };
+                base[c] + r
+            })
+        }))
     }
 
     /// The vertex graph of a pattern of `3 × 3` vertex blocks.
@@ -391,7 +409,10 @@ pub struct CholeskySolver {
 
 #[derive(Debug, Clone)]
 enum SolverKind {
-    Single(Arc<SymbolicCholesky<usize>>),
+    /// A scalar pattern, AMD-ordered by faer.
+    Scalar(Arc<SymbolicCholesky<usize>>),
+    /// A vertex-block pattern as one domain in its chosen vertex order.
+    Single(Arc<Domain>),
     TwoDomain(Arc<TwoDomain>),
 }
 
@@ -404,8 +425,12 @@ pub struct CholeskyFactor {
 
 #[derive(Debug, Clone)]
 enum FactorKind {
-    Single {
+    Scalar {
         symbolic: Arc<SymbolicCholesky<usize>>,
+        values: Vec<f64>,
+    },
+    Single {
+        domain: Arc<Domain>,
         values: Vec<f64>,
     },
     TwoDomain(TwoDomainFactor),
@@ -424,17 +449,6 @@ fn symbolic_with(
     .map_err(|e| Error::Setup(format!("{e:?}")))
 }
 
-/// The symbolic factor for a vertex elimination order (each vertex's DOFs together).
-fn symbolic_for_vertex_order(pattern: &SymmetricPattern, order: &[usize]) -> Result<SymbolicCholesky<usize>> {
-    let fwd: Vec<usize> = order.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
-    let mut inv = vec![0usize; fwd.len()];
-    for (i, &f) in fwd.iter().enumerate() {
-        inv[f] = i;
-    }
-    let perm = faer::perm::PermRef::new_checked(&fwd, &inv, pattern.dim());
-    symbolic_with(pattern, SymmetricOrdering::Custom(perm))
-}
-
 impl CholeskySolver {
     pub fn new(pattern: Arc<SymmetricPattern>) -> Result<Self> {
         Self::with_substructuring(pattern, Substructuring::Auto)
@@ -446,7 +460,7 @@ impl CholeskySolver {
             let symbolic = symbolic_with(&pattern, SymmetricOrdering::Amd)?;
             return Ok(Self {
                 pattern,
-                kind: SolverKind::Single(Arc::new(symbolic)),
+                kind: SolverKind::Scalar(Arc::new(symbolic)),
             });
         };
         let split = match substructuring {
@@ -462,7 +476,7 @@ impl CholeskySolver {
             // about equally long; otherwise one thread does most of the work anyway.
             let worth_it = substructuring == Substructuring::Always || lens[0].max(lens[1]) <= 3 * lens[0].min(lens[1]);
             if worth_it {
-                let two = TwoDomain::new(&pattern, interiors, &b.separator)?;
+                let two = TwoDomain::new(&pattern, &graph, interiors, &b.separator)?;
                 return Ok(Self {
                     pattern,
                     kind: SolverKind::TwoDomain(Arc::new(two)),
@@ -470,7 +484,7 @@ impl CholeskySolver {
             }
         }
         let (order, _) = graph.best_order()?;
-        let kind = SolverKind::Single(Arc::new(symbolic_for_vertex_order(&pattern, &order)?));
+        let kind = SolverKind::Single(Arc::new(Domain::new(&pattern, &graph, &order, &[])?));
         Ok(Self { pattern, kind })
     }
 
@@ -482,7 +496,8 @@ impl CholeskySolver {
     /// both domains plus the dense separator block).
     pub fn factor_nnz(&self) -> usize {
         match &self.kind {
-            SolverKind::Single(s) => s.len_val(),
+            SolverKind::Scalar(s) => s.len_val(),
+            SolverKind::Single(d) => d.factor_len(),
             SolverKind::TwoDomain(t) => t.factor_len(),
         }
     }
@@ -490,7 +505,7 @@ impl CholeskySolver {
     /// Number of domains the factorisation is split into (1 or 2).
     pub fn domains(&self) -> usize {
         match self.kind {
-            SolverKind::Single(_) => 1,
+            SolverKind::Scalar(_) | SolverKind::Single(_) => 1,
             SolverKind::TwoDomain(_) => 2,
         }
     }
@@ -503,7 +518,11 @@ impl CholeskySolver {
         );
         a.check_finite()?;
         let kind = match &self.kind {
-            SolverKind::Single(symbolic) => {
+            SolverKind::Single(domain) => FactorKind::Single {
+                domain: domain.clone(),
+                values: domain.factorize_numeric(a)?,
+            },
+            SolverKind::Scalar(symbolic) => {
                 let mut values = vec![0.0; symbolic.len_val()];
                 let par = Par::Seq;
                 let params: Spec<LltParams, f64> = Default::default();
@@ -519,7 +538,7 @@ impl CholeskySolver {
                         params,
                     )
                     .map_err(|_| Error::NotPositiveDefinite)?;
-                FactorKind::Single {
+                FactorKind::Scalar {
                     symbolic: symbolic.clone(),
                     values,
                 }
@@ -543,7 +562,11 @@ impl CholeskyFactor {
     pub fn solve_many_in_place(&self, rhs: &mut [f64], k: usize) {
         assert_eq!(rhs.len(), self.n * k, "right-hand side length");
         match &self.kind {
-            FactorKind::Single { symbolic, values } => {
+            FactorKind::Single { domain, values } => {
+                debug_assert_eq!(domain.dim(), self.n);
+                domain.solve_in_place(values, rhs, k);
+            }
+            FactorKind::Scalar { symbolic, values } => {
                 let par = Par::Seq;
                 let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(k, par));
                 LltRef::new(symbolic, values).solve_in_place_with_conj(

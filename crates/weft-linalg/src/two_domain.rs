@@ -27,11 +27,11 @@ use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
 use faer::linalg::matmul::triangular::BlockStructure;
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
-    supernodal::SymbolicSupernodalCholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky, supernodal::SymbolicSupernodalCholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-use faer::{Accum, Mat, Par, Side, Spec};
+use faer::{Accum, Conj, Mat, MatMut, Par, Side, Spec};
 
 use crate::ordering::{Bisection, Graph};
 
@@ -60,16 +60,18 @@ pub(crate) fn plan(graph: &Graph, bisection: &Bisection) -> Result<([Vec<usize>;
 }
 use crate::{Error, Result, SymmetricMatrix, SymmetricPattern};
 
-/// One domain `Mᵢ` over `[interior DOFs (fill-reducing order), separator DOFs]`.
+/// One domain `Mᵢ` over `[interior DOFs (fill-reducing order), separator DOFs]`, stored
+/// already permuted (faer then factorises it in the identity order: no permutation of
+/// `A` per factorisation). An undivided matrix is one domain without separator.
 #[derive(Debug)]
-struct Domain {
+pub(crate) struct Domain {
     /// Global DOF of each local DOF.
     dofs: Vec<usize>,
     /// Local DOFs `0..interior` are the interior; the rest are the separator's.
     interior: usize,
     local: SymbolicSparseColMat<usize>,
-    /// `(local slot, global slot)` pairs: the domain's values gathered from `A`'s.
-    gather: Vec<(usize, usize)>,
+    /// The slot in `A` of each local stored entry (the domain's values are gathered).
+    gather: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
 }
 
@@ -102,40 +104,60 @@ fn supernodal(symbolic: &SymbolicCholesky<usize>) -> Result<&SymbolicSupernodalC
 impl Domain {
     /// Builds the domain over `interior` vertices (already in elimination order) and the
     /// separator vertices, with `A`'s pattern `pattern`.
-    fn new(pattern: &SymmetricPattern, interior: &[usize], separator: &[usize]) -> Result<Self> {
-        let nv = pattern.dim() / 3;
-        let mut local_vertex = vec![usize::MAX; nv];
-        for (i, &v) in interior.iter().chain(separator).enumerate() {
+    pub(crate) fn new(
+        pattern: &SymmetricPattern,
+        graph: &Graph,
+        interior: &[usize],
+        separator: &[usize],
+    ) -> Result<Self> {
+        let vertices: Vec<usize> = interior.iter().chain(separator).copied().collect();
+        let mut local_vertex = vec![usize::MAX; graph.len()];
+        for (i, &v) in vertices.iter().enumerate() {
             local_vertex[v] = i;
         }
-        let dofs: Vec<usize> = interior
-            .iter()
-            .chain(separator)
-            .flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2])
-            .collect();
-        let local_dof = |g: usize| {
-            let lv = local_vertex[g / 3];
-            (lv != usize::MAX).then(|| 3 * lv + g % 3)
-        };
-        let mut pairs = Vec::new();
-        let mut globals = Vec::new();
-        for (slot, r, c) in pattern.entries() {
-            if let (Some(lr), Some(lc)) = (local_dof(r), local_dof(c)) {
-                pairs.push((lr.min(lc), lr.max(lc)));
-                globals.push(slot);
+        // The local upper pattern, column by column: for local vertex `lv`, its coupled
+        // local vertices `lu < lv` (all three DOF rows each), then its own block's upper
+        // part; each entry's global slot is recorded alongside.
+        let n = 3 * vertices.len();
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        col_ptr.push(0);
+        let mut row_idx = Vec::new();
+        let mut gather = Vec::new();
+        let mut rows = Vec::new();
+        let missing = || Error::Setup("vertex block missing from the pattern".into());
+        for (lv, &gv) in vertices.iter().enumerate() {
+            rows.clear();
+            rows.extend(
+                graph
+                    .neighbours(gv)
+                    .iter()
+                    .map(|&u| local_vertex[u])
+                    .filter(|&lu| lu < lv),
+            );
+            rows.sort_unstable();
+            let blocks = rows
+                .iter()
+                .map(|&lu| pattern.block_slots(vertices[lu], gv).ok_or_else(missing))
+                .collect::<Result<Vec<_>>>()?;
+            let own = pattern.block_slots(gv, gv).ok_or_else(missing)?;
+            for j in 0..3 {
+                for (&lu, block) in rows.iter().zip(&blocks) {
+                    for (i, slots) in block.iter().enumerate() {
+                        row_idx.push(3 * lu + i);
+                        gather.push(slots[j]);
+                    }
+                }
+                for (i, slots) in own.iter().enumerate().take(j + 1) {
+                    row_idx.push(3 * lv + i);
+                    gather.push(slots[j]);
+                }
+                col_ptr.push(row_idx.len());
             }
         }
-        let local = SymmetricPattern::new(dofs.len(), pairs.iter().copied());
-        let gather = pairs
-            .iter()
-            .zip(&globals)
-            .map(|(&(r, c), &g)| {
-                let l = local.slot(r, c).unwrap_or_else(|| unreachable!("({r}, {c}) was added"));
-                (l, g)
-            })
-            .collect();
+        let dofs: Vec<usize> = vertices.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        let local = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         let symbolic = factorize_symbolic_cholesky(
-            local.symbolic.as_ref(),
+            local.as_ref(),
             Side::Upper,
             SymmetricOrdering::Identity,
             CholeskySymbolicParams {
@@ -148,22 +170,19 @@ impl Domain {
         Ok(Self {
             dofs,
             interior: 3 * interior.len(),
-            local: local.symbolic,
+            local,
             gather,
             symbolic,
         })
     }
 
-    fn factor_len(&self) -> usize {
+    pub(crate) fn factor_len(&self) -> usize {
         self.symbolic.len_val()
     }
 
-    /// The numeric factor of `Mᵢ` and its dense trailing block `L̃ᵢ` (lower triangular).
-    fn factorize(&self, a: &SymmetricMatrix) -> Result<(Vec<f64>, Mat<f64>)> {
-        let mut local_values = vec![0.0; self.local.row_idx().len()];
-        for &(l, g) in &self.gather {
-            local_values[l] += a.values[g];
-        }
+    /// The numeric factor of the domain's matrix.
+    pub(crate) fn factorize_numeric(&self, a: &SymmetricMatrix) -> Result<Vec<f64>> {
+        let local_values: Vec<f64> = self.gather.iter().map(|&g| a.values[g]).collect();
         let mut values = vec![0.0; self.symbolic.len_val()];
         let params: Spec<LltParams, f64> = Default::default();
         let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, params));
@@ -178,6 +197,12 @@ impl Domain {
                 params,
             )
             .map_err(|_| Error::NotPositiveDefinite)?;
+        Ok(values)
+    }
+
+    /// The numeric factor of `Mᵢ` and its dense trailing block `L̃ᵢ` (lower triangular).
+    fn factorize(&self, a: &SymmetricMatrix) -> Result<(Vec<f64>, Mat<f64>)> {
+        let values = self.factorize_numeric(a)?;
         let s = self.dofs.len() - self.interior;
         let mut trailing = Mat::<f64>::zeros(s, s);
         let sym = supernodal(&self.symbolic)?;
@@ -192,6 +217,34 @@ impl Domain {
             }
         });
         Ok((values, trailing))
+    }
+
+    /// Solves the whole domain's system (for an undivided matrix: a domain without
+    /// separator) with faer's supernodal solve, `k` right-hand sides column-major.
+    pub(crate) fn solve_in_place(&self, values: &[f64], rhs: &mut [f64], k: usize) {
+        let n = self.dofs.len();
+        let mut local = vec![0.0; n * k];
+        for c in 0..k {
+            for (l, &g) in self.dofs.iter().enumerate() {
+                local[c * n + l] = rhs[c * n + g];
+            }
+        }
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, Par::Seq));
+        LltRef::new(&self.symbolic, values).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut local, n, k),
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
+        for c in 0..k {
+            for (l, &g) in self.dofs.iter().enumerate() {
+                rhs[c * n + g] = local[c * n + l];
+            }
+        }
+    }
+
+    pub(crate) fn dim(&self) -> usize {
+        self.dofs.len()
     }
 
     /// Forward substitution over the interior columns: on exit `y[..interior]` holds
@@ -292,11 +345,16 @@ fn for_each_supernode(
 
 impl TwoDomain {
     /// Builds both domains from [`plan`]'s interior orders.
-    pub(crate) fn new(pattern: &SymmetricPattern, interiors: [Vec<usize>; 2], separator: &[usize]) -> Result<Self> {
+    pub(crate) fn new(
+        pattern: &SymmetricPattern,
+        graph: &Graph,
+        interiors: [Vec<usize>; 2],
+        separator: &[usize],
+    ) -> Result<Self> {
         let [i0, i1] = interiors;
         let (d0, d1) = rayon::join(
-            || Domain::new(pattern, &i0, separator),
-            || Domain::new(pattern, &i1, separator),
+            || Domain::new(pattern, graph, &i0, separator),
+            || Domain::new(pattern, graph, &i1, separator),
         );
         let separator_dofs: Vec<usize> = separator.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
         let nv = pattern.dim() / 3;

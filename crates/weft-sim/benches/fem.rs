@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
+use weft_linalg::{CholeskySolver, Substructuring, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TetMesh;
 use weft_mesh::generators::{BeamParams, beam};
 use weft_mesh::limb::{LimbParams, limb};
@@ -62,25 +62,40 @@ fn bench_case(c: &mut Criterion, case: &Case, nonlinear_samples: usize) {
             }
         }
         system.constrain_dofs(&case.fixed);
-        group.bench_function("prefactorized linear: factorisation", |b| {
-            b.iter(|| {
-                let solver = CholeskySolver::new(pattern.clone()).unwrap();
-                solver.factorize(&system).unwrap()
-            })
-        });
-        // The numeric part alone (the symbolic analysis is reusable across materials and
-        // time steps on the same mesh).
-        let solver = CholeskySolver::new(pattern.clone()).unwrap();
-        eprintln!(
-            "{}: {} DOFs, {} stored entries in A (upper), {} in L",
-            case.name,
-            pattern.dim(),
-            pattern.nnz(),
-            solver.factor_nnz()
-        );
-        group.bench_function("prefactorized linear: numeric factorisation", |b| {
-            b.iter(|| solver.factorize(&system).unwrap())
-        });
+        // Default: two domains on two threads when the body splits well (weft-linalg's
+        // `Substructuring::Auto`); `one thread`: the undivided sequential factor, as a
+        // same-run baseline.
+        for (label, sub) in [("", Substructuring::Auto), (", one thread", Substructuring::Never)] {
+            group.bench_function(format!("prefactorized linear: factorisation{label}"), |b| {
+                b.iter(|| {
+                    let solver = CholeskySolver::with_substructuring(pattern.clone(), sub).unwrap();
+                    solver.factorize(&system).unwrap()
+                })
+            });
+            // The numeric part alone (the symbolic analysis is reusable across materials
+            // and time steps on the same mesh).
+            let solver = CholeskySolver::with_substructuring(pattern.clone(), sub).unwrap();
+            eprintln!(
+                "{}{label}: {} DOFs, {} stored entries in A (upper), {} in L, {} domain(s)",
+                case.name,
+                pattern.dim(),
+                pattern.nnz(),
+                solver.factor_nnz(),
+                solver.domains()
+            );
+            group.bench_function(format!("prefactorized linear: numeric factorisation{label}"), |b| {
+                b.iter(|| solver.factorize(&system).unwrap())
+            });
+            let factor = solver.factorize(&system).unwrap();
+            let rhs: Vec<f64> = (0..pattern.dim()).map(|i| (0.1 * i as f64).sin()).collect();
+            group.bench_function(format!("prefactorized linear: solve{label}"), |b| {
+                b.iter(|| {
+                    let mut x = rhs.clone();
+                    factor.solve_in_place(&mut x);
+                    x
+                })
+            });
+        }
     }
     // One pre-factorised step: right-hand side + one sparse solve.
     let mut pre = PrefactorizedLinear::new(
