@@ -392,7 +392,7 @@ pub enum Substructuring {
 
 /// Smallest vertex count at which [`Substructuring::Auto`] considers splitting: below
 /// it, the threads' start-up costs more than half a factorisation.
-pub const MIN_SPLIT_VERTICES: usize = 400;
+pub const MIN_SPLIT_VERTICES: usize = 2000;
 
 /// Sparse Cholesky `A = L Lᵀ` with the symbolic analysis (fill-reducing ordering,
 /// elimination tree, supernodes) done once per pattern.

@@ -118,13 +118,14 @@ impl Energy for AxialSprings {
     }
     fn add_hessian(&self, _x: &[f64], _project: bool, hessian: &mut SymmetricMatrix) {
         // k w wᵀ ⊗ I₃ is already positive semi-definite: projection changes nothing.
+        // One 3 × 3 block per vertex pair (`add_vertex_block` keeps the stored upper
+        // triangle, so every ordered pair is offered).
         for (q, w) in self.quads.iter().zip(&self.weights) {
             for i in 0..4 {
                 for j in 0..4 {
                     let h = self.stiffness * w[i] * w[j];
-                    for k in 0..3 {
-                        hessian.add(3 * q[i] + k, 3 * q[j] + k, h);
-                    }
+                    let block = [[h, 0.0, 0.0], [0.0, h, 0.0], [0.0, 0.0, h]];
+                    hessian.add_vertex_block(q[i], q[j], &block);
                 }
             }
         }
