@@ -250,6 +250,13 @@ impl Domain {
     /// Forward substitution over the interior columns: on exit `y[..interior]` holds
     /// `Lᵢᵢ⁻¹ bᵢ` and `y[interior..]` has had `L_Sᵢ Lᵢᵢ⁻¹ bᵢ` subtracted.
     fn forward(&self, values: &[f64], y: &mut [f64]) {
+        // Compiled for the widest SIMD the CPU has (pulp dispatches at run time; the
+        // workspace targets baseline x86-64): a memory-streaming loop wants wide loads.
+        pulp::Arch::new().dispatch(|| self.forward_impl(values, y))
+    }
+
+    #[inline(always)]
+    fn forward_impl(&self, values: &[f64], y: &mut [f64]) {
         let sym = supernodal(&self.symbolic).unwrap_or_else(|_| unreachable!("checked in new"));
         let mut t = Vec::new();
         for_each_supernode(sym, values, |begin, end, pattern, val| {
@@ -275,6 +282,11 @@ impl Domain {
     /// Backward substitution over the interior columns, with the separator's values
     /// already in `y[interior..]`.
     fn backward(&self, values: &[f64], y: &mut [f64]) {
+        pulp::Arch::new().dispatch(|| self.backward_impl(values, y))
+    }
+
+    #[inline(always)]
+    fn backward_impl(&self, values: &[f64], y: &mut [f64]) {
         let sym = supernodal(&self.symbolic).unwrap_or_else(|_| unreachable!("checked in new"));
         let mut t = Vec::new();
         for s in (0..sym.n_supernodes()).rev() {
@@ -295,6 +307,7 @@ impl Domain {
 }
 
 /// `y += a x` (vectorises: no reduction).
+#[inline(always)]
 fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     for (yi, &xi) in y.iter_mut().zip(x) {
         *yi += a * xi;
@@ -304,6 +317,7 @@ fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
 /// `xᵀy` with eight independent partial sums, so the loop is bound by memory rather
 /// than by the latency of one chain of floating-point additions (the backward
 /// substitution is a stream of such dot products).
+#[inline(always)]
 fn dot(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len().min(y.len());
     let (x, y) = (&x[..n], &y[..n]);
@@ -320,6 +334,7 @@ fn dot(x: &[f64], y: &[f64]) -> f64 {
 }
 
 /// Supernode `s`: its column range, off-diagonal row pattern and column-major values.
+#[inline(always)]
 fn supernode<'a>(
     sym: &'a SymbolicSupernodalCholesky<usize>,
     values: &'a [f64],
@@ -332,6 +347,7 @@ fn supernode<'a>(
     (begin, end, pattern, &values[vp[s]..vp[s + 1]])
 }
 
+#[inline(always)]
 fn for_each_supernode(
     sym: &SymbolicSupernodalCholesky<usize>,
     values: &[f64],
