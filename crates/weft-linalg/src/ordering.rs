@@ -204,13 +204,16 @@ impl Graph {
         counts.iter().sum()
     }
 
-    /// Of the level-set and AMD orders of this graph, the one with the smaller factor,
-    /// with that factor's length.
+    /// Of the level-set and AMD orders of this graph, the faster to factorise, with its
+    /// factor's length: the banded one unless AMD's factor is over 20 % smaller — a
+    /// banded factor's supernodes are whole cross-sections, dense blocks on which faer
+    /// runs several times faster per entry (default beam: banded 0.38 M entries factorise
+    /// in 4.3 ms, AMD's 0.33 M in 4.7 ms), while on sheets AMD's factor is 2–3× smaller.
     pub(crate) fn best_order(&self) -> Result<(Vec<usize>, usize)> {
         let (banded, _) = self.level_order();
         let amd = self.amd_order()?;
         let (lb, la) = (self.factor_len(&banded), self.factor_len(&amd));
-        Ok(if la < lb { (amd, la) } else { (banded, lb) })
+        Ok(if 5 * la < 4 * lb { (amd, la) } else { (banded, lb) })
     }
 
     /// Approximate minimum degree order (faer's AMD) of the vertices.
