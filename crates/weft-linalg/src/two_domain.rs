@@ -267,12 +267,26 @@ impl Domain {
             let (c, r) = (end - begin, end - begin + pattern.len());
             t.clear();
             t.resize(pattern.len(), 0.0);
-            for j in begin..end.min(self.interior) {
+            let jend = end.min(self.interior);
+            // The diagonal block first, then the rows below it as one blocked update
+            // `t = L_bot y_top`, four columns per pass over `t` (four memory streams).
+            for j in begin..jend {
                 let col = &val[(j - begin) * r..][..r];
                 let yj = y[j] / col[j - begin];
                 y[j] = yj;
                 axpy(-yj, &col[j - begin + 1..c], &mut y[j + 1..end]);
-                axpy(yj, &col[c..], &mut t);
+            }
+            let mut j = begin;
+            while j + 4 <= jend {
+                let k = j - begin;
+                let cols = [0, 1, 2, 3].map(|q| &val[(k + q) * r + c..(k + q + 1) * r]);
+                let a = [y[j], y[j + 1], y[j + 2], y[j + 3]];
+                axpy4(a, cols, &mut t);
+                j += 4;
+            }
+            for j in j..jend {
+                let k = j - begin;
+                axpy(y[j], &val[k * r + c..(k + 1) * r], &mut t);
             }
             for (&row, &tk) in pattern.iter().zip(&t) {
                 y[row] -= tk;
@@ -298,10 +312,26 @@ impl Domain {
             let (c, r) = (end - begin, end - begin + pattern.len());
             t.clear();
             t.extend(pattern.iter().map(|&row| y[row]));
-            for j in (begin..end.min(self.interior)).rev() {
+            let jend = end.min(self.interior);
+            // The rows below the diagonal block only meet the known `t`: all their dot
+            // products first (four columns per pass), then the triangular block.
+            let mut j = begin;
+            while j + 4 <= jend {
+                let k = j - begin;
+                let cols = [0, 1, 2, 3].map(|q| &val[(k + q) * r + c..(k + q + 1) * r]);
+                let d = dot4(cols, &t);
+                for q in 0..4 {
+                    y[j + q] -= d[q];
+                }
+                j += 4;
+            }
+            for j in j..jend {
+                let k = j - begin;
+                y[j] -= dot(&val[k * r + c..(k + 1) * r], &t);
+            }
+            for j in (begin..jend).rev() {
                 let col = &val[(j - begin) * r..][..r];
-                let acc = y[j] - dot(&col[j - begin + 1..c], &y[j + 1..end]) - dot(&col[c..], &t);
-                y[j] = acc / col[j - begin];
+                y[j] = (y[j] - dot(&col[j - begin + 1..c], &y[j + 1..end])) / col[j - begin];
             }
         }
     }
@@ -313,6 +343,43 @@ fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     for (yi, &xi) in y.iter_mut().zip(x) {
         *yi += a * xi;
     }
+}
+
+/// `t += Σ_q a_q x_q` over four columns in one pass.
+#[inline(always)]
+fn axpy4(a: [f64; 4], x: [&[f64]; 4], t: &mut [f64]) {
+    let n = t.len();
+    let [x0, x1, x2, x3] = x.map(|x| &x[..n]);
+    for i in 0..n {
+        t[i] += a[0] * x0[i] + a[1] * x1[i] + a[2] * x2[i] + a[3] * x3[i];
+    }
+}
+
+/// `[x_qᵀ t]` for four columns in one pass over `t`, each with four partial sums.
+#[inline(always)]
+fn dot4(x: [&[f64]; 4], t: &[f64]) -> [f64; 4] {
+    let n = t.len();
+    let [x0, x1, x2, x3] = x.map(|x| &x[..n]);
+    let mut acc = [[0.0f64; 4]; 4];
+    let chunks = n / 4;
+    for b in 0..chunks {
+        for l in 0..4 {
+            let i = 4 * b + l;
+            let ti = t[i];
+            acc[0][l] += x0[i] * ti;
+            acc[1][l] += x1[i] * ti;
+            acc[2][l] += x2[i] * ti;
+            acc[3][l] += x3[i] * ti;
+        }
+    }
+    let mut out = acc.map(|a| a.iter().sum::<f64>());
+    for i in 4 * chunks..n {
+        out[0] += x0[i] * t[i];
+        out[1] += x1[i] * t[i];
+        out[2] += x2[i] * t[i];
+        out[3] += x3[i] * t[i];
+    }
+    out
 }
 
 /// `xᵀy` with eight independent partial sums, so the loop is bound by memory rather
