@@ -38,6 +38,7 @@
 
 pub mod axial;
 pub mod error;
+mod ipm;
 pub mod metrics;
 pub mod quasistatic;
 pub mod rest;
@@ -50,4 +51,4 @@ pub use quasistatic::{
     QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution, ZeroLengthScaling,
 };
 pub use rest::RestShape;
-pub use socp::{BackwardReport, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution};
+pub use socp::{BackwardReport, ConicSolver, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution};

@@ -66,13 +66,29 @@ use weft_linalg::{LdltSettings, LdltSolver, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TriMesh;
 
 use crate::error::{Error, Result, check_output};
+use crate::ipm::{IpmSettings, ReducedIpm};
 use crate::rest::{RestShape, edge_vector};
+
+/// Which interior-point method solves the forward SOCP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConicSolver {
+    /// Our primal–dual method on the reduced `3V × 3V` normal equations (`crate::ipm`):
+    /// one sparse Cholesky of a mesh-edge-sparse matrix per iteration.
+    #[default]
+    ReducedIpm,
+    /// Clarabel on the full conic KKT system (QDLDL); kept for cross-checking.
+    Clarabel,
+}
 
 /// Settings of [`InextensibilityLayer`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SocpSettings {
-    /// Clarabel's gap (absolute and relative) and feasibility tolerances.
+    pub solver: ConicSolver,
+    /// The interior-point tolerance on the relative primal and dual residuals and the
+    /// relative gap (for Clarabel: its absolute and relative gap and feasibility
+    /// tolerances).
     pub tolerance: f64,
     pub max_iterations: u32,
     /// Largest accepted relative excess of an edge over its bound: `l/l^max − 1`.
@@ -80,10 +96,11 @@ pub struct SocpSettings {
     /// Regularisation and refinement of the backward LDLᵀ.
     pub ldlt_delta: f64,
     pub refinement_steps: usize,
-    /// Clarabel's iterative refinement of its own KKT solves (about 25 % of its time on
-    /// the paper-sized sheet; on by default for accuracy on degenerate problems).
+    /// Iterative refinement of the interior-point method's linear solves (for Clarabel
+    /// about 25 % of its time on the paper-sized sheet; on by default for accuracy on
+    /// degenerate problems).
     pub iterative_refinement: bool,
-    /// Print Clarabel's iteration log.
+    /// Print the interior-point iteration log.
     pub verbose: bool,
     /// Polish the interior-point solution by Newton's method on the active-set KKT
     /// conditions (Eq. 2), so they hold to round-off.
@@ -93,6 +110,7 @@ pub struct SocpSettings {
 impl Default for SocpSettings {
     fn default() -> Self {
         Self {
+            solver: ConicSolver::default(),
             tolerance: 1e-8,
             max_iterations: 100,
             feasibility_tolerance: 1e-6,
@@ -118,17 +136,18 @@ impl SocpSettings {
 /// What one forward solve did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SocpReport {
-    /// Clarabel's final status (`Solved` or `AlmostSolved`).
+    /// The interior-point method's final status (`Solved`, or Clarabel's `AlmostSolved`).
     pub status: String,
+    /// Interior-point iterations of whichever [`ConicSolver`] ran.
     pub iterations: u32,
     /// Newton iterations of the active-set polish, `None` if it was off or rejected (the
     /// interior-point solution is returned then).
     pub polish_iterations: Option<usize>,
     /// Wall time of the whole forward pass, including the conic solve (s).
     pub time_seconds: f64,
-    /// Clarabel's own solve time (s).
+    /// The interior-point method's own solve time (s).
     pub solver_seconds: f64,
-    /// Clarabel's primal and dual residuals.
+    /// The interior-point method's primal and dual residuals.
     pub primal_residual: f64,
     pub dual_residual: f64,
     /// Relative KKT residual at the returned point: the largest of stationarity
@@ -159,6 +178,19 @@ impl SocpSolution {
     pub fn into_positions(self) -> Vec<f64> {
         self.positions
     }
+}
+
+/// A conic solution `(x, s, z)` of either [`ConicSolver`] and what it took.
+#[derive(Debug)]
+struct ConicSolution {
+    x: Vec<f64>,
+    s: Vec<f64>,
+    z: Vec<f64>,
+    status: String,
+    iterations: u32,
+    seconds: f64,
+    primal_residual: f64,
+    dual_residual: f64,
 }
 
 /// What one backward solve did.
@@ -204,6 +236,7 @@ pub struct InextensibilityLayer {
     p: CscMatrix<f64>,
     a: CscMatrix<f64>,
     cones: Vec<SupportedConeT<f64>>,
+    ipm: ReducedIpm,
     kkt: LdltSolver,
     /// For every edge, the KKT slots of its local 7 × 7 matrix over
     /// `[3a, 3a+1, 3a+2, 3b, 3b+1, 3b+2, 3V+e]` (`usize::MAX` for the lower triangle).
@@ -313,6 +346,7 @@ impl InextensibilityLayer {
             ..LdltSettings::default()
         };
         let kkt = LdltSolver::new(pattern, signs, ldlt)?;
+        let ipm = ReducedIpm::new(nv, &edges, rest.weights())?;
         Ok(Self {
             rest,
             epsilon,
@@ -322,6 +356,7 @@ impl InextensibilityLayer {
             p,
             a,
             cones,
+            ipm,
             kkt,
             kkt_slots,
             diag_slots,
@@ -348,7 +383,9 @@ impl InextensibilityLayer {
         self.rest.weights()
     }
 
-    fn new_solver(&self, b: &[f64]) -> Result<DefaultSolver<f64>> {
+    /// Solves the SOCP for `b` with Clarabel. A fresh solver per call keeps results
+    /// independent of call order and thread.
+    fn solve_clarabel(&self, b: &[f64]) -> Result<ConicSolution> {
         let tol = self.settings.tolerance;
         let settings = DefaultSettings {
             verbose: self.settings.verbose,
@@ -361,8 +398,48 @@ impl InextensibilityLayer {
             ..DefaultSettings::default()
         };
         let q = vec![0.0; 3 * self.num_vertices()];
-        DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings)
-            .map_err(|e| Error::SolverSetup(e.to_string()))
+        let mut solver = DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings)
+            .map_err(|e| Error::SolverSetup(e.to_string()))?;
+        solver.solve();
+        let sol = &solver.solution;
+        let status = format!("{:?}", sol.status);
+        if !matches!(sol.status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
+            return Err(Error::SolverFailed {
+                status,
+                iterations: sol.iterations,
+            });
+        }
+        Ok(ConicSolution {
+            x: sol.x.clone(),
+            s: sol.s.clone(),
+            z: sol.z.clone(),
+            status,
+            iterations: sol.iterations,
+            seconds: sol.solve_time,
+            primal_residual: sol.r_prim,
+            dual_residual: sol.r_dual,
+        })
+    }
+
+    /// Solves the SOCP for `b` with the reduced-system interior-point method.
+    fn solve_reduced_ipm(&self, b: &[f64]) -> Result<ConicSolution> {
+        let settings = IpmSettings {
+            tolerance: self.settings.tolerance,
+            max_iterations: self.settings.max_iterations,
+            iterative_refinement: self.settings.iterative_refinement,
+            verbose: self.settings.verbose,
+        };
+        let sol = self.ipm.solve(b, &settings)?;
+        Ok(ConicSolution {
+            x: sol.x,
+            s: sol.s,
+            z: sol.z,
+            status: "Solved".to_string(),
+            iterations: sol.iterations,
+            seconds: sol.seconds,
+            primal_residual: sol.primal_residual,
+            dual_residual: sol.dual_residual,
+        })
     }
 
     /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
@@ -378,24 +455,14 @@ impl InextensibilityLayer {
             b[4 * e] = self.max_lengths[e] / ell;
             b[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
         }
-        // A fresh solver per call keeps results independent of call order and thread.
-        let mut solver = self.new_solver(&b)?;
-        solver.solve();
-        let sol = &solver.solution;
-        let status = sol.status;
-        let iterations = sol.iterations;
-        if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
-            return Err(Error::SolverFailed {
-                status: format!("{status:?}"),
-                iterations,
-            });
-        }
-        check_output("conic solution", &sol.x)?;
-        check_output("conic slacks", &sol.s)?;
-        check_output("conic duals", &sol.z)?;
-        let mut x = sol.x.clone();
-        let mut s = sol.s.clone();
-        let mut z = sol.z.clone();
+        let conic = match self.settings.solver {
+            ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b)?,
+            ConicSolver::Clarabel => self.solve_clarabel(&b)?,
+        };
+        check_output("conic solution", &conic.x)?;
+        check_output("conic slacks", &conic.s)?;
+        check_output("conic duals", &conic.z)?;
+        let (mut x, mut s, mut z) = (conic.x, conic.s, conic.z);
         let polish_iterations = if self.settings.polish {
             self.polish(&b, &mut x, &mut s, &mut z)
         } else {
@@ -427,13 +494,13 @@ impl InextensibilityLayer {
         }
         let (stationarity, complementarity) = self.kkt_residuals(&x, &s, &z);
         let report = SocpReport {
-            status: format!("{status:?}"),
-            iterations,
+            status: conic.status,
+            iterations: conic.iterations,
             polish_iterations,
             time_seconds: start.elapsed().as_secs_f64(),
-            solver_seconds: sol.solve_time,
-            primal_residual: sol.r_prim,
-            dual_residual: sol.r_dual,
+            solver_seconds: conic.seconds,
+            primal_residual: conic.primal_residual,
+            dual_residual: conic.dual_residual,
             kkt_residual: stationarity.max(complementarity).max(max_violation.max(0.0)),
             max_violation,
             active_constraints: active,

@@ -1,0 +1,668 @@
+//! A primal–dual interior-point method for the inextensibility SOCP that solves only the
+//! reduced `3V × 3V` normal equations.
+//!
+//! The problem, in the solver units of [`crate::socp`]:
+//!
+//! ```text
+//! min_δ ½ δᵀ K δ   s.t.   s_e = b_e − A_e δ ∈ Q⁴,   A_e δ = [0; −D_e δ],   D_e = E_a − E_b
+//! ```
+//!
+//! with `K = diag(w_v) ⊗ I₃`, optimality `Kδ + Aᵀz = 0`, `Aδ + s = b`, `s, z ∈ K`,
+//! `sᵀz = 0` — the sign convention of Clarabel's `(x, s, z)`, so the polish and the
+//! backward pass work on either solver's output.
+//!
+//! The method is the path-following algorithm of CVXOPT's `coneqp` (Vandenberghe, *The
+//! CVXOPT linear and quadratic cone program solvers*, 2010, §§3, 6–8): Nesterov–Todd
+//! scaling per cone, Mehrotra's predictor–corrector, an infeasible start. The Newton
+//! system
+//!
+//! ```text
+//! K dx + Aᵀ dz = bx,    A dx + ds = bz,    λ ∘ (W dz + W⁻¹ ds) = bs
+//! ```
+//!
+//! is reduced by eliminating `ds` and `dz` cone by cone (CVXOPT notes Eq. 49–50):
+//! `dz = W⁻² (A dx − bz + W (λ ⋄ bs))`, leaving
+//!
+//! ```text
+//! (K + Aᵀ W⁻² A) dx = bx + Aᵀ W⁻² (bz − W (λ ⋄ bs)).
+//! ```
+//!
+//! Because the first row of `A_e` is zero, `Aᵀ W⁻² A = Σ_e D_eᵀ G_e D_e` with `G_e` the
+//! lower-right `3 × 3` block of `W_e⁻²`: a matrix of `3 × 3` vertex blocks with exactly
+//! the sparsity of the mesh edges, factorised by one sparse Cholesky whose symbolic
+//! analysis is done once per mesh. Predictor and corrector share that factor.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
+
+use crate::error::{Error, Result};
+
+/// Fraction of the step to the cone boundary that is taken (CVXOPT's `STEP = 0.99`).
+const STEP_FRACTION: f64 = 0.99;
+
+/// Settings of one interior-point solve (a subset of `SocpSettings`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct IpmSettings {
+    pub tolerance: f64,
+    pub max_iterations: u32,
+    /// One step of iterative refinement of each reduced solve against the assembled matrix.
+    pub iterative_refinement: bool,
+    pub verbose: bool,
+}
+
+/// An interior-point solution and what it took.
+#[derive(Debug, Clone)]
+pub(crate) struct IpmSolution {
+    pub x: Vec<f64>,
+    pub s: Vec<f64>,
+    pub z: Vec<f64>,
+    pub iterations: u32,
+    /// `‖Aδ + s − b‖∞ / max(1, ‖b‖∞)`.
+    pub primal_residual: f64,
+    /// `‖Kδ + Aᵀz‖∞ / max(1, ‖Kδ‖∞, ‖Aᵀz‖∞)`.
+    pub dual_residual: f64,
+    pub seconds: f64,
+}
+
+/// The reduced-system interior-point solver of one mesh: the edges, the vertex weights
+/// and the symbolic Cholesky factor of `K + Σ_e D_eᵀ G_e D_e`.
+#[derive(Debug)]
+pub(crate) struct ReducedIpm {
+    edges: Vec<[usize; 2]>,
+    weights: Vec<f64>,
+    cholesky: CholeskySolver,
+}
+
+/// The lower-right `3 × 3` blocks `G_e` (or any per-edge `3 × 3` matrix) of `Aᵀ H A`.
+type EdgeBlocks = Vec<[[f64; 3]; 3]>;
+
+impl ReducedIpm {
+    pub fn new(num_vertices: usize, edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
+        let pattern = SymmetricPattern::from_vertex_pairs(num_vertices, edges.iter().map(|&[a, b]| (a, b)));
+        let cholesky = CholeskySolver::new(Arc::new(pattern))?;
+        Ok(Self {
+            edges: edges.to_vec(),
+            weights: weights.to_vec(),
+            cholesky,
+        })
+    }
+
+    fn num_cones(&self) -> usize {
+        self.edges.len()
+    }
+
+    /// `K + Σ_e D_eᵀ G_e D_e`.
+    fn assemble(&self, blocks: &EdgeBlocks) -> SymmetricMatrix {
+        let mut matrix = SymmetricMatrix::zeros(self.cholesky.pattern().clone());
+        for (v, &w) in self.weights.iter().enumerate() {
+            matrix.add_vertex_block(v, v, &[[w, 0.0, 0.0], [0.0, w, 0.0], [0.0, 0.0, w]]);
+        }
+        for (&[a, b], g) in self.edges.iter().zip(blocks) {
+            let neg = g.map(|row| row.map(|v| -v));
+            matrix.add_vertex_block(a, a, g);
+            matrix.add_vertex_block(b, b, g);
+            // G is symmetric, so the block at (min, max) is −G either way round.
+            matrix.add_vertex_block(a.min(b), a.max(b), &neg);
+        }
+        matrix
+    }
+
+    /// `y = Aᵀ u` for a cone vector `u` (length `4m`): `(Aᵀu)_a −= u_e¹, (Aᵀu)_b += u_e¹`.
+    fn add_transpose_product(&self, u: &[f64], y: &mut [f64]) {
+        for (e, &[a, b]) in self.edges.iter().enumerate() {
+            for c in 0..3 {
+                y[3 * a + c] -= u[4 * e + 1 + c];
+                y[3 * b + c] += u[4 * e + 1 + c];
+            }
+        }
+    }
+
+    /// `A_e x = [0; −(x_a − x_b)]`.
+    fn edge_product(&self, e: usize, x: &[f64]) -> [f64; 4] {
+        let [a, b] = self.edges[e];
+        [
+            0.0,
+            x[3 * b] - x[3 * a],
+            x[3 * b + 1] - x[3 * a + 1],
+            x[3 * b + 2] - x[3 * a + 2],
+        ]
+    }
+
+    /// Residuals at `(x, s, z)`: `r_x = Kx + Aᵀz`, `r_z = Ax + s − b`, and `Kx`.
+    fn residuals(&self, b: &[f64], x: &[f64], s: &[f64], z: &[f64]) -> Residuals {
+        let n = x.len();
+        let kx: Vec<f64> = (0..n).map(|i| self.weights[i / 3] * x[i]).collect();
+        let mut at_z = vec![0.0; n];
+        self.add_transpose_product(z, &mut at_z);
+        let rx: Vec<f64> = kx.iter().zip(&at_z).map(|(a, b)| a + b).collect();
+        let mut rz = vec![0.0; 4 * self.num_cones()];
+        for e in 0..self.num_cones() {
+            let ax = self.edge_product(e, x);
+            for k in 0..4 {
+                rz[4 * e + k] = ax[k] + s[4 * e + k] - b[4 * e + k];
+            }
+        }
+        let objective = 0.5 * x.iter().zip(&kx).map(|(a, b)| a * b).sum::<f64>();
+        let dual_scale = max_abs(&kx).max(max_abs(&at_z)).max(1.0);
+        Residuals {
+            primal: max_abs(&rz) / max_abs(b).max(1.0),
+            dual: max_abs(&rx) / dual_scale,
+            gap: dot(s, z),
+            objective,
+            rx,
+            rz,
+        }
+    }
+
+    /// Factorises `K + Σ_e D_eᵀ G_e D_e`, keeping the matrix for iterative refinement.
+    fn factorize(&self, blocks: &EdgeBlocks) -> Result<(SymmetricMatrix, CholeskyFactor)> {
+        let matrix = self.assemble(blocks);
+        let factor = self.cholesky.factorize(&matrix)?;
+        Ok((matrix, factor))
+    }
+
+    /// Solves `M y = rhs` in place, with one step of iterative refinement if asked.
+    fn solve_reduced(&self, matrix: &SymmetricMatrix, factor: &CholeskyFactor, rhs: &mut [f64], refine: bool) {
+        let b = refine.then(|| rhs.to_vec());
+        factor.solve_in_place(rhs);
+        if let Some(b) = b {
+            let mut r = vec![0.0; rhs.len()];
+            matrix.mul_vec(rhs, &mut r);
+            r.iter_mut().zip(&b).for_each(|(r, b)| *r = b - *r);
+            factor.solve_in_place(&mut r);
+            rhs.iter_mut().zip(&r).for_each(|(x, d)| *x += d);
+        }
+    }
+
+    /// The CVXOPT initial point (Vandenberghe §… "Starting point"): `x` minimises
+    /// `½ xᵀKx + ½ ‖Ax − b‖²`, `s = b − Ax`, `z = Ax − b`, each then shifted along the
+    /// cone's identity `e = [1; 0]` into the interior if it is not already there.
+    fn initial_point(&self, b: &[f64], refine: bool) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+        let n = self.weights.len() * 3;
+        let m = self.num_cones();
+        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let (matrix, factor) = self.factorize(&vec![identity; m])?;
+        let mut x = vec![0.0; n];
+        self.add_transpose_product(b, &mut x);
+        self.solve_reduced(&matrix, &factor, &mut x, refine);
+        let mut s = vec![0.0; 4 * m];
+        for e in 0..m {
+            let ax = self.edge_product(e, &x);
+            for k in 0..4 {
+                s[4 * e + k] = b[4 * e + k] - ax[k];
+            }
+        }
+        let mut z: Vec<f64> = s.iter().map(|v| -v).collect();
+        for v in [&mut s, &mut z] {
+            // `max_e (‖v_e¹‖ − v_e⁰)`: minus the smallest eigenvalue over all cones.
+            let t = v
+                .chunks_exact(4)
+                .map(|c| norm3(&c[1..4]) - c[0])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let scale = max_abs(v).max(1.0);
+            if t >= -1e-8 * scale {
+                v.chunks_exact_mut(4).for_each(|c| c[0] += 1.0 + t);
+            }
+        }
+        Ok((x, s, z))
+    }
+
+    /// Solves the SOCP for the cone vector `b` (length `4m`, `b_e⁰ > 0`).
+    pub fn solve(&self, b: &[f64], settings: &IpmSettings) -> Result<IpmSolution> {
+        let start = Instant::now();
+        let m = self.num_cones();
+        let n = 3 * self.weights.len();
+        let refine = settings.iterative_refinement;
+        let failed = |status: &str, iterations: u32| Error::SolverFailed {
+            status: status.to_string(),
+            iterations,
+        };
+        let (mut x, mut s, mut z) = self.initial_point(b, refine)?;
+        let mut iterations = 0;
+        loop {
+            let res = self.residuals(b, &x, &s, &z);
+            let relative_gap = res.gap / res.objective.max(1.0);
+            if settings.verbose {
+                eprintln!(
+                    "ipm {iterations:3}: pres {:.2e} dres {:.2e} gap {:.2e} obj {:.6e}",
+                    res.primal, res.dual, relative_gap, res.objective
+                );
+            }
+            if !(res.primal.is_finite() && res.dual.is_finite() && relative_gap.is_finite()) {
+                return Err(failed("NumericalError", iterations));
+            }
+            let tol = settings.tolerance;
+            if res.primal <= tol && res.dual <= tol && relative_gap <= tol {
+                return Ok(IpmSolution {
+                    x,
+                    s,
+                    z,
+                    iterations,
+                    primal_residual: res.primal,
+                    dual_residual: res.dual,
+                    seconds: start.elapsed().as_secs_f64(),
+                });
+            }
+            if iterations >= settings.max_iterations {
+                return Err(failed("MaxIterations", iterations));
+            }
+            iterations += 1;
+
+            let scalings: Vec<NtScaling> = (0..m)
+                .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
+                .collect::<Option<_>>()
+                .ok_or_else(|| failed("NumericalError", iterations))?;
+            let blocks: EdgeBlocks = scalings.iter().map(NtScaling::inverse_squared_block).collect();
+            let factor_start = Instant::now();
+            let (matrix, factor) = self.factorize(&blocks)?;
+            let factor_seconds = factor_start.elapsed().as_secs_f64();
+            let newton = NewtonSystem {
+                ipm: self,
+                matrix: &matrix,
+                factor: &factor,
+                scalings: &scalings,
+                refine,
+            };
+            let bx: Vec<f64> = res.rx.iter().map(|v| -v).collect();
+            let bz: Vec<f64> = res.rz.iter().map(|v| -v).collect();
+
+            // Predictor (affine scaling): λ ∘ (W dz + W⁻¹ ds) = −λ ∘ λ.
+            let lambda_sq: Vec<[f64; 4]> = scalings.iter().map(|w| jordan_product(&w.lambda, &w.lambda)).collect();
+            let mut bs: Vec<f64> = lambda_sq.iter().flat_map(|l| l.map(|v| -v)).collect();
+            let affine = newton.solve(&bx, &bz, &bs);
+            let alpha_affine = self.max_step(&s, &z, &affine).min(1.0);
+            // Mehrotra's centring σ = (1 − α_aff)³ (CVXOPT's `EXPON = 3`).
+            let sigma = (1.0 - alpha_affine).powi(3);
+            let mu = res.gap / m as f64;
+
+            // Corrector: −λ∘λ − (W⁻¹ds_aff) ∘ (W dz_aff) + σμ e.
+            for e in 0..m {
+                let ds = &affine.ds_scaled[4 * e..4 * e + 4];
+                let dz = &affine.dz_scaled[4 * e..4 * e + 4];
+                let second_order = jordan_product(ds.try_into().unwrap(), dz.try_into().unwrap());
+                for k in 0..4 {
+                    bs[4 * e + k] = -lambda_sq[e][k] - second_order[k];
+                }
+                bs[4 * e] += sigma * mu;
+            }
+            let step = newton.solve(&bx, &bz, &bs);
+            let alpha = (STEP_FRACTION * self.max_step(&s, &z, &step)).min(1.0);
+            if settings.verbose {
+                eprintln!(
+                    "      α_aff {alpha_affine:.3} σ {sigma:.2e} α {alpha:.3} (assembly + factorisation {:.1} ms)",
+                    1e3 * factor_seconds
+                );
+            }
+            if !(alpha > 1e-12) {
+                return Err(failed("StepTooSmall", iterations));
+            }
+            x.iter_mut().zip(&step.dx).for_each(|(v, d)| *v += alpha * d);
+            s.iter_mut().zip(&step.ds).for_each(|(v, d)| *v += alpha * d);
+            z.iter_mut().zip(&step.dz).for_each(|(v, d)| *v += alpha * d);
+            debug_assert_eq!(x.len(), n);
+        }
+    }
+
+    /// The largest `α` with `s + α ds` and `z + α dz` in every cone.
+    fn max_step(&self, s: &[f64], z: &[f64], step: &NewtonStep) -> f64 {
+        let mut alpha = f64::INFINITY;
+        for e in 0..self.num_cones() {
+            let r = 4 * e..4 * e + 4;
+            alpha = alpha
+                .min(max_cone_step(&s[r.clone()], &step.ds[r.clone()]))
+                .min(max_cone_step(&z[r.clone()], &step.dz[r]));
+        }
+        alpha
+    }
+}
+
+struct Residuals {
+    primal: f64,
+    dual: f64,
+    gap: f64,
+    objective: f64,
+    rx: Vec<f64>,
+    rz: Vec<f64>,
+}
+
+/// A Newton direction, with the scaled `W⁻¹ ds`, `W dz` Mehrotra's correction needs.
+struct NewtonStep {
+    dx: Vec<f64>,
+    ds: Vec<f64>,
+    dz: Vec<f64>,
+    ds_scaled: Vec<f64>,
+    dz_scaled: Vec<f64>,
+}
+
+/// One iteration's factorised Newton system.
+struct NewtonSystem<'a> {
+    ipm: &'a ReducedIpm,
+    matrix: &'a SymmetricMatrix,
+    factor: &'a CholeskyFactor,
+    scalings: &'a [NtScaling],
+    refine: bool,
+}
+
+impl NewtonSystem<'_> {
+    /// Solves `K dx + Aᵀ dz = bx`, `A dx + ds = bz`, `λ ∘ (W dz + W⁻¹ ds) = bs` through the
+    /// reduced system (CVXOPT notes Eq. 49–50).
+    fn solve(&self, bx: &[f64], bz: &[f64], bs: &[f64]) -> NewtonStep {
+        let m = self.scalings.len();
+        // t = λ ⋄ bs (so W dz + W⁻¹ ds = t) and y = W⁻²(bz − W t).
+        let mut t = vec![[0.0; 4]; m];
+        let mut y = vec![0.0; 4 * m];
+        for (e, w) in self.scalings.iter().enumerate() {
+            t[e] = jordan_divide(&w.lambda, bs[4 * e..4 * e + 4].try_into().unwrap());
+            let wt = w.apply(&t[e]);
+            let r: [f64; 4] = std::array::from_fn(|k| bz[4 * e + k] - wt[k]);
+            y[4 * e..4 * e + 4].copy_from_slice(&w.apply_inverse_squared(&r));
+        }
+        let mut dx = bx.to_vec();
+        self.ipm.add_transpose_product(&y, &mut dx);
+        self.ipm.solve_reduced(self.matrix, self.factor, &mut dx, self.refine);
+        let mut step = NewtonStep {
+            dx,
+            ds: vec![0.0; 4 * m],
+            dz: vec![0.0; 4 * m],
+            ds_scaled: vec![0.0; 4 * m],
+            dz_scaled: vec![0.0; 4 * m],
+        };
+        for (e, w) in self.scalings.iter().enumerate() {
+            // dz = W⁻² A dx − y. ds from the linear equation A dx + ds = bz rather than
+            // from W dz + W⁻¹ ds = t: near the solution W² has eigenvalues of very
+            // different sizes and W (t − W dz) cancels, which let the primal residual
+            // grow again in the last iterations.
+            let adx = self.ipm.edge_product(e, &step.dx);
+            let h_adx = w.apply_inverse_squared(&adx);
+            let dz: [f64; 4] = std::array::from_fn(|k| h_adx[k] - y[4 * e + k]);
+            let ds: [f64; 4] = std::array::from_fn(|k| bz[4 * e + k] - adx[k]);
+            let r = 4 * e..4 * e + 4;
+            step.dz[r.clone()].copy_from_slice(&dz);
+            step.dz_scaled[r.clone()].copy_from_slice(&w.apply(&dz));
+            step.ds_scaled[r.clone()].copy_from_slice(&w.apply_inverse(&ds));
+            step.ds[r].copy_from_slice(&ds);
+        }
+        step
+    }
+}
+
+/// The Nesterov–Todd scaling of one `Q⁴` cone (CVXOPT notes §6.2, Eq. 55–57):
+/// `W = β (2 v vᵀ − J)`, `J = diag(1, −1, −1, −1)`, `vᵀ J v = 1`, with `W z = W⁻¹ s = λ`.
+/// `W² = β² (2 w̄ w̄ᵀ − J)` maps `z` to `s`; `v` is its hyperbolic square root.
+#[derive(Debug, Clone, Copy)]
+struct NtScaling {
+    beta: f64,
+    /// `w̄ = (s̄ + J z̄) / (2γ)`, `s̄ = s / √(sᵀJs)`, `z̄ = z / √(zᵀJz)`, `γ = √((1 + s̄ᵀz̄)/2)`.
+    w: [f64; 4],
+    /// `v = (w̄ + e) / √(2 (w̄₀ + 1))`.
+    v: [f64; 4],
+    lambda: [f64; 4],
+}
+
+impl NtScaling {
+    /// `None` unless `s` and `z` are strictly inside the cone.
+    fn new(s: &[f64], z: &[f64]) -> Option<Self> {
+        let (s_norm, z_norm) = (cone_norm(s)?, cone_norm(z)?);
+        let sb: [f64; 4] = std::array::from_fn(|k| s[k] / s_norm);
+        let zb: [f64; 4] = std::array::from_fn(|k| z[k] / z_norm);
+        let gamma = ((1.0 + dot(&sb, &zb)) / 2.0).sqrt();
+        let w = [
+            (sb[0] + zb[0]) / (2.0 * gamma),
+            (sb[1] - zb[1]) / (2.0 * gamma),
+            (sb[2] - zb[2]) / (2.0 * gamma),
+            (sb[3] - zb[3]) / (2.0 * gamma),
+        ];
+        let root = (2.0 * (w[0] + 1.0)).sqrt();
+        let v = [(w[0] + 1.0) / root, w[1] / root, w[2] / root, w[3] / root];
+        // λ = W z without forming W (CVXOPT notes Eq. 57): λ̄₀ = γ,
+        // λ̄₁ = ((γ + z̄₀) s̄₁ + (γ + s̄₀) z̄₁) / (s̄₀ + z̄₀ + 2γ), λ = √(‖s‖_J ‖z‖_J) λ̄.
+        let scale = (s_norm * z_norm).sqrt();
+        let denom = sb[0] + zb[0] + 2.0 * gamma;
+        let mut lambda = [scale * gamma, 0.0, 0.0, 0.0];
+        for k in 1..4 {
+            lambda[k] = scale * ((gamma + zb[0]) * sb[k] + (gamma + sb[0]) * zb[k]) / denom;
+        }
+        let beta = (s_norm / z_norm).sqrt();
+        let ok = beta.is_finite() && root.is_finite() && lambda.iter().all(|x| x.is_finite());
+        ok.then_some(Self { beta, w, v, lambda })
+    }
+
+    /// `W u = β (2 v (vᵀu) − J u)`.
+    fn apply(&self, u: &[f64; 4]) -> [f64; 4] {
+        let vu = dot(&self.v, u);
+        let ju = [u[0], -u[1], -u[2], -u[3]];
+        std::array::from_fn(|k| self.beta * (2.0 * self.v[k] * vu - ju[k]))
+    }
+
+    /// `W⁻¹ u = (2 J v (vᵀ J u) − J u) / β`.
+    fn apply_inverse(&self, u: &[f64; 4]) -> [f64; 4] {
+        let ju = [u[0], -u[1], -u[2], -u[3]];
+        let jv = [self.v[0], -self.v[1], -self.v[2], -self.v[3]];
+        let vju = dot(&self.v, &ju);
+        std::array::from_fn(|k| (2.0 * jv[k] * vju - ju[k]) / self.beta)
+    }
+
+    /// `W⁻² u = (2 J w̄ (w̄ᵀ J u) − J u) / β²`, the inverse of `W² = β² (2 w̄ w̄ᵀ − J)`.
+    fn apply_inverse_squared(&self, u: &[f64; 4]) -> [f64; 4] {
+        let ju = [u[0], -u[1], -u[2], -u[3]];
+        let jw = [self.w[0], -self.w[1], -self.w[2], -self.w[3]];
+        let wju = dot(&self.w, &ju);
+        let inv_b2 = 1.0 / (self.beta * self.beta);
+        std::array::from_fn(|k| inv_b2 * (2.0 * jw[k] * wju - ju[k]))
+    }
+
+    /// `G`, the lower-right `3 × 3` block of `W⁻²`: `(I + 2 w̄₁ w̄₁ᵀ) / β²`.
+    fn inverse_squared_block(&self) -> [[f64; 3]; 3] {
+        let inv_b2 = 1.0 / (self.beta * self.beta);
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let id = if i == j { 1.0 } else { 0.0 };
+                inv_b2 * (id + 2.0 * self.w[i + 1] * self.w[j + 1])
+            })
+        })
+    }
+}
+
+/// `√(v₀² − ‖v₁‖²)`, or `None` if `v` is not strictly inside `Q⁴`.
+fn cone_norm(v: &[f64]) -> Option<f64> {
+    let n1 = norm3(&v[1..4]);
+    // (v₀ − ‖v₁‖)(v₀ + ‖v₁‖) avoids the cancellation of v₀² − ‖v₁‖² near the boundary.
+    let q = (v[0] - n1) * (v[0] + n1);
+    (v[0] > n1 && q > 0.0).then(|| q.sqrt())
+}
+
+/// The Jordan product of `Q⁴`: `u ∘ v = [uᵀv; u₀ v₁ + v₀ u₁]`.
+fn jordan_product(u: &[f64; 4], v: &[f64; 4]) -> [f64; 4] {
+    [
+        dot(u, v),
+        u[0] * v[1] + v[0] * u[1],
+        u[0] * v[2] + v[0] * u[2],
+        u[0] * v[3] + v[0] * u[3],
+    ]
+}
+
+/// `λ ⋄ v`: the `x` with `λ ∘ x = v`, for `λ` inside the cone:
+/// `x₀ = (λ₀ v₀ − λ₁ᵀv₁) / (λᵀJλ)`, `x₁ = (v₁ − x₀ λ₁) / λ₀`.
+fn jordan_divide(lambda: &[f64; 4], v: &[f64; 4]) -> [f64; 4] {
+    let l1n = norm3(&lambda[1..4]);
+    let rho = (lambda[0] - l1n) * (lambda[0] + l1n);
+    let l1v1 = lambda[1] * v[1] + lambda[2] * v[2] + lambda[3] * v[3];
+    let x0 = (lambda[0] * v[0] - l1v1) / rho;
+    [
+        x0,
+        (v[1] - x0 * lambda[1]) / lambda[0],
+        (v[2] - x0 * lambda[2]) / lambda[0],
+        (v[3] - x0 * lambda[3]) / lambda[0],
+    ]
+}
+
+/// The largest `α ≥ 0` with `x + α d ∈ Q⁴` (`∞` if the ray stays inside), for `x`
+/// inside: the smallest positive root of `q(α) = (x + αd)ᵀ J (x + αd) = aα² + 2bα + c`,
+/// `c > 0`, in cancellation-free form.
+fn max_cone_step(x: &[f64], d: &[f64]) -> f64 {
+    let Some(xn) = cone_norm(x) else {
+        return 0.0;
+    };
+    let c = xn * xn;
+    let b = x[0] * d[0] - (x[1] * d[1] + x[2] * d[2] + x[3] * d[3]);
+    let dn = norm3(&d[1..4]);
+    let a = (d[0] - dn) * (d[0] + dn);
+    let disc = b * b - a * c;
+    if b < 0.0 {
+        // Both roots positive (a > 0), one (a < 0), or the linear root (a = 0).
+        if disc >= 0.0 {
+            c / (-b + disc.sqrt())
+        } else {
+            f64::INFINITY
+        }
+    } else if a < 0.0 {
+        (b + disc.sqrt()) / -a
+    } else {
+        f64::INFINITY
+    }
+}
+
+fn dot(u: &[f64], v: &[f64]) -> f64 {
+    u.iter().zip(v).map(|(a, b)| a * b).sum()
+}
+
+fn norm3(v: &[f64]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_interior(seed: &mut u64) -> [f64; 4] {
+        let mut next = || {
+            *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let v1 = [next(), next(), next()];
+        [norm3(&v1) + 0.01 + next().abs(), v1[0], v1[1], v1[2]]
+    }
+
+    #[test]
+    fn nt_scaling_maps_z_and_s_to_the_same_point() {
+        let mut seed = 7;
+        for _ in 0..20 {
+            let (s, z) = (random_interior(&mut seed), random_interior(&mut seed));
+            let w = NtScaling::new(&s, &z).unwrap();
+            let (wz, winv_s) = (w.apply(&z), w.apply_inverse(&s));
+            for k in 0..4 {
+                assert!(
+                    (wz[k] - w.lambda[k]).abs() < 1e-12 * w.lambda[0],
+                    "{wz:?} vs {:?}",
+                    w.lambda
+                );
+                assert!((winv_s[k] - w.lambda[k]).abs() < 1e-12 * w.lambda[0]);
+            }
+            // W⁻¹ inverts W, and the closed-form block is that of W⁻².
+            let v = random_interior(&mut seed);
+            let back = w.apply_inverse(&w.apply(&v));
+            assert!((0..4).all(|k| (back[k] - v[k]).abs() < 1e-12 * v[0]));
+            let g = w.inverse_squared_block();
+            for j in 0..4 {
+                let mut unit = [0.0; 4];
+                unit[j] = 1.0;
+                let col = w.apply_inverse(&w.apply_inverse(&unit));
+                let direct = w.apply_inverse_squared(&unit);
+                for i in 0..4 {
+                    assert!((col[i] - direct[i]).abs() < 1e-10 * direct[j].abs().max(1.0));
+                    if i > 0 && j > 0 {
+                        assert!((col[i] - g[i - 1][j - 1]).abs() < 1e-10 * direct[j].abs().max(1.0));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The reduced solve must satisfy the full Newton system it eliminates:
+    /// `K dx + Aᵀ dz = bx`, `A dx + ds = bz`, `λ ∘ (W dz + W⁻¹ ds) = bs`.
+    #[test]
+    fn reduced_newton_solve_satisfies_the_full_system() {
+        let mut seed = 17;
+        // Two triangles sharing an edge, plus a dangling edge: 5 vertices, 6 edges.
+        let edges = [[0, 1], [1, 2], [2, 0], [1, 3], [3, 2], [3, 4]];
+        let weights = [0.7, 1.3, 1.0, 0.9, 1.1];
+        let ipm = ReducedIpm::new(5, &edges, &weights).unwrap();
+        let m = edges.len();
+        let cone = |seed: &mut u64| random_interior(seed).to_vec();
+        let s: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
+        let z: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
+        let scalings: Vec<NtScaling> = (0..m)
+            .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]).unwrap())
+            .collect();
+        let blocks: EdgeBlocks = scalings.iter().map(NtScaling::inverse_squared_block).collect();
+        let (matrix, factor) = ipm.factorize(&blocks).unwrap();
+        let newton = NewtonSystem {
+            ipm: &ipm,
+            matrix: &matrix,
+            factor: &factor,
+            scalings: &scalings,
+            refine: false,
+        };
+        let bx: Vec<f64> = (0..15).flat_map(|_| cone(&mut seed)).take(15).collect();
+        let bz: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
+        let bs: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
+        let step = newton.solve(&bx, &bz, &bs);
+        let mut rx: Vec<f64> = (0..15).map(|i| weights[i / 3] * step.dx[i] - bx[i]).collect();
+        ipm.add_transpose_product(&step.dz, &mut rx);
+        assert!(max_abs(&rx) < 1e-12, "dual equation {rx:?}");
+        for (e, w) in scalings.iter().enumerate() {
+            let r = 4 * e..4 * e + 4;
+            let (ds, dz): ([f64; 4], [f64; 4]) = (
+                step.ds[r.clone()].try_into().unwrap(),
+                step.dz[r.clone()].try_into().unwrap(),
+            );
+            let adx = ipm.edge_product(e, &step.dx);
+            let wdz = w.apply(&dz);
+            let winv_ds = w.apply_inverse(&ds);
+            let sum: [f64; 4] = std::array::from_fn(|k| wdz[k] + winv_ds[k]);
+            let comp = jordan_product(&w.lambda, &sum);
+            for k in 0..4 {
+                assert!(
+                    (adx[k] + ds[k] - bz[4 * e + k]).abs() < 1e-12,
+                    "primal equation, cone {e}"
+                );
+                assert!((comp[k] - bs[4 * e + k]).abs() < 1e-10, "complementarity, cone {e}");
+                assert!((wdz[k] - step.dz_scaled[4 * e + k]).abs() < 1e-12);
+                assert!((winv_ds[k] - step.ds_scaled[4 * e + k]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn jordan_divide_inverts_the_product() {
+        let mut seed = 11;
+        let (l, v) = (random_interior(&mut seed), random_interior(&mut seed));
+        let x = jordan_divide(&l, &v);
+        let back = jordan_product(&l, &x);
+        assert!((0..4).all(|k| (back[k] - v[k]).abs() < 1e-12));
+    }
+
+    #[test]
+    fn max_cone_step_lands_on_the_boundary() {
+        let mut seed = 13;
+        for _ in 0..50 {
+            let x = random_interior(&mut seed);
+            let d = random_interior(&mut seed).map(|v| 3.0 * v - 1.0);
+            let alpha = max_cone_step(&x, &d);
+            if alpha.is_finite() {
+                let y: [f64; 4] = std::array::from_fn(|k| x[k] + alpha * d[k]);
+                assert!((y[0] - norm3(&y[1..4])).abs() < 1e-10 * (1.0 + alpha), "{y:?}");
+                assert!(y[0] >= -1e-12);
+            } else {
+                let y: [f64; 4] = std::array::from_fn(|k| x[k] + 1e6 * d[k]);
+                assert!(y[0] >= norm3(&y[1..4]));
+            }
+        }
+    }
+}
