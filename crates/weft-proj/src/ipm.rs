@@ -32,12 +32,12 @@
 //! the sparsity of the mesh edges, factorised by one sparse Cholesky whose symbolic
 //! analysis is done once per mesh. Predictor and corrector share that factor.
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
+use weft_linalg::CholeskyFactor;
 
 use crate::error::{Error, Result};
+use crate::kkt::{Block3, EdgeSystem};
 
 /// Fraction of the step to the cone boundary that is taken (CVXOPT's `STEP = 0.99`).
 const STEP_FRACTION: f64 = 0.99;
@@ -47,7 +47,7 @@ const STEP_FRACTION: f64 = 0.99;
 pub(crate) struct IpmSettings {
     pub tolerance: f64,
     pub max_iterations: u32,
-    /// One step of iterative refinement of each reduced solve against the assembled matrix.
+    /// One step of iterative refinement of each reduced solve.
     pub iterative_refinement: bool,
     pub verbose: bool,
 }
@@ -66,52 +66,24 @@ pub(crate) struct IpmSolution {
     pub seconds: f64,
 }
 
-/// The reduced-system interior-point solver of one mesh: the edges, the vertex weights
-/// and the symbolic Cholesky factor of `K + Σ_e D_eᵀ G_e D_e`.
+/// The reduced-system interior-point solver on one mesh's [`EdgeSystem`].
 #[derive(Debug)]
-pub(crate) struct ReducedIpm {
-    edges: Vec<[usize; 2]>,
-    weights: Vec<f64>,
-    cholesky: CholeskySolver,
+pub(crate) struct ReducedIpm<'a> {
+    system: &'a EdgeSystem,
 }
 
-/// The lower-right `3 × 3` blocks `G_e` (or any per-edge `3 × 3` matrix) of `Aᵀ H A`.
-type EdgeBlocks = Vec<[[f64; 3]; 3]>;
-
-impl ReducedIpm {
-    pub fn new(num_vertices: usize, edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
-        let pattern = SymmetricPattern::from_vertex_pairs(num_vertices, edges.iter().map(|&[a, b]| (a, b)));
-        let cholesky = CholeskySolver::new(Arc::new(pattern))?;
-        Ok(Self {
-            edges: edges.to_vec(),
-            weights: weights.to_vec(),
-            cholesky,
-        })
+impl<'a> ReducedIpm<'a> {
+    pub fn new(system: &'a EdgeSystem) -> Self {
+        Self { system }
     }
 
     fn num_cones(&self) -> usize {
-        self.edges.len()
-    }
-
-    /// `K + Σ_e D_eᵀ G_e D_e`.
-    fn assemble(&self, blocks: &EdgeBlocks) -> SymmetricMatrix {
-        let mut matrix = SymmetricMatrix::zeros(self.cholesky.pattern().clone());
-        for (v, &w) in self.weights.iter().enumerate() {
-            matrix.add_vertex_block(v, v, &[[w, 0.0, 0.0], [0.0, w, 0.0], [0.0, 0.0, w]]);
-        }
-        for (&[a, b], g) in self.edges.iter().zip(blocks) {
-            let neg = g.map(|row| row.map(|v| -v));
-            matrix.add_vertex_block(a, a, g);
-            matrix.add_vertex_block(b, b, g);
-            // G is symmetric, so the block at (min, max) is −G either way round.
-            matrix.add_vertex_block(a.min(b), a.max(b), &neg);
-        }
-        matrix
+        self.system.edges().len()
     }
 
     /// `y = Aᵀ u` for a cone vector `u` (length `4m`): `(Aᵀu)_a −= u_e¹, (Aᵀu)_b += u_e¹`.
     fn add_transpose_product(&self, u: &[f64], y: &mut [f64]) {
-        for (e, &[a, b]) in self.edges.iter().enumerate() {
+        for (e, &[a, b]) in self.system.edges().iter().enumerate() {
             for c in 0..3 {
                 y[3 * a + c] -= u[4 * e + 1 + c];
                 y[3 * b + c] += u[4 * e + 1 + c];
@@ -121,7 +93,7 @@ impl ReducedIpm {
 
     /// `A_e x = [0; −(x_a − x_b)]`.
     fn edge_product(&self, e: usize, x: &[f64]) -> [f64; 4] {
-        let [a, b] = self.edges[e];
+        let [a, b] = self.system.edges()[e];
         [
             0.0,
             x[3 * b] - x[3 * a],
@@ -133,7 +105,7 @@ impl ReducedIpm {
     /// Residuals at `(x, s, z)`: `r_x = Kx + Aᵀz`, `r_z = Ax + s − b`, and `Kx`.
     fn residuals(&self, b: &[f64], x: &[f64], s: &[f64], z: &[f64]) -> Residuals {
         let n = x.len();
-        let kx: Vec<f64> = (0..n).map(|i| self.weights[i / 3] * x[i]).collect();
+        let kx: Vec<f64> = (0..n).map(|i| self.system.weights()[i / 3] * x[i]).collect();
         let mut at_z = vec![0.0; n];
         self.add_transpose_product(z, &mut at_z);
         let rx: Vec<f64> = kx.iter().zip(&at_z).map(|(a, b)| a + b).collect();
@@ -156,21 +128,15 @@ impl ReducedIpm {
         }
     }
 
-    /// Factorises `K + Σ_e D_eᵀ G_e D_e`, keeping the matrix for iterative refinement.
-    fn factorize(&self, blocks: &EdgeBlocks) -> Result<(SymmetricMatrix, CholeskyFactor)> {
-        let matrix = self.assemble(blocks);
-        let factor = self.cholesky.factorize(&matrix)?;
-        Ok((matrix, factor))
-    }
-
-    /// Solves `M y = rhs` in place, with one step of iterative refinement if asked.
-    fn solve_reduced(&self, matrix: &SymmetricMatrix, factor: &CholeskyFactor, rhs: &mut [f64], refine: bool) {
+    /// Solves `(K + Σ_e D_eᵀ G_e D_e) y = rhs` in place, with one step of iterative
+    /// refinement if asked.
+    fn solve_reduced(&self, blocks: &[Block3], factor: &CholeskyFactor, rhs: &mut [f64], refine: bool) {
         let b = refine.then(|| rhs.to_vec());
         factor.solve_in_place(rhs);
-        if let Some(b) = b {
-            let mut r = vec![0.0; rhs.len()];
-            matrix.mul_vec(rhs, &mut r);
-            r.iter_mut().zip(&b).for_each(|(r, b)| *r = b - *r);
+        if let Some(mut r) = b {
+            let mut product = vec![0.0; rhs.len()];
+            self.system.add_product(blocks, rhs, &mut product);
+            r.iter_mut().zip(&product).for_each(|(r, p)| *r -= p);
             factor.solve_in_place(&mut r);
             rhs.iter_mut().zip(&r).for_each(|(x, d)| *x += d);
         }
@@ -180,13 +146,13 @@ impl ReducedIpm {
     /// `½ xᵀKx + ½ ‖Ax − b‖²`, `s = b − Ax`, `z = Ax − b`, each then shifted along the
     /// cone's identity `e = [1; 0]` into the interior if it is not already there.
     fn initial_point(&self, b: &[f64], refine: bool) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-        let n = self.weights.len() * 3;
+        let n = self.system.weights().len() * 3;
         let m = self.num_cones();
-        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-        let (matrix, factor) = self.factorize(&vec![identity; m])?;
+        let identity = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; m];
+        let factor = self.system.factorize(&identity)?;
         let mut x = vec![0.0; n];
         self.add_transpose_product(b, &mut x);
-        self.solve_reduced(&matrix, &factor, &mut x, refine);
+        self.solve_reduced(&identity, &factor, &mut x, refine);
         let mut s = vec![0.0; 4 * m];
         for e in 0..m {
             let ax = self.edge_product(e, &x);
@@ -213,7 +179,7 @@ impl ReducedIpm {
     pub fn solve(&self, b: &[f64], settings: &IpmSettings) -> Result<IpmSolution> {
         let start = Instant::now();
         let m = self.num_cones();
-        let n = 3 * self.weights.len();
+        let n = 3 * self.system.weights().len();
         let refine = settings.iterative_refinement;
         let failed = |status: &str, iterations: u32| Error::SolverFailed {
             status: status.to_string(),
@@ -254,13 +220,13 @@ impl ReducedIpm {
                 .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
                 .collect::<Option<_>>()
                 .ok_or_else(|| failed("NumericalError", iterations))?;
-            let blocks: EdgeBlocks = scalings.iter().map(NtScaling::inverse_squared_block).collect();
+            let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
             let factor_start = Instant::now();
-            let (matrix, factor) = self.factorize(&blocks)?;
+            let factor = self.system.factorize(&blocks)?;
             let factor_seconds = factor_start.elapsed().as_secs_f64();
             let newton = NewtonSystem {
                 ipm: self,
-                matrix: &matrix,
+                blocks: &blocks,
                 factor: &factor,
                 scalings: &scalings,
                 refine,
@@ -338,8 +304,8 @@ struct NewtonStep {
 
 /// One iteration's factorised Newton system.
 struct NewtonSystem<'a> {
-    ipm: &'a ReducedIpm,
-    matrix: &'a SymmetricMatrix,
+    ipm: &'a ReducedIpm<'a>,
+    blocks: &'a [Block3],
     factor: &'a CholeskyFactor,
     scalings: &'a [NtScaling],
     refine: bool,
@@ -361,7 +327,7 @@ impl NewtonSystem<'_> {
         }
         let mut dx = bx.to_vec();
         self.ipm.add_transpose_product(&y, &mut dx);
-        self.ipm.solve_reduced(self.matrix, self.factor, &mut dx, self.refine);
+        self.ipm.solve_reduced(self.blocks, self.factor, &mut dx, self.refine);
         let mut step = NewtonStep {
             dx,
             ds: vec![0.0; 4 * m],
@@ -454,7 +420,7 @@ impl NtScaling {
     }
 
     /// `G`, the lower-right `3 × 3` block of `W⁻²`: `(I + 2 w̄₁ w̄₁ᵀ) / β²`.
-    fn inverse_squared_block(&self) -> [[f64; 3]; 3] {
+    fn inverse_squared_block(&self) -> Block3 {
         let inv_b2 = 1.0 / (self.beta * self.beta);
         std::array::from_fn(|i| {
             std::array::from_fn(|j| {
@@ -592,7 +558,8 @@ mod tests {
         // Two triangles sharing an edge, plus a dangling edge: 5 vertices, 6 edges.
         let edges = [[0, 1], [1, 2], [2, 0], [1, 3], [3, 2], [3, 4]];
         let weights = [0.7, 1.3, 1.0, 0.9, 1.1];
-        let ipm = ReducedIpm::new(5, &edges, &weights).unwrap();
+        let system = EdgeSystem::new(5, &edges, &weights).unwrap();
+        let ipm = ReducedIpm::new(&system);
         let m = edges.len();
         let cone = |seed: &mut u64| random_interior(seed).to_vec();
         let s: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
@@ -600,11 +567,11 @@ mod tests {
         let scalings: Vec<NtScaling> = (0..m)
             .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]).unwrap())
             .collect();
-        let blocks: EdgeBlocks = scalings.iter().map(NtScaling::inverse_squared_block).collect();
-        let (matrix, factor) = ipm.factorize(&blocks).unwrap();
+        let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
+        let factor = system.factorize(&blocks).unwrap();
         let newton = NewtonSystem {
             ipm: &ipm,
-            matrix: &matrix,
+            blocks: &blocks,
             factor: &factor,
             scalings: &scalings,
             refine: false,

@@ -39,6 +39,7 @@
 pub mod axial;
 pub mod error;
 mod ipm;
+mod kkt;
 pub mod metrics;
 pub mod quasistatic;
 pub mod rest;

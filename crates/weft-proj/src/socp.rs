@@ -54,7 +54,6 @@
 //! solution and the LDLᵀ's sign-aware dynamic regularisation pick one multiplier
 //! solution; iterative refinement against the unregularised matrix then restores `η`.
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use clarabel::algebra::CscMatrix;
@@ -62,11 +61,11 @@ use clarabel::solver::{
     DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT, SupportedConeT::SecondOrderConeT,
 };
 use rayon::prelude::*;
-use weft_linalg::{LdltSettings, LdltSolver, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TriMesh;
 
 use crate::error::{Error, Result, check_output};
 use crate::ipm::{IpmSettings, ReducedIpm};
+use crate::kkt::{EdgeBlock, EdgeSystem, KktFactor};
 use crate::rest::{RestShape, edge_vector};
 
 /// Which interior-point method solves the forward SOCP.
@@ -203,26 +202,6 @@ pub struct BackwardReport {
     pub constraint_rows: usize,
 }
 
-/// One edge's contribution to a KKT matrix over `[r_a, r_b, row_e]`: `D_eᵀ B D_e` in the
-/// primal block, `D_eᵀ c` coupling to the edge's row, `σ` on its diagonal.
-#[derive(Debug, Clone, Copy)]
-struct EdgeBlock {
-    primal: nalgebra::Matrix3<f64>,
-    coupling: Option<nalgebra::Vector3<f64>>,
-    diagonal: f64,
-}
-
-impl EdgeBlock {
-    /// An edge without a constraint row: its multiplier decouples (`−1 · ν = 0`).
-    fn decoupled() -> Self {
-        Self {
-            primal: nalgebra::Matrix3::zeros(),
-            coupling: None,
-            diagonal: -1.0,
-        }
-    }
-}
-
 /// Geng et al.'s inextensibility projection as a layer: built once per rest mesh and
 /// `ε`, then [`forward`](Self::forward) / [`backward`](Self::backward) per example.
 #[derive(Debug)]
@@ -236,13 +215,9 @@ pub struct InextensibilityLayer {
     p: CscMatrix<f64>,
     a: CscMatrix<f64>,
     cones: Vec<SupportedConeT<f64>>,
-    ipm: ReducedIpm,
-    kkt: LdltSolver,
-    /// For every edge, the KKT slots of its local 7 × 7 matrix over
-    /// `[3a, 3a+1, 3a+2, 3b, 3b+1, 3b+2, 3V+e]` (`usize::MAX` for the lower triangle).
-    kkt_slots: Vec<[usize; 49]>,
-    /// KKT slots of the diagonal of the primal block.
-    diag_slots: Vec<usize>,
+    /// `K + Σ_e D_eᵀ G_e D_e` and its symbolic Cholesky factor: the linear algebra of
+    /// the interior-point method, the polish and the backward pass.
+    system: EdgeSystem,
 }
 
 impl InextensibilityLayer {
@@ -294,59 +269,7 @@ impl InextensibilityLayer {
         let a = CscMatrix::new_from_triplets(4 * m, n, ri, ci, vals);
         let cones = vec![SecondOrderConeT(4); m];
 
-        // Pattern of the differentiated KKT system (primal 3V + one row per edge).
-        let mut entries = Vec::with_capacity(m * 49 + 6 * nv);
-        for v in 0..nv {
-            for r in 0..3 {
-                for c in r..3 {
-                    entries.push((3 * v + r, 3 * v + c));
-                }
-            }
-        }
-        let local_dofs = |e: usize, [va, vb]: [usize; 2]| -> [usize; 7] {
-            [3 * va, 3 * va + 1, 3 * va + 2, 3 * vb, 3 * vb + 1, 3 * vb + 2, n + e]
-        };
-        for (e, &edge) in edges.iter().enumerate() {
-            let dofs = local_dofs(e, edge);
-            for &r in &dofs {
-                for &c in &dofs {
-                    if r <= c {
-                        entries.push((r, c));
-                    }
-                }
-            }
-        }
-        let pattern = Arc::new(SymmetricPattern::new(n + m, entries));
-        let slot = |r: usize, c: usize| {
-            pattern
-                .slot(r, c)
-                .unwrap_or_else(|| unreachable!("({r}, {c}) was added"))
-        };
-        let kkt_slots = edges
-            .iter()
-            .enumerate()
-            .map(|(e, &edge)| {
-                let dofs = local_dofs(e, edge);
-                let mut s = [usize::MAX; 49];
-                for (i, &r) in dofs.iter().enumerate() {
-                    for (j, &c) in dofs.iter().enumerate() {
-                        if r <= c {
-                            s[7 * i + j] = slot(r, c);
-                        }
-                    }
-                }
-                s
-            })
-            .collect();
-        let diag_slots = (0..n).map(|i| slot(i, i)).collect();
-        let signs = (0..n + m).map(|i| if i < n { 1 } else { -1 }).collect();
-        let ldlt = LdltSettings {
-            delta: settings.ldlt_delta,
-            refinement_steps: settings.refinement_steps,
-            ..LdltSettings::default()
-        };
-        let kkt = LdltSolver::new(pattern, signs, ldlt)?;
-        let ipm = ReducedIpm::new(nv, &edges, rest.weights())?;
+        let system = EdgeSystem::new(nv, &edges, rest.weights())?;
         Ok(Self {
             rest,
             epsilon,
@@ -356,10 +279,7 @@ impl InextensibilityLayer {
             p,
             a,
             cones,
-            ipm,
-            kkt,
-            kkt_slots,
-            diag_slots,
+            system,
         })
     }
 
@@ -429,7 +349,7 @@ impl InextensibilityLayer {
             iterative_refinement: self.settings.iterative_refinement,
             verbose: self.settings.verbose,
         };
-        let sol = self.ipm.solve(b, &settings)?;
+        let sol = ReducedIpm::new(&self.system).solve(b, &settings)?;
         Ok(ConicSolution {
             x: sol.x,
             s: sol.s,
@@ -669,7 +589,7 @@ impl InextensibilityLayer {
                     }
                 })
                 .collect();
-            let factor = self.kkt.factorize(&self.assemble(&blocks)).ok()?;
+            let factor = self.factorize_kkt(blocks).ok()?;
             let mut step: Vec<f64> = r.iter().chain(&r_len).map(|v| -v).collect();
             factor.solve_in_place(&mut step);
             let trial: Vec<f64> = delta.iter().zip(&step).map(|(d, s)| d + s).collect();
@@ -688,42 +608,11 @@ impl InextensibilityLayer {
         Some((delta, lambda, norm, iterations))
     }
 
-    /// Assembles the symmetric KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e; c_eᵀ D_e, σ_e]`.
-    fn assemble(&self, blocks: &[EdgeBlock]) -> SymmetricMatrix {
-        let w = self.rest.weights();
-        let mut kkt = SymmetricMatrix::zeros(self.kkt.pattern().clone());
-        let values = kkt.values_mut();
-        for (i, &slot) in self.diag_slots.iter().enumerate() {
-            values[slot] += w[i / 3];
-        }
-        for (e, block) in blocks.iter().enumerate() {
-            let slots = &self.kkt_slots[e];
-            let mut local = [0.0; 49];
-            for i in 0..3 {
-                for j in 0..3 {
-                    let bij = block.primal[(i, j)];
-                    local[7 * i + j] = bij;
-                    local[7 * (i + 3) + (j + 3)] = bij;
-                    local[7 * i + (j + 3)] = -bij;
-                    local[7 * (i + 3) + j] = -bij;
-                }
-            }
-            if let Some(c) = block.coupling {
-                for i in 0..3 {
-                    local[7 * i + 6] = c[i];
-                    local[7 * (i + 3) + 6] = -c[i];
-                    local[7 * 6 + i] = c[i];
-                    local[7 * 6 + i + 3] = -c[i];
-                }
-            }
-            local[48] = block.diagonal;
-            for k in 0..49 {
-                if slots[k] != usize::MAX && local[k] != 0.0 {
-                    values[slots[k]] += local[k];
-                }
-            }
-        }
-        kkt
+    /// The regularised LDLᵀ of the edge KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e;
+    /// c_eᵀ D_e, σ_e]` (rows first, see `crate::kkt`).
+    fn factorize_kkt(&self, blocks: Vec<EdgeBlock>) -> Result<KktFactor<'_>> {
+        self.system
+            .factorize_kkt(blocks, self.settings.ldlt_delta, self.settings.refinement_steps)
     }
 
     /// `∂E/∂r̂` from `∂E/∂r*` (`grad_out`) at a forward solution (Geng et al. Eq. 11).
@@ -779,7 +668,7 @@ impl InextensibilityLayer {
                 }
             })
             .collect();
-        let factor = self.kkt.factorize(&self.assemble(&blocks))?;
+        let factor = self.factorize_kkt(blocks)?;
         let mut rhs = vec![0.0; n + m];
         rhs[..n].copy_from_slice(grad_out);
         let linear_residual = factor.solve_in_place(&mut rhs);
