@@ -45,28 +45,56 @@ use crate::error::Result;
 /// A symmetric `3 × 3` block, row-major, as [`SymmetricMatrix::add_vertex_block`] takes it.
 pub(crate) type Block3 = [[f64; 3]; 3];
 
-/// `K + Σ_e D_eᵀ G_e D_e` for one mesh: its edges, the vertex weights `w_v`
-/// (`K = diag(w_v) ⊗ I₃`) and the symbolic Cholesky factor of its pattern.
+/// `K + Σ_e D_eᵀ G_e D_e` over some of a mesh's edges: those edges, their indices in
+/// the mesh's edge list, the vertex weights `w_v` (`K = diag(w_v) ⊗ I₃`) and the symbolic
+/// Cholesky factor of its pattern.
 #[derive(Debug)]
 pub(crate) struct EdgeSystem {
     edges: Vec<[usize; 2]>,
+    ids: Vec<usize>,
     weights: Vec<f64>,
     cholesky: CholeskySolver,
 }
 
 impl EdgeSystem {
+    /// The system over every edge of the mesh.
     pub fn new(num_vertices: usize, edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
-        let pattern = SymmetricPattern::from_vertex_pairs(num_vertices, edges.iter().map(|&[a, b]| (a, b)));
+        debug_assert_eq!(weights.len(), num_vertices);
+        Self::over(edges.to_vec(), (0..edges.len()).collect(), weights.to_vec())
+    }
+
+    fn over(edges: Vec<[usize; 2]>, ids: Vec<usize>, weights: Vec<f64>) -> Result<Self> {
+        let pattern = SymmetricPattern::from_vertex_pairs(weights.len(), edges.iter().map(|&[a, b]| (a, b)));
         let cholesky = CholeskySolver::new(Arc::new(pattern))?;
         Ok(Self {
-            edges: edges.to_vec(),
-            weights: weights.to_vec(),
+            edges,
+            ids,
+            weights,
             cholesky,
         })
     }
 
+    /// The system over the edges with `keep[id]` only (its own symbolic analysis): after
+    /// the polish every other edge is exactly decoupled, and the Cholesky factor of the
+    /// active edges' pattern is an order of magnitude cheaper than the full one.
+    pub fn restricted(&self, keep: &[bool]) -> Result<Self> {
+        let (ids, edges) = self
+            .ids
+            .iter()
+            .zip(&self.edges)
+            .filter(|&(&id, _)| keep[id])
+            .map(|(&id, &edge)| (id, edge))
+            .unzip();
+        Self::over(edges, ids, self.weights.clone())
+    }
+
     pub fn edges(&self) -> &[[usize; 2]] {
         &self.edges
+    }
+
+    /// The index in the mesh's edge list of each of [`Self::edges`].
+    pub fn ids(&self) -> &[usize] {
+        &self.ids
     }
 
     pub fn weights(&self) -> &[f64] {
@@ -116,8 +144,9 @@ impl EdgeSystem {
         ]
     }
 
-    /// Factorises the edge KKT matrix `𝒦` with one row per edge (see the module doc):
-    /// row pivots `min(σ_e, −δ)`, then the Cholesky factor of their Schur complement.
+    /// Factorises the edge KKT matrix `𝒦` with one row per edge of this system (`blocks`
+    /// in the order of [`Self::edges`]; see the module doc): row pivots `min(σ_e, −δ)`,
+    /// then the Cholesky factor of their Schur complement.
     pub fn factorize_kkt(&self, blocks: Vec<EdgeBlock>, delta: f64, refinement_steps: usize) -> Result<KktFactor<'_>> {
         let pivots: Vec<f64> = blocks.iter().map(|blk| blk.diagonal.min(-delta)).collect();
         let schur: Vec<Block3> = blocks
@@ -163,7 +192,8 @@ impl EdgeBlock {
 }
 
 /// The regularised rows-first LDLᵀ of an edge KKT matrix, kept with its blocks for
-/// iterative refinement. Unknowns are laid out `[primal (3V); one multiplier per edge]`.
+/// iterative refinement. Unknowns are laid out `[primal (3V); one multiplier per edge of
+/// the system]`.
 #[derive(Debug)]
 pub(crate) struct KktFactor<'a> {
     system: &'a EdgeSystem,

@@ -54,6 +54,7 @@
 //! solution and the LDLᵀ's sign-aware dynamic regularisation pick one multiplier
 //! solution; iterative refinement against the unregularised matrix then restores `η`.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use clarabel::algebra::CscMatrix;
@@ -167,6 +168,8 @@ pub struct SocpSolution {
     positions: Vec<f64>,
     s: Vec<f64>,
     z: Vec<f64>,
+    /// The polish's system over its active edges, reused by the backward pass.
+    active_system: Option<Arc<EdgeSystem>>,
 }
 
 impl SocpSolution {
@@ -217,7 +220,7 @@ pub struct InextensibilityLayer {
     cones: Vec<SupportedConeT<f64>>,
     /// `K + Σ_e D_eᵀ G_e D_e` and its symbolic Cholesky factor: the linear algebra of
     /// the interior-point method, the polish and the backward pass.
-    system: EdgeSystem,
+    system: Arc<EdgeSystem>,
 }
 
 impl InextensibilityLayer {
@@ -269,7 +272,7 @@ impl InextensibilityLayer {
         let a = CscMatrix::new_from_triplets(4 * m, n, ri, ci, vals);
         let cones = vec![SecondOrderConeT(4); m];
 
-        let system = EdgeSystem::new(nv, &edges, rest.weights())?;
+        let system = Arc::new(EdgeSystem::new(nv, &edges, rest.weights())?);
         Ok(Self {
             rest,
             epsilon,
@@ -383,10 +386,10 @@ impl InextensibilityLayer {
         check_output("conic slacks", &conic.s)?;
         check_output("conic duals", &conic.z)?;
         let (mut x, mut s, mut z) = (conic.x, conic.s, conic.z);
-        let polish_iterations = if self.settings.polish {
-            self.polish(&b, &mut x, &mut s, &mut z)
+        let (polish_iterations, active_system) = if self.settings.polish {
+            self.polish(&b, &mut x, &mut s, &mut z).unzip()
         } else {
-            None
+            (None, None)
         };
 
         let positions: Vec<f64> = pred.iter().zip(&x).map(|(p, d)| p + ell * d).collect();
@@ -426,7 +429,13 @@ impl InextensibilityLayer {
             active_constraints: active,
             num_constraints: m,
         };
-        Ok((SocpSolution { positions, s, z }, report))
+        let solution = SocpSolution {
+            positions,
+            s,
+            z,
+            active_system,
+        };
+        Ok((solution, report))
     }
 
     /// Relative stationarity `‖Kδ + Aᵀz‖∞ / max(‖Kδ‖∞, ‖Aᵀz‖∞)` and relative
@@ -472,8 +481,9 @@ impl InextensibilityLayer {
     /// Eq. 2 restricted to the active edges (`‖d_e‖ = l_e^max`), so the returned point
     /// satisfies them to round-off rather than to the interior-point tolerance.
     /// Accepted only if it converges with non-negative multipliers and every other edge
-    /// within its bound; returns the Newton iterations, or `None` if it was rejected.
-    fn polish(&self, b: &[f64], x: &mut [f64], s: &mut [f64], z: &mut [f64]) -> Option<usize> {
+    /// within its bound; returns the Newton iterations and the system over the final
+    /// active set, or `None` if it was rejected.
+    fn polish(&self, b: &[f64], x: &mut [f64], s: &mut [f64], z: &mut [f64]) -> Option<(usize, Arc<EdgeSystem>)> {
         let m = self.num_constraints();
         let edges = self.rest.edges();
         let d_at = |delta: &[f64], e: usize| {
@@ -493,7 +503,8 @@ impl InextensibilityLayer {
         // set is nearly always right; an edge that needs a negative multiplier is
         // released, one that ends up over its bound is added.
         for _ in 0..6 {
-            let (delta, lambda, norm, iterations) = self.polish_newton(b, &active, x, &lambda0, &d_at)?;
+            let system = self.system_over(&active).ok()?;
+            let (delta, lambda, norm, iterations) = self.polish_newton(b, &system, &active, x, &lambda0, &d_at)?;
             total += iterations;
             if norm > 1e-12 {
                 return None;
@@ -525,9 +536,22 @@ impl InextensibilityLayer {
                     z[4 * e + 1 + c] = -le * u[c];
                 }
             }
-            return Some(total);
+            return Some((total, system));
         }
         None
+    }
+
+    /// The edge system over the edges with `keep[e]`: the layer's full one when most
+    /// edges are kept, else a restricted one (its symbolic analysis costs about as much
+    /// as two numeric factorisations of the full pattern and makes each factorisation
+    /// several times cheaper).
+    fn system_over(&self, keep: &[bool]) -> Result<Arc<EdgeSystem>> {
+        let kept = keep.iter().filter(|&&k| k).count();
+        if 2 * kept > keep.len() {
+            Ok(self.system.clone())
+        } else {
+            Ok(Arc::new(self.system.restricted(keep)?))
+        }
     }
 
     /// Newton's method on Eq. 2 with the edges in `active` held at their bounds, from the
@@ -536,6 +560,7 @@ impl InextensibilityLayer {
     fn polish_newton(
         &self,
         b: &[f64],
+        system: &EdgeSystem,
         active: &[bool],
         x0: &[f64],
         lambda0: &[f64],
@@ -572,9 +597,12 @@ impl InextensibilityLayer {
         let mut iterations = 0;
         while norm > 1e-14 && iterations < 10 {
             iterations += 1;
-            // The Jacobian of Eq. 2: [K + Σ λ_e D_eᵀ (I − u uᵀ)/l D_e, D_eᵀu_e; u_eᵀD_e, 0].
-            let blocks: Vec<EdgeBlock> = (0..m)
-                .map(|e| {
+            // The Jacobian of Eq. 2: [K + Σ λ_e D_eᵀ (I − u uᵀ)/l D_e, D_eᵀu_e; u_eᵀD_e, 0],
+            // one row per edge of `system` (those of inactive edges decouple).
+            let blocks: Vec<EdgeBlock> = system
+                .ids()
+                .iter()
+                .map(|&e| {
                     if !active[e] {
                         return EdgeBlock::decoupled();
                     }
@@ -589,13 +617,20 @@ impl InextensibilityLayer {
                     }
                 })
                 .collect();
-            let factor = self.factorize_kkt(blocks).ok()?;
-            let mut step: Vec<f64> = r.iter().chain(&r_len).map(|v| -v).collect();
+            let factor = self.factorize_kkt(system, blocks).ok()?;
+            let mut step: Vec<f64> = r
+                .iter()
+                .chain(system.ids().iter().map(|&e| &r_len[e]))
+                .map(|v| -v)
+                .collect();
             factor.solve_in_place(&mut step);
             let trial: Vec<f64> = delta.iter().zip(&step).map(|(d, s)| d + s).collect();
-            let trial_lambda: Vec<f64> = (0..m)
-                .map(|e| if active[e] { lambda[e] + step[n + e] } else { 0.0 })
-                .collect();
+            let mut trial_lambda = vec![0.0; m];
+            for (k, &e) in system.ids().iter().enumerate() {
+                if active[e] {
+                    trial_lambda[e] = lambda[e] + step[n + k];
+                }
+            }
             let (tr, tr_len, tnorm) = residual(&trial, &trial_lambda);
             // Newton from an interior-point solution is in its region of quadratic
             // convergence; an occasional first-step increase (the multipliers of nearly
@@ -610,9 +645,8 @@ impl InextensibilityLayer {
 
     /// The regularised LDLᵀ of the edge KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e;
     /// c_eᵀ D_e, σ_e]` (rows first, see `crate::kkt`).
-    fn factorize_kkt(&self, blocks: Vec<EdgeBlock>) -> Result<KktFactor<'_>> {
-        self.system
-            .factorize_kkt(blocks, self.settings.ldlt_delta, self.settings.refinement_steps)
+    fn factorize_kkt<'a>(&self, system: &'a EdgeSystem, blocks: Vec<EdgeBlock>) -> Result<KktFactor<'a>> {
+        system.factorize_kkt(blocks, self.settings.ldlt_delta, self.settings.refinement_steps)
     }
 
     /// `∂E/∂r̂` from `∂E/∂r*` (`grad_out`) at a forward solution (Geng et al. Eq. 11).
@@ -637,13 +671,23 @@ impl InextensibilityLayer {
                 got: solution.s.len(),
             });
         }
+        // Edges carrying force (Appendix A, last paragraph: the others decouple). After
+        // the polish they are its active edges, whose system (and symbolic factor) the
+        // solution carries.
+        let (s_all, z_all) = (&solution.s, &solution.z);
+        let loaded: Vec<bool> = (0..m).map(|e| z_all[4 * e] > 0.0 && s_all[4 * e] > 0.0).collect();
+        let system = match &solution.active_system {
+            Some(system) if covers(system, &loaded) => system.clone(),
+            _ => self.system_over(&loaded)?,
+        };
         let mut rows = 0;
-        let blocks: Vec<EdgeBlock> = (0..m)
-            .map(|e| {
-                let (s, z) = (&solution.s[4 * e..4 * e + 4], &solution.z[4 * e..4 * e + 4]);
+        let blocks: Vec<EdgeBlock> = system
+            .ids()
+            .iter()
+            .map(|&e| {
+                let (s, z) = (&s_all[4 * e..4 * e + 4], &z_all[4 * e..4 * e + 4]);
                 let (s0, z0) = (s[0], z[0]);
-                if !(z0 > 0.0 && s0 > 0.0) {
-                    // No force on the edge (Appendix A, last paragraph): it decouples.
+                if !loaded[e] {
                     return EdgeBlock::decoupled();
                 }
                 let s1 = nalgebra::Vector3::new(s[1], s[2], s[3]);
@@ -668,8 +712,8 @@ impl InextensibilityLayer {
                 }
             })
             .collect();
-        let factor = self.factorize_kkt(blocks)?;
-        let mut rhs = vec![0.0; n + m];
+        let factor = self.factorize_kkt(&system, blocks)?;
+        let mut rhs = vec![0.0; n + system.ids().len()];
         rhs[..n].copy_from_slice(grad_out);
         let linear_residual = factor.solve_in_place(&mut rhs);
         let w = self.rest.weights();
@@ -707,4 +751,11 @@ impl InextensibilityLayer {
             .map(|(s, g)| self.backward(s, g.as_ref()))
             .collect()
     }
+}
+
+/// Whether every edge with `needed[e]` is in `system`.
+fn covers(system: &EdgeSystem, needed: &[bool]) -> bool {
+    let mut inside = vec![false; needed.len()];
+    system.ids().iter().for_each(|&e| inside[e] = true);
+    needed.iter().zip(&inside).all(|(&n, &i)| !n || i)
 }
