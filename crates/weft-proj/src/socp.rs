@@ -93,12 +93,15 @@ pub struct SocpSettings {
     pub max_iterations: u32,
     /// Largest accepted relative excess of an edge over its bound: `l/l^max − 1`.
     pub feasibility_tolerance: f64,
-    /// Regularisation and refinement of the backward LDLᵀ.
+    /// Regularisation of the polish and backward LDLᵀ (a constraint-row pivot above
+    /// `−δ` becomes `−δ`) and its steps of iterative refinement against the
+    /// unregularised matrix.
     pub ldlt_delta: f64,
     pub refinement_steps: usize,
-    /// Iterative refinement of the interior-point method's linear solves (for Clarabel
-    /// about 25 % of its time on the paper-sized sheet; on by default for accuracy on
-    /// degenerate problems).
+    /// Iterative refinement of the interior-point method's linear solves: for the
+    /// reduced IPM a residual check per solve and one refinement step when it is above
+    /// `√ε`; for Clarabel its own refinement (about 25 % of its time on the paper-sized
+    /// sheet). On by default for accuracy on degenerate problems.
     pub iterative_refinement: bool,
     /// Print the interior-point iteration log.
     pub verbose: bool,
@@ -497,14 +500,21 @@ impl InextensibilityLayer {
         let mut active: Vec<bool> = (0..m)
             .map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
             .collect();
-        let lambda0: Vec<f64> = (0..m).map(|e| z[4 * e]).collect();
+        let mut start: (Vec<f64>, Vec<f64>) = (x.to_vec(), (0..m).map(|e| z[4 * e]).collect());
         let mut total = 0;
         // A primal active-set loop around Newton: the interior-point solution's active
         // set is nearly always right; an edge that needs a negative multiplier is
-        // released, one that ends up over its bound is added.
+        // released, one that ends up over its bound is added. Each round starts from the
+        // previous round's Newton solution, which differs only near the changed edges.
+        let mut previous: Option<Arc<EdgeSystem>> = None;
         for _ in 0..6 {
-            let system = self.system_over(&active).ok()?;
-            let (delta, lambda, norm, iterations) = self.polish_newton(b, &system, &active, x, &lambda0, &d_at)?;
+            // A round that only released edges keeps the previous round's system.
+            let system = match previous.take() {
+                Some(system) if covers(&system, &active) => system,
+                _ => self.system_over(&active).ok()?,
+            };
+            let (delta, lambda, norm, iterations) =
+                self.polish_newton(b, &system, &active, &start.0, &start.1, &d_at)?;
             total += iterations;
             if norm > 1e-12 {
                 return None;
@@ -521,6 +531,8 @@ impl InextensibilityLayer {
                 }
             }
             if changed {
+                start = (delta, lambda);
+                previous = Some(system);
                 continue;
             }
             x.copy_from_slice(&delta);
