@@ -50,6 +50,8 @@ pub(crate) struct IpmSettings {
     /// Check each reduced solve's residual and refine it once if it is large.
     pub iterative_refinement: bool,
     pub verbose: bool,
+    /// Relative gap and residuals below which `finish` is offered the iterate (once).
+    pub early_finish_gap: f64,
 }
 
 /// An interior-point solution and what it took.
@@ -77,51 +79,47 @@ impl<'a> ReducedIpm<'a> {
         Self { system }
     }
 
-    fn num_cones(&self) -> usize {
-        self.system.edges().len()
-    }
-
-    /// `y = Aᵀ u` for a cone vector `u` (length `4m`): `(Aᵀu)_a −= u_e¹, (Aᵀu)_b += u_e¹`.
-    fn add_transpose_product(&self, u: &[f64], y: &mut [f64]) {
-        for (e, &[a, b]) in self.system.edges().iter().enumerate() {
+    /// `y += Aᵀ u` for cone vectors `u`: `(Aᵀu)_a −= u_e¹`, `(Aᵀu)_b += u_e¹`.
+    fn add_transpose_product(&self, u: &[Cone], y: &mut [f64]) {
+        for (&[a, b], ue) in self.system.edges().iter().zip(u) {
             for c in 0..3 {
-                y[3 * a + c] -= u[4 * e + 1 + c];
-                y[3 * b + c] += u[4 * e + 1 + c];
+                y[3 * a + c] -= ue[1 + c];
+                y[3 * b + c] += ue[1 + c];
             }
         }
     }
 
-    /// `A_e x = [0; −(x_a − x_b)]`.
-    fn edge_product(&self, e: usize, x: &[f64]) -> [f64; 4] {
-        let [a, b] = self.system.edges()[e];
-        [
-            0.0,
-            x[3 * b] - x[3 * a],
-            x[3 * b + 1] - x[3 * a + 1],
-            x[3 * b + 2] - x[3 * a + 2],
-        ]
+    /// `A x` per cone: `A_e x = [0; −(x_a − x_b)]`.
+    fn product(&self, x: &[f64]) -> Vec<Cone> {
+        self.system
+            .edges()
+            .iter()
+            .map(|&[a, b]| {
+                let d = self.system.edge_difference(a, b, x);
+                [0.0, -d[0], -d[1], -d[2]]
+            })
+            .collect()
     }
 
-    /// Residuals at `(x, s, z)`: `r_x = Kx + Aᵀz`, `r_z = Ax + s − b`, and `Kx`.
-    fn residuals(&self, b: &[f64], x: &[f64], s: &[f64], z: &[f64]) -> Residuals {
-        let n = x.len();
-        let kx: Vec<f64> = (0..n).map(|i| self.system.weights()[i / 3] * x[i]).collect();
-        let mut at_z = vec![0.0; n];
+    /// Residuals at `(x, s, z)`: `r_x = Kx + Aᵀz`, `r_z = Ax + s − b`, and their norms.
+    fn residuals(&self, b: &[Cone], x: &[f64], s: &[Cone], z: &[Cone]) -> Residuals {
+        let w = self.system.weights();
+        let kx: Vec<f64> = x.iter().enumerate().map(|(i, xi)| w[i / 3] * xi).collect();
+        let mut at_z = vec![0.0; x.len()];
         self.add_transpose_product(z, &mut at_z);
         let rx: Vec<f64> = kx.iter().zip(&at_z).map(|(a, b)| a + b).collect();
-        let mut rz = vec![0.0; 4 * self.num_cones()];
-        for e in 0..self.num_cones() {
-            let ax = self.edge_product(e, x);
+        let mut rz = self.product(x);
+        for ((r, se), be) in rz.iter_mut().zip(s).zip(b) {
             for k in 0..4 {
-                rz[4 * e + k] = ax[k] + s[4 * e + k] - b[4 * e + k];
+                r[k] += se[k] - be[k];
             }
         }
-        let objective = 0.5 * x.iter().zip(&kx).map(|(a, b)| a * b).sum::<f64>();
+        let objective = 0.5 * dot(x, &kx);
         let dual_scale = max_abs(&kx).max(max_abs(&at_z)).max(1.0);
         Residuals {
-            primal: max_abs(&rz) / max_abs(b).max(1.0),
+            primal: max_abs(rz.as_flattened()) / max_abs(b.as_flattened()).max(1.0),
             dual: max_abs(&rx) / dual_scale,
-            gap: dot(s, z),
+            gap: dot(s.as_flattened(), z.as_flattened()),
             objective,
             rx,
             rz,
@@ -150,41 +148,47 @@ impl<'a> ReducedIpm<'a> {
     /// The CVXOPT initial point (Vandenberghe §… "Starting point"): `x` minimises
     /// `½ xᵀKx + ½ ‖Ax − b‖²`, `s = b − Ax`, `z = Ax − b`, each then shifted along the
     /// cone's identity `e = [1; 0]` into the interior if it is not already there.
-    fn initial_point(&self, b: &[f64], refine: bool) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    fn initial_point(&self, b: &[Cone], refine: bool) -> Result<(Vec<f64>, Vec<Cone>, Vec<Cone>)> {
         let n = self.system.weights().len() * 3;
-        let m = self.num_cones();
-        let identity = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; m];
+        let identity = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; b.len()];
         let factor = self.system.factorize(&identity)?;
         let mut x = vec![0.0; n];
         self.add_transpose_product(b, &mut x);
         self.solve_reduced(&identity, &factor, &mut x, refine);
-        let mut s = vec![0.0; 4 * m];
-        for e in 0..m {
-            let ax = self.edge_product(e, &x);
-            for k in 0..4 {
-                s[4 * e + k] = b[4 * e + k] - ax[k];
-            }
+        let mut s = self.product(&x);
+        for (se, be) in s.iter_mut().zip(b) {
+            *se = std::array::from_fn(|k| be[k] - se[k]);
         }
-        let mut z: Vec<f64> = s.iter().map(|v| -v).collect();
+        let mut z: Vec<Cone> = s.iter().map(|c| c.map(|v| -v)).collect();
         for v in [&mut s, &mut z] {
             // `max_e (‖v_e¹‖ − v_e⁰)`: minus the smallest eigenvalue over all cones.
             let t = v
-                .chunks_exact(4)
+                .iter()
                 .map(|c| norm3(&c[1..4]) - c[0])
                 .fold(f64::NEG_INFINITY, f64::max);
-            let scale = max_abs(v).max(1.0);
+            let scale = max_abs(v.as_flattened()).max(1.0);
             if t >= -1e-8 * scale {
-                v.chunks_exact_mut(4).for_each(|c| c[0] += 1.0 + t);
+                v.iter_mut().for_each(|c| c[0] += 1.0 + t);
             }
         }
         Ok((x, s, z))
     }
 
     /// Solves the SOCP for the cone vector `b` (length `4m`, `b_e⁰ > 0`).
-    pub fn solve(&self, b: &[f64], settings: &IpmSettings) -> Result<IpmSolution> {
+    ///
+    /// The first iterate whose relative gap and residuals are below
+    /// `settings.early_finish_gap` is offered to `finish(x, s, z)`; if that returns a
+    /// result (the caller has certified an optimum from it), the solve stops there and
+    /// returns it with the iterate.
+    pub fn solve<T>(
+        &self,
+        b: &[f64],
+        settings: &IpmSettings,
+        mut finish: impl FnMut(&[f64], &[f64], &[f64]) -> Option<T>,
+    ) -> Result<(IpmSolution, Option<T>)> {
         let start = Instant::now();
-        let m = self.num_cones();
-        let n = 3 * self.system.weights().len();
+        let b = b.as_chunks::<4>().0;
+        let m = b.len();
         let refine = settings.iterative_refinement;
         let failed = |status: &str, iterations: u32| Error::SolverFailed {
             status: status.to_string(),
@@ -192,6 +196,7 @@ impl<'a> ReducedIpm<'a> {
         };
         let (mut x, mut s, mut z) = self.initial_point(b, refine)?;
         let mut iterations = 0;
+        let mut offered = false;
         loop {
             let res = self.residuals(b, &x, &s, &z);
             let relative_gap = res.gap / res.objective.max(1.0);
@@ -205,24 +210,35 @@ impl<'a> ReducedIpm<'a> {
                 return Err(failed("NumericalError", iterations));
             }
             let tol = settings.tolerance;
-            if res.primal <= tol && res.dual <= tol && relative_gap <= tol {
-                return Ok(IpmSolution {
+            let converged = res.primal <= tol && res.dual <= tol && relative_gap <= tol;
+            let near = res.primal.max(res.dual).max(relative_gap) <= settings.early_finish_gap;
+            let finished = if near && !converged && !offered {
+                offered = true;
+                finish(&x, s.as_flattened(), z.as_flattened())
+            } else {
+                None
+            };
+            if converged || finished.is_some() {
+                let solution = IpmSolution {
                     x,
-                    s,
-                    z,
+                    s: s.into_flattened(),
+                    z: z.into_flattened(),
                     iterations,
                     primal_residual: res.primal,
                     dual_residual: res.dual,
                     seconds: start.elapsed().as_secs_f64(),
-                });
+                };
+                return Ok((solution, finished));
             }
             if iterations >= settings.max_iterations {
                 return Err(failed("MaxIterations", iterations));
             }
             iterations += 1;
 
-            let scalings: Vec<NtScaling> = (0..m)
-                .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
+            let scalings: Vec<NtScaling> = s
+                .iter()
+                .zip(&z)
+                .map(|(se, ze)| NtScaling::new(se, ze))
                 .collect::<Option<_>>()
                 .ok_or_else(|| failed("NumericalError", iterations))?;
             let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
@@ -237,29 +253,30 @@ impl<'a> ReducedIpm<'a> {
                 refine,
             };
             let bx: Vec<f64> = res.rx.iter().map(|v| -v).collect();
-            let bz: Vec<f64> = res.rz.iter().map(|v| -v).collect();
+            let bz: Vec<Cone> = res.rz.iter().map(|c| c.map(|v| -v)).collect();
 
             // Predictor (affine scaling): λ ∘ (W dz + W⁻¹ ds) = −λ ∘ λ.
-            let lambda_sq: Vec<[f64; 4]> = scalings.iter().map(|w| jordan_product(&w.lambda, &w.lambda)).collect();
-            let mut bs: Vec<f64> = lambda_sq.iter().flat_map(|l| l.map(|v| -v)).collect();
+            let lambda_sq: Vec<Cone> = scalings.iter().map(|w| jordan_product(&w.lambda, &w.lambda)).collect();
+            let mut bs: Vec<Cone> = lambda_sq.iter().map(|l| l.map(|v| -v)).collect();
             let affine = newton.solve(&bx, &bz, &bs);
-            let alpha_affine = self.max_step(&s, &z, &affine).min(1.0);
+            let alpha_affine = max_step(&scalings, &s, &z, &affine).min(1.0);
             // Mehrotra's centring σ = (1 − α_aff)³ (CVXOPT's `EXPON = 3`).
             let sigma = (1.0 - alpha_affine).powi(3);
             let mu = res.gap / m as f64;
 
             // Corrector: −λ∘λ − (W⁻¹ds_aff) ∘ (W dz_aff) + σμ e.
-            for e in 0..m {
-                let ds = &affine.ds_scaled[4 * e..4 * e + 4];
-                let dz = &affine.dz_scaled[4 * e..4 * e + 4];
-                let second_order = jordan_product(ds.try_into().unwrap(), dz.try_into().unwrap());
-                for k in 0..4 {
-                    bs[4 * e + k] = -lambda_sq[e][k] - second_order[k];
-                }
-                bs[4 * e] += sigma * mu;
+            for (((bse, l2), ds), dz) in bs
+                .iter_mut()
+                .zip(&lambda_sq)
+                .zip(&affine.ds_scaled)
+                .zip(&affine.dz_scaled)
+            {
+                let second_order = jordan_product(ds, dz);
+                *bse = std::array::from_fn(|k| -l2[k] - second_order[k]);
+                bse[0] += sigma * mu;
             }
             let step = newton.solve(&bx, &bz, &bs);
-            let alpha = (STEP_FRACTION * self.max_step(&s, &z, &step)).min(1.0);
+            let alpha = (STEP_FRACTION * max_step(&scalings, &s, &z, &step)).min(1.0);
             if settings.verbose {
                 eprintln!(
                     "      α_aff {alpha_affine:.3} σ {sigma:.2e} α {alpha:.3} (assembly + factorisation {:.1} ms)",
@@ -270,23 +287,28 @@ impl<'a> ReducedIpm<'a> {
                 return Err(failed("StepTooSmall", iterations));
             }
             x.iter_mut().zip(&step.dx).for_each(|(v, d)| *v += alpha * d);
-            s.iter_mut().zip(&step.ds).for_each(|(v, d)| *v += alpha * d);
-            z.iter_mut().zip(&step.dz).for_each(|(v, d)| *v += alpha * d);
-            debug_assert_eq!(x.len(), n);
+            for (v, d) in s.iter_mut().zip(&step.ds).chain(z.iter_mut().zip(&step.dz)) {
+                for k in 0..4 {
+                    v[k] += alpha * d[k];
+                }
+            }
         }
     }
+}
 
-    /// The largest `α` with `s + α ds` and `z + α dz` in every cone.
-    fn max_step(&self, s: &[f64], z: &[f64], step: &NewtonStep) -> f64 {
-        let mut alpha = f64::INFINITY;
-        for e in 0..self.num_cones() {
-            let r = 4 * e..4 * e + 4;
-            alpha = alpha
-                .min(max_cone_step(&s[r.clone()], &step.ds[r.clone()]))
-                .min(max_cone_step(&z[r.clone()], &step.dz[r]));
-        }
-        alpha
+/// One `Q⁴` cone's part of a cone vector.
+type Cone = [f64; 4];
+
+/// The largest `α` with `s + α ds` and `z + α dz` in every cone (`s`, `z` the point the
+/// scalings were computed at, whose `sᵀJs`, `zᵀJz` they keep).
+fn max_step(scalings: &[NtScaling], s: &[Cone], z: &[Cone], step: &NewtonStep) -> f64 {
+    let mut alpha = f64::INFINITY;
+    for (((w, (se, ze)), ds), dz) in scalings.iter().zip(s.iter().zip(z)).zip(&step.ds).zip(&step.dz) {
+        alpha = alpha
+            .min(max_cone_step(se, w.s_jnorm_sq, ds))
+            .min(max_cone_step(ze, w.z_jnorm_sq, dz));
     }
+    alpha
 }
 
 struct Residuals {
@@ -295,16 +317,16 @@ struct Residuals {
     gap: f64,
     objective: f64,
     rx: Vec<f64>,
-    rz: Vec<f64>,
+    rz: Vec<Cone>,
 }
 
 /// A Newton direction, with the scaled `W⁻¹ ds`, `W dz` Mehrotra's correction needs.
 struct NewtonStep {
     dx: Vec<f64>,
-    ds: Vec<f64>,
-    dz: Vec<f64>,
-    ds_scaled: Vec<f64>,
-    dz_scaled: Vec<f64>,
+    ds: Vec<Cone>,
+    dz: Vec<Cone>,
+    ds_scaled: Vec<Cone>,
+    dz_scaled: Vec<Cone>,
 }
 
 /// One iteration's factorised Newton system.
@@ -319,41 +341,41 @@ struct NewtonSystem<'a> {
 impl NewtonSystem<'_> {
     /// Solves `K dx + Aᵀ dz = bx`, `A dx + ds = bz`, `λ ∘ (W dz + W⁻¹ ds) = bs` through the
     /// reduced system (CVXOPT notes Eq. 49–50).
-    fn solve(&self, bx: &[f64], bz: &[f64], bs: &[f64]) -> NewtonStep {
-        let m = self.scalings.len();
+    fn solve(&self, bx: &[f64], bz: &[Cone], bs: &[Cone]) -> NewtonStep {
         // t = λ ⋄ bs (so W dz + W⁻¹ ds = t) and y = W⁻²(bz − W t).
-        let mut t = vec![[0.0; 4]; m];
-        let mut y = vec![0.0; 4 * m];
-        for (e, w) in self.scalings.iter().enumerate() {
-            t[e] = jordan_divide(&w.lambda, bs[4 * e..4 * e + 4].try_into().unwrap());
-            let wt = w.apply(&t[e]);
-            let r: [f64; 4] = std::array::from_fn(|k| bz[4 * e + k] - wt[k]);
-            y[4 * e..4 * e + 4].copy_from_slice(&w.apply_inverse_squared(&r));
-        }
+        let y: Vec<Cone> = self
+            .scalings
+            .iter()
+            .zip(bz.iter().zip(bs))
+            .map(|(w, (bze, bse))| {
+                let wt = w.apply(&jordan_divide(&w.lambda, bse));
+                w.apply_inverse_squared(&std::array::from_fn(|k| bze[k] - wt[k]))
+            })
+            .collect();
         let mut dx = bx.to_vec();
         self.ipm.add_transpose_product(&y, &mut dx);
         self.ipm.solve_reduced(self.blocks, self.factor, &mut dx, self.refine);
+        let m = self.scalings.len();
         let mut step = NewtonStep {
             dx,
-            ds: vec![0.0; 4 * m],
-            dz: vec![0.0; 4 * m],
-            ds_scaled: vec![0.0; 4 * m],
-            dz_scaled: vec![0.0; 4 * m],
+            ds: Vec::with_capacity(m),
+            dz: Vec::with_capacity(m),
+            ds_scaled: Vec::with_capacity(m),
+            dz_scaled: Vec::with_capacity(m),
         };
-        for (e, w) in self.scalings.iter().enumerate() {
+        let adx = self.ipm.product(&step.dx);
+        for (((w, adx), ye), bze) in self.scalings.iter().zip(&adx).zip(&y).zip(bz) {
             // dz = W⁻² A dx − y. ds from the linear equation A dx + ds = bz rather than
             // from W dz + W⁻¹ ds = t: near the solution W² has eigenvalues of very
             // different sizes and W (t − W dz) cancels, which let the primal residual
             // grow again in the last iterations.
-            let adx = self.ipm.edge_product(e, &step.dx);
-            let h_adx = w.apply_inverse_squared(&adx);
-            let dz: [f64; 4] = std::array::from_fn(|k| h_adx[k] - y[4 * e + k]);
-            let ds: [f64; 4] = std::array::from_fn(|k| bz[4 * e + k] - adx[k]);
-            let r = 4 * e..4 * e + 4;
-            step.dz[r.clone()].copy_from_slice(&dz);
-            step.dz_scaled[r.clone()].copy_from_slice(&w.apply(&dz));
-            step.ds_scaled[r.clone()].copy_from_slice(&w.apply_inverse(&ds));
-            step.ds[r].copy_from_slice(&ds);
+            let h_adx = w.apply_inverse_squared(adx);
+            let dz: Cone = std::array::from_fn(|k| h_adx[k] - ye[k]);
+            let ds: Cone = std::array::from_fn(|k| bze[k] - adx[k]);
+            step.dz_scaled.push(w.apply(&dz));
+            step.ds_scaled.push(w.apply_inverse(&ds));
+            step.dz.push(dz);
+            step.ds.push(ds);
         }
         step
     }
@@ -364,6 +386,9 @@ impl NewtonSystem<'_> {
 /// `W² = β² (2 w̄ w̄ᵀ − J)` maps `z` to `s`; `v` is its hyperbolic square root.
 #[derive(Debug, Clone, Copy)]
 struct NtScaling {
+    /// `sᵀJs` and `zᵀJz` of the point the scaling was computed at.
+    s_jnorm_sq: f64,
+    z_jnorm_sq: f64,
     beta: f64,
     /// `w̄ = (s̄ + J z̄) / (2γ)`, `s̄ = s / √(sᵀJs)`, `z̄ = z / √(zᵀJz)`, `γ = √((1 + s̄ᵀz̄)/2)`.
     w: [f64; 4],
@@ -374,8 +399,9 @@ struct NtScaling {
 
 impl NtScaling {
     /// `None` unless `s` and `z` are strictly inside the cone.
-    fn new(s: &[f64], z: &[f64]) -> Option<Self> {
-        let (s_norm, z_norm) = (cone_norm(s)?, cone_norm(z)?);
+    fn new(s: &Cone, z: &Cone) -> Option<Self> {
+        let (s_jnorm_sq, z_jnorm_sq) = (cone_norm_sq(s)?, cone_norm_sq(z)?);
+        let (s_norm, z_norm) = (s_jnorm_sq.sqrt(), z_jnorm_sq.sqrt());
         let sb: [f64; 4] = std::array::from_fn(|k| s[k] / s_norm);
         let zb: [f64; 4] = std::array::from_fn(|k| z[k] / z_norm);
         let gamma = ((1.0 + dot(&sb, &zb)) / 2.0).sqrt();
@@ -397,7 +423,14 @@ impl NtScaling {
         }
         let beta = (s_norm / z_norm).sqrt();
         let ok = beta.is_finite() && root.is_finite() && lambda.iter().all(|x| x.is_finite());
-        ok.then_some(Self { beta, w, v, lambda })
+        ok.then_some(Self {
+            s_jnorm_sq,
+            z_jnorm_sq,
+            beta,
+            w,
+            v,
+            lambda,
+        })
     }
 
     /// `W u = β (2 v (vᵀu) − J u)`.
@@ -436,12 +469,12 @@ impl NtScaling {
     }
 }
 
-/// `√(v₀² − ‖v₁‖²)`, or `None` if `v` is not strictly inside `Q⁴`.
-fn cone_norm(v: &[f64]) -> Option<f64> {
+/// `vᵀJv = v₀² − ‖v₁‖²`, or `None` if `v` is not strictly inside `Q⁴`.
+fn cone_norm_sq(v: &Cone) -> Option<f64> {
     let n1 = norm3(&v[1..4]);
     // (v₀ − ‖v₁‖)(v₀ + ‖v₁‖) avoids the cancellation of v₀² − ‖v₁‖² near the boundary.
     let q = (v[0] - n1) * (v[0] + n1);
-    (v[0] > n1 && q > 0.0).then(|| q.sqrt())
+    (v[0] > n1 && q > 0.0).then_some(q)
 }
 
 /// The Jordan product of `Q⁴`: `u ∘ v = [uᵀv; u₀ v₁ + v₀ u₁]`.
@@ -470,16 +503,13 @@ fn jordan_divide(lambda: &[f64; 4], v: &[f64; 4]) -> [f64; 4] {
 }
 
 /// The largest `α ≥ 0` with `x + α d ∈ Q⁴` (`∞` if the ray stays inside), for `x`
-/// inside: the smallest positive root of `q(α) = (x + αd)ᵀ J (x + αd) = aα² + 2bα + c`,
-/// `c > 0`, in cancellation-free form.
-fn max_cone_step(x: &[f64], d: &[f64]) -> f64 {
-    let Some(xn) = cone_norm(x) else {
-        return 0.0;
-    };
-    let c = xn * xn;
+/// inside with `xᵀJx = c > 0`: the smallest positive root of
+/// `q(α) = (x + αd)ᵀ J (x + αd) = aα² + 2bα + c`, in cancellation-free form. (`c` comes
+/// accurately from the NT scaling; a rounding error in `a` only moves the root by a
+/// relative `ε`.)
+fn max_cone_step(x: &Cone, c: f64, d: &Cone) -> f64 {
     let b = x[0] * d[0] - (x[1] * d[1] + x[2] * d[2] + x[3] * d[3]);
-    let dn = norm3(&d[1..4]);
-    let a = (d[0] - dn) * (d[0] + dn);
+    let a = d[0] * d[0] - (d[1] * d[1] + d[2] * d[2] + d[3] * d[3]);
     let disc = b * b - a * c;
     if b < 0.0 {
         // Both roots positive (a > 0), one (a < 0), or the linear root (a = 0).
@@ -566,11 +596,12 @@ mod tests {
         let system = EdgeSystem::new(5, &edges, &weights).unwrap();
         let ipm = ReducedIpm::new(&system);
         let m = edges.len();
-        let cone = |seed: &mut u64| random_interior(seed).to_vec();
-        let s: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
-        let z: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
-        let scalings: Vec<NtScaling> = (0..m)
-            .map(|e| NtScaling::new(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]).unwrap())
+        let cones = |seed: &mut u64, count: usize| -> Vec<Cone> { (0..count).map(|_| random_interior(seed)).collect() };
+        let (s, z) = (cones(&mut seed, m), cones(&mut seed, m));
+        let scalings: Vec<NtScaling> = s
+            .iter()
+            .zip(&z)
+            .map(|(se, ze)| NtScaling::new(se, ze).unwrap())
             .collect();
         let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
         let factor = system.factorize(&blocks).unwrap();
@@ -581,32 +612,27 @@ mod tests {
             scalings: &scalings,
             refine: false,
         };
-        let bx: Vec<f64> = (0..15).flat_map(|_| cone(&mut seed)).take(15).collect();
-        let bz: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
-        let bs: Vec<f64> = (0..m).flat_map(|_| cone(&mut seed)).collect();
+        let bx: Vec<f64> = cones(&mut seed, 4).as_flattened()[..15].to_vec();
+        let (bz, bs) = (cones(&mut seed, m), cones(&mut seed, m));
         let step = newton.solve(&bx, &bz, &bs);
         let mut rx: Vec<f64> = (0..15).map(|i| weights[i / 3] * step.dx[i] - bx[i]).collect();
         ipm.add_transpose_product(&step.dz, &mut rx);
         assert!(max_abs(&rx) < 1e-12, "dual equation {rx:?}");
+        let adx = ipm.product(&step.dx);
         for (e, w) in scalings.iter().enumerate() {
-            let r = 4 * e..4 * e + 4;
-            let (ds, dz): ([f64; 4], [f64; 4]) = (
-                step.ds[r.clone()].try_into().unwrap(),
-                step.dz[r.clone()].try_into().unwrap(),
-            );
-            let adx = ipm.edge_product(e, &step.dx);
+            let (ds, dz) = (step.ds[e], step.dz[e]);
             let wdz = w.apply(&dz);
             let winv_ds = w.apply_inverse(&ds);
-            let sum: [f64; 4] = std::array::from_fn(|k| wdz[k] + winv_ds[k]);
+            let sum: Cone = std::array::from_fn(|k| wdz[k] + winv_ds[k]);
             let comp = jordan_product(&w.lambda, &sum);
             for k in 0..4 {
                 assert!(
-                    (adx[k] + ds[k] - bz[4 * e + k]).abs() < 1e-12,
+                    (adx[e][k] + ds[k] - bz[e][k]).abs() < 1e-12,
                     "primal equation, cone {e}"
                 );
-                assert!((comp[k] - bs[4 * e + k]).abs() < 1e-10, "complementarity, cone {e}");
-                assert!((wdz[k] - step.dz_scaled[4 * e + k]).abs() < 1e-12);
-                assert!((winv_ds[k] - step.ds_scaled[4 * e + k]).abs() < 1e-12);
+                assert!((comp[k] - bs[e][k]).abs() < 1e-10, "complementarity, cone {e}");
+                assert!((wdz[k] - step.dz_scaled[e][k]).abs() < 1e-12);
+                assert!((winv_ds[k] - step.ds_scaled[e][k]).abs() < 1e-12);
             }
         }
     }
@@ -626,7 +652,7 @@ mod tests {
         for _ in 0..50 {
             let x = random_interior(&mut seed);
             let d = random_interior(&mut seed).map(|v| 3.0 * v - 1.0);
-            let alpha = max_cone_step(&x, &d);
+            let alpha = max_cone_step(&x, cone_norm_sq(&x).unwrap(), &d);
             if alpha.is_finite() {
                 let y: [f64; 4] = std::array::from_fn(|k| x[k] + alpha * d[k]);
                 assert!((y[0] - norm3(&y[1..4])).abs() < 1e-10 * (1.0 + alpha), "{y:?}");

@@ -54,7 +54,17 @@ pub(crate) struct EdgeSystem {
     ids: Vec<usize>,
     weights: Vec<f64>,
     cholesky: CholeskySolver,
+    /// Storage slots of the diagonal entries of each vertex block.
+    diagonal_slots: Vec<[u32; 3]>,
+    /// Per edge `(a, b)`: the slots of the upper triangles of the vertex blocks `(a, a)`
+    /// and `(b, b)` (in [`UPPER`] order), then of the nine entries of the coupling
+    /// block (row-major from the smaller vertex). Assembly is then a scatter, with no
+    /// search per block (the IPM assembles the full system every iteration).
+    edge_slots: Vec<[u32; 21]>,
 }
+
+/// The upper-triangle entries `(i, j)`, `i ≤ j`, of a `3 × 3` block.
+const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
 impl EdgeSystem {
     /// The system over every edge of the mesh.
@@ -65,12 +75,32 @@ impl EdgeSystem {
 
     fn over(edges: Vec<[usize; 2]>, ids: Vec<usize>, weights: Vec<f64>) -> Result<Self> {
         let pattern = SymmetricPattern::from_vertex_pairs(weights.len(), edges.iter().map(|&[a, b]| (a, b)));
+        let slot = |r: usize, c: usize| {
+            let slot = pattern.slot(r, c).expect("a vertex block of its own pattern");
+            u32::try_from(slot).expect("fewer than 2³² stored entries")
+        };
+        let diagonal_slots = (0..weights.len())
+            .map(|v| std::array::from_fn(|c| slot(3 * v + c, 3 * v + c)))
+            .collect();
+        let edge_slots = edges
+            .iter()
+            .map(|&[a, b]| {
+                let (u, v) = (a.min(b), a.max(b));
+                std::array::from_fn(|k| match k {
+                    0..6 => slot(3 * a + UPPER[k].0, 3 * a + UPPER[k].1),
+                    6..12 => slot(3 * b + UPPER[k - 6].0, 3 * b + UPPER[k - 6].1),
+                    _ => slot(3 * u + (k - 12) / 3, 3 * v + (k - 12) % 3),
+                })
+            })
+            .collect();
         let cholesky = CholeskySolver::new(Arc::new(pattern))?;
         Ok(Self {
             edges,
             ids,
             weights,
             cholesky,
+            diagonal_slots,
+            edge_slots,
         })
     }
 
@@ -104,14 +134,19 @@ impl EdgeSystem {
     /// Assembles `K + Σ_e D_eᵀ G_e D_e`.
     fn assemble(&self, blocks: &[Block3]) -> SymmetricMatrix {
         let mut matrix = SymmetricMatrix::zeros(self.cholesky.pattern().clone());
-        for (v, &w) in self.weights.iter().enumerate() {
-            matrix.add_vertex_block(v, v, &[[w, 0.0, 0.0], [0.0, w, 0.0], [0.0, 0.0, w]]);
+        let values = matrix.values_mut();
+        for (slots, &w) in self.diagonal_slots.iter().zip(&self.weights) {
+            slots.iter().for_each(|&s| values[s as usize] += w);
         }
-        for (&[a, b], g) in self.edges.iter().zip(blocks) {
-            matrix.add_vertex_block(a, a, g);
-            matrix.add_vertex_block(b, b, g);
-            // G is symmetric, so the block at (min, max) is −G either way round.
-            matrix.add_vertex_block(a.min(b), a.max(b), &g.map(|row| row.map(|v| -v)));
+        for (slots, g) in self.edge_slots.iter().zip(blocks) {
+            for (k, &(i, j)) in UPPER.iter().enumerate() {
+                values[slots[k] as usize] += g[i][j];
+                values[slots[6 + k] as usize] += g[i][j];
+            }
+            // G is symmetric, so the coupling block is −G either way round.
+            for k in 0..9 {
+                values[slots[12 + k] as usize] -= g[k / 3][k % 3];
+            }
         }
         matrix
     }
@@ -136,6 +171,7 @@ impl EdgeSystem {
     }
 
     /// `D_e x = x_a − x_b`.
+    #[inline]
     pub fn edge_difference(&self, a: usize, b: usize, x: &[f64]) -> [f64; 3] {
         [
             x[3 * a] - x[3 * b],

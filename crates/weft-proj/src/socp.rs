@@ -108,6 +108,13 @@ pub struct SocpSettings {
     /// Polish the interior-point solution by Newton's method on the active-set KKT
     /// conditions (Eq. 2), so they hold to round-off.
     pub polish: bool,
+    /// With the polish on and the reduced IPM, the polish is first tried from the first
+    /// iterate whose relative gap and residuals are below this value. An accepted polish
+    /// satisfies the KKT conditions to round-off with non-negative multipliers and every
+    /// bound held, which certifies the (unique) optimum, and ends the solve; a rejected
+    /// one lets the interior-point method continue to `tolerance`. `0` turns the early
+    /// try off.
+    pub early_polish_gap: f64,
 }
 
 impl Default for SocpSettings {
@@ -122,6 +129,7 @@ impl Default for SocpSettings {
             iterative_refinement: true,
             verbose: false,
             polish: true,
+            early_polish_gap: 1e-4,
         }
     }
 }
@@ -150,6 +158,8 @@ pub struct SocpReport {
     pub time_seconds: f64,
     /// The interior-point method's own solve time (s).
     pub solver_seconds: f64,
+    /// Time in the polish (s), including an early attempt that was rejected.
+    pub polish_seconds: f64,
     /// The interior-point method's primal and dual residuals.
     pub primal_residual: f64,
     pub dual_residual: f64,
@@ -198,6 +208,17 @@ struct ConicSolution {
     dual_residual: f64,
 }
 
+/// A solution certified by the polish: the active-set KKT conditions hold to round-off.
+#[derive(Debug)]
+struct Polished {
+    x: Vec<f64>,
+    s: Vec<f64>,
+    z: Vec<f64>,
+    iterations: usize,
+    /// The edge system over the final active set, kept for the backward pass.
+    system: Arc<EdgeSystem>,
+}
+
 /// What one backward solve did.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct BackwardReport {
@@ -233,6 +254,13 @@ impl InextensibilityLayer {
             return Err(Error::InvalidParameter {
                 name: "epsilon",
                 value: epsilon,
+                reason: "must be finite and ≥ 0",
+            });
+        }
+        if !(settings.early_polish_gap.is_finite() && settings.early_polish_gap >= 0.0) {
+            return Err(Error::InvalidParameter {
+                name: "early_polish_gap",
+                value: settings.early_polish_gap,
                 reason: "must be finite and ≥ 0",
             });
         }
@@ -347,25 +375,40 @@ impl InextensibilityLayer {
         })
     }
 
-    /// Solves the SOCP for `b` with the reduced-system interior-point method.
-    fn solve_reduced_ipm(&self, b: &[f64]) -> Result<ConicSolution> {
+    /// Solves the SOCP for `b` with the reduced-system interior-point method. With the
+    /// polish on, its first iterate within `early_polish_gap` is polished; if the polish
+    /// certifies the optimum there, that ends the solve (the seconds in the polish are
+    /// returned apart from the interior-point time).
+    fn solve_reduced_ipm(&self, b: &[f64]) -> Result<(ConicSolution, Option<Polished>, f64)> {
         let settings = IpmSettings {
             tolerance: self.settings.tolerance,
             max_iterations: self.settings.max_iterations,
             iterative_refinement: self.settings.iterative_refinement,
             verbose: self.settings.verbose,
+            early_finish_gap: if self.settings.polish {
+                self.settings.early_polish_gap
+            } else {
+                0.0
+            },
         };
-        let sol = ReducedIpm::new(&self.system).solve(b, &settings)?;
-        Ok(ConicSolution {
+        let mut polish_seconds = 0.0;
+        let (sol, polished) = ReducedIpm::new(&self.system).solve(b, &settings, |x, s, z| {
+            let start = Instant::now();
+            let polished = self.polish(b, x, s, z);
+            polish_seconds += start.elapsed().as_secs_f64();
+            polished
+        })?;
+        let conic = ConicSolution {
             x: sol.x,
             s: sol.s,
             z: sol.z,
             status: "Solved".to_string(),
             iterations: sol.iterations,
-            seconds: sol.seconds,
+            seconds: sol.seconds - polish_seconds,
             primal_residual: sol.primal_residual,
             dual_residual: sol.dual_residual,
-        })
+        };
+        Ok((conic, polished, polish_seconds))
     }
 
     /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
@@ -381,18 +424,30 @@ impl InextensibilityLayer {
             b[4 * e] = self.max_lengths[e] / ell;
             b[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
         }
-        let conic = match self.settings.solver {
+        let (conic, early, mut polish_seconds) = match self.settings.solver {
             ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b)?,
-            ConicSolver::Clarabel => self.solve_clarabel(&b)?,
+            ConicSolver::Clarabel => (self.solve_clarabel(&b)?, None, 0.0),
         };
         check_output("conic solution", &conic.x)?;
         check_output("conic slacks", &conic.s)?;
         check_output("conic duals", &conic.z)?;
-        let (mut x, mut s, mut z) = (conic.x, conic.s, conic.z);
-        let (polish_iterations, active_system) = if self.settings.polish {
-            self.polish(&b, &mut x, &mut s, &mut z).unzip()
-        } else {
-            (None, None)
+        let polished = early.or_else(|| {
+            let start = Instant::now();
+            let polished = self
+                .settings
+                .polish
+                .then(|| self.polish(&b, &conic.x, &conic.s, &conic.z))
+                .flatten();
+            polish_seconds += start.elapsed().as_secs_f64();
+            polished
+        });
+        let (polish_iterations, active_system) = match &polished {
+            Some(p) => (Some(p.iterations), Some(p.system.clone())),
+            None => (None, None),
+        };
+        let (x, s, z) = match polished {
+            Some(p) => (p.x, p.s, p.z),
+            None => (conic.x, conic.s, conic.z),
         };
 
         let positions: Vec<f64> = pred.iter().zip(&x).map(|(p, d)| p + ell * d).collect();
@@ -425,6 +480,7 @@ impl InextensibilityLayer {
             polish_iterations,
             time_seconds: start.elapsed().as_secs_f64(),
             solver_seconds: conic.seconds,
+            polish_seconds,
             primal_residual: conic.primal_residual,
             dual_residual: conic.dual_residual,
             kkt_residual: stationarity.max(complementarity).max(max_violation.max(0.0)),
@@ -484,9 +540,8 @@ impl InextensibilityLayer {
     /// Eq. 2 restricted to the active edges (`‖d_e‖ = l_e^max`), so the returned point
     /// satisfies them to round-off rather than to the interior-point tolerance.
     /// Accepted only if it converges with non-negative multipliers and every other edge
-    /// within its bound; returns the Newton iterations and the system over the final
-    /// active set, or `None` if it was rejected.
-    fn polish(&self, b: &[f64], x: &mut [f64], s: &mut [f64], z: &mut [f64]) -> Option<(usize, Arc<EdgeSystem>)> {
+    /// within its bound; returns the polished point, or `None` if it was rejected.
+    fn polish(&self, b: &[f64], x: &[f64], s: &[f64], z: &[f64]) -> Option<Polished> {
         let m = self.num_constraints();
         let edges = self.rest.edges();
         let d_at = |delta: &[f64], e: usize| {
@@ -535,7 +590,8 @@ impl InextensibilityLayer {
                 previous = Some(system);
                 continue;
             }
-            x.copy_from_slice(&delta);
+            let mut s = vec![0.0; 4 * m];
+            let mut z = vec![0.0; 4 * m];
             for e in 0..m {
                 let d = d_at(&delta, e);
                 s[4 * e] = b[4 * e];
@@ -548,7 +604,13 @@ impl InextensibilityLayer {
                     z[4 * e + 1 + c] = -le * u[c];
                 }
             }
-            return Some((total, system));
+            return Some(Polished {
+                x: delta,
+                s,
+                z,
+                iterations: total,
+                system,
+            });
         }
         None
     }

@@ -364,6 +364,22 @@ fn reduced_ipm_alone_meets_bounds_and_kkt_to_its_tolerance() {
     }
 }
 
+/// Forward and backward (output gradient `g`) on a fresh layer: positions, forward
+/// report, input gradient; the backward's linear residual is checked.
+fn forward_backward(
+    rest: &TriMesh,
+    eps: f64,
+    settings: SocpSettings,
+    pred: &[f64],
+    g: &[f64],
+) -> (Vec<f64>, weft_proj::SocpReport, Vec<f64>) {
+    let layer = InextensibilityLayer::new(rest, eps, settings).unwrap();
+    let (sol, report) = layer.forward(pred).unwrap();
+    let (grad, back) = layer.backward_with_report(&sol, g).unwrap();
+    assert!(back.linear_residual < 1e-8, "{back:?}");
+    (sol.into_positions(), report, grad)
+}
+
 /// Without the polish every edge carries some force and the backward pass factorises
 /// the full edge system; with it, the active edges' system that the polish built. On
 /// the mixed-active-set sheets both give the same gradient up to the interior-point
@@ -378,15 +394,40 @@ fn socp_backward_agrees_with_and_without_polish() {
                 polish,
                 ..SocpSettings::tight()
             };
-            let layer = InextensibilityLayer::new(&rest, eps, settings).unwrap();
-            let (sol, _) = layer.forward(&pred).unwrap();
-            let (grad, report) = layer.backward_with_report(&sol, &g).unwrap();
-            assert!(report.linear_residual < 1e-8, "{report:?}");
-            grad
+            forward_backward(&rest, eps, settings, &pred, &g).2
         };
         let err = max_norm_rel_error(&gradient(false), &gradient(true));
         assert!(err < 1e-5, "unpolished vs polished backward: {err:e}");
     }
+}
+
+/// The polish tried early (from the first iterate with a relative gap below 1e-4) or
+/// only after the interior-point method converged must certify the same projection and
+/// give the same gradient: an accepted polish is the unique optimum to round-off.
+#[test]
+fn early_polish_gives_the_same_projection_and_gradient() {
+    let mut handed_over_early = false;
+    for (rest, pred, eps) in cross_check_cases() {
+        let g: Vec<f64> = (0..pred.len()).map(|i| (0.37 * i as f64).cos()).collect();
+        let run = |early_polish_gap| {
+            let settings = SocpSettings {
+                early_polish_gap,
+                ..SocpSettings::default()
+            };
+            let (positions, report, grad) = forward_backward(&rest, eps, settings, &pred, &g);
+            assert!(
+                report.polish_iterations.is_some() && report.kkt_residual < 1e-12,
+                "{report:?}"
+            );
+            (positions, grad, report.iterations)
+        };
+        let (late, early) = (run(0.0), run(1e-4));
+        assert!(early.2 <= late.2);
+        handed_over_early |= early.2 < late.2;
+        assert!(max_norm_rel_error(&early.0, &late.0) < 1e-12);
+        assert!(max_norm_rel_error(&early.1, &late.1) < 1e-8);
+    }
+    assert!(handed_over_early, "no case accepted the early polish");
 }
 
 #[test]
@@ -434,6 +475,17 @@ fn socp_rejects_bad_input() {
     assert!(matches!(
         InextensibilityLayer::new(&rest, f64::NAN, SocpSettings::default()),
         Err(Error::InvalidParameter { .. })
+    ));
+    let negative_gap = SocpSettings {
+        early_polish_gap: -1.0,
+        ..SocpSettings::default()
+    };
+    assert!(matches!(
+        InextensibilityLayer::new(&rest, 0.1, negative_gap),
+        Err(Error::InvalidParameter {
+            name: "early_polish_gap",
+            ..
+        })
     ));
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
     let mut pred = rest.flat_positions();
