@@ -401,9 +401,10 @@ fn socp_backward_agrees_with_and_without_polish() {
     }
 }
 
-/// The polish tried early (from the first iterate with a relative gap below 1e-4) or
-/// only after the interior-point method converged must certify the same projection and
-/// give the same gradient: an accepted polish is the unique optimum to round-off.
+/// The polish tried early (the default: from the first iterate with a relative gap
+/// below `early_polish_gap`) or only after the interior-point method converged must
+/// certify the same projection and give the same gradient: an accepted polish is the
+/// unique optimum to round-off.
 #[test]
 fn early_polish_gives_the_same_projection_and_gradient() {
     let mut handed_over_early = false;
@@ -421,7 +422,7 @@ fn early_polish_gives_the_same_projection_and_gradient() {
             );
             (positions, grad, report.iterations)
         };
-        let (late, early) = (run(0.0), run(1e-4));
+        let (late, early) = (run(0.0), run(SocpSettings::default().early_polish_gap));
         assert!(early.2 <= late.2);
         handed_over_early |= early.2 < late.2;
         assert!(max_norm_rel_error(&early.0, &late.0) < 1e-12);
