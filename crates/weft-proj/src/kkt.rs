@@ -327,3 +327,174 @@ fn mul3(g: &Block3, d: &[f64; 3]) -> [f64; 3] {
 fn norm(x: &[f64]) -> f64 {
     x.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Two triangles sharing an edge, plus a dangling edge: 5 vertices, 6 edges.
+    const EDGES: [[usize; 2]; 6] = [[0, 1], [1, 2], [2, 0], [1, 3], [3, 2], [3, 4]];
+    const WEIGHTS: [f64; 5] = [0.7, 1.3, 1.0, 0.9, 1.1];
+
+    /// The dense KKT matrix over `[3V; one row per edge of system]`.
+    fn dense_kkt(system: &EdgeSystem, blocks: &[EdgeBlock]) -> DMatrix<f64> {
+        let n = 3 * WEIGHTS.len();
+        let k = system.edges().len();
+        let mut a = DMatrix::zeros(n + k, n + k);
+        for i in 0..n {
+            a[(i, i)] = WEIGHTS[i / 3];
+        }
+        for (row, (&[u, v], blk)) in system.edges().iter().zip(blocks).enumerate() {
+            for i in 0..3 {
+                for j in 0..3 {
+                    let h = blk.primal[(i, j)];
+                    a[(3 * u + i, 3 * u + j)] += h;
+                    a[(3 * v + i, 3 * v + j)] += h;
+                    a[(3 * u + i, 3 * v + j)] -= h;
+                    a[(3 * v + i, 3 * u + j)] -= h;
+                }
+                if let Some(c) = blk.coupling {
+                    for (r, sign) in [(3 * u + i, 1.0), (3 * v + i, -1.0)] {
+                        a[(r, n + row)] = sign * c[i];
+                        a[(n + row, r)] = sign * c[i];
+                    }
+                }
+            }
+            a[(n + row, n + row)] = blk.diagonal;
+        }
+        a
+    }
+
+    fn unit(x: f64, y: f64, z: f64) -> Vector3<f64> {
+        Vector3::new(x, y, z).normalize()
+    }
+
+    /// Active rows (σ = 0, the polish's case), a row with a small negative diagonal and
+    /// an eliminated one (the backward's cases) and a decoupled one.
+    fn mixed_blocks() -> Vec<EdgeBlock> {
+        let curvature = |u: Vector3<f64>, s: f64| (Matrix3::identity() - u * u.transpose()) * s;
+        vec![
+            EdgeBlock {
+                primal: curvature(unit(1.0, 0.2, 0.0), 0.3),
+                coupling: Some(unit(1.0, 0.2, 0.0)),
+                diagonal: 0.0,
+            },
+            EdgeBlock {
+                primal: curvature(unit(-0.3, 1.0, 0.1), 0.7),
+                coupling: Some(unit(-0.3, 1.0, 0.1)),
+                diagonal: 0.0,
+            },
+            EdgeBlock {
+                primal: Matrix3::identity() * 0.2,
+                coupling: Some(unit(0.5, -1.0, 0.2) * 0.9),
+                diagonal: -1e-3,
+            },
+            EdgeBlock {
+                primal: Matrix3::identity() * 0.05 + unit(0.0, 1.0, 1.0) * unit(0.0, 1.0, 1.0).transpose(),
+                ..EdgeBlock::decoupled()
+            },
+            EdgeBlock::decoupled(),
+            EdgeBlock {
+                primal: Matrix3::zeros(),
+                coupling: Some(unit(0.1, 0.1, 1.0)),
+                diagonal: 0.0,
+            },
+        ]
+    }
+
+    fn rhs(len: usize) -> Vec<f64> {
+        (0..len).map(|i| (0.37 * i as f64 + 0.2).sin()).collect()
+    }
+
+    #[test]
+    fn rows_first_ldlt_solves_the_kkt_system() {
+        let system = EdgeSystem::new(5, &EDGES, &WEIGHTS).unwrap();
+        let blocks = mixed_blocks();
+        let dense = dense_kkt(&system, &blocks);
+        let b = rhs(15 + 6);
+        let expected = dense.clone().lu().solve(&DVector::from_vec(b.clone())).unwrap();
+        let factor = system.factorize_kkt(blocks, 1e-9, 3).unwrap();
+        let mut x = b.clone();
+        let residual = factor.solve_in_place(&mut x);
+        assert!(residual < 1e-14, "relative residual {residual:e}");
+        let err = (DVector::from_vec(x) - &expected).amax() / expected.amax();
+        assert!(err < 1e-12, "vs dense LU: {err:e}");
+    }
+
+    #[test]
+    fn restricted_system_matches_the_full_one_on_decoupled_edges() {
+        let full = EdgeSystem::new(5, &EDGES, &WEIGHTS).unwrap();
+        let mut blocks = mixed_blocks();
+        blocks[3] = EdgeBlock::decoupled();
+        let keep: Vec<bool> = blocks.iter().map(|blk| blk.coupling.is_some()).collect();
+        let restricted = full.restricted(&keep).unwrap();
+        assert_eq!(restricted.ids(), &[0, 1, 2, 5]);
+        let b = rhs(15 + 6);
+        let mut x_full = b.clone();
+        full.factorize_kkt(blocks.clone(), 1e-9, 3)
+            .unwrap()
+            .solve_in_place(&mut x_full);
+        // The restricted layout has rows for its edges only; a decoupled row's
+        // multiplier is −b (its equation is −ν = b).
+        let mut x = b[..15].to_vec();
+        x.extend(restricted.ids().iter().map(|&e| b[15 + e]));
+        let kept: Vec<EdgeBlock> = restricted.ids().iter().map(|&e| blocks[e]).collect();
+        restricted.factorize_kkt(kept, 1e-9, 3).unwrap().solve_in_place(&mut x);
+        for i in 0..15 {
+            assert!(
+                (x[i] - x_full[i]).abs() < 1e-12,
+                "primal {i}: {} vs {}",
+                x[i],
+                x_full[i]
+            );
+        }
+        for (k, &e) in restricted.ids().iter().enumerate() {
+            assert!((x[15 + k] - x_full[15 + e]).abs() < 1e-12);
+        }
+    }
+
+    /// Geng et al. Appendix A: three collinear active edges of a triangle have dependent
+    /// constraint rows, so the KKT matrix is singular. For a consistent right-hand side
+    /// the regularised factor plus refinement still solves it, and the primal part — the
+    /// one the backward pass uses — is unique.
+    #[test]
+    fn dependent_rows_are_solved_for_a_consistent_right_hand_side() {
+        let system = EdgeSystem::new(5, &EDGES, &WEIGHTS).unwrap();
+        let along = Vector3::x();
+        let active = EdgeBlock {
+            primal: Matrix3::zeros(),
+            coupling: Some(along),
+            diagonal: 0.0,
+        };
+        // Edges (0,1), (1,2), (2,0) all along x: c₀₁ᵀ(r₀−r₁) + c₁₂ᵀ(r₁−r₂) + c₂₀ᵀ(r₂−r₀) ≡ 0.
+        let blocks = vec![
+            active,
+            active,
+            active,
+            EdgeBlock::decoupled(),
+            EdgeBlock::decoupled(),
+            EdgeBlock::decoupled(),
+        ];
+        let dense = dense_kkt(&system, &blocks);
+        let mut b = rhs(15 + 6);
+        b[15..18].iter_mut().for_each(|v| *v = 0.0);
+        let factor = system.factorize_kkt(blocks, 1e-9, 3).unwrap();
+        let mut x = b.clone();
+        let residual = factor.solve_in_place(&mut x);
+        assert!(residual < 1e-12, "relative residual {residual:e}");
+        let r = &dense * DVector::from_vec(x.clone()) - DVector::from_vec(b.clone());
+        assert!(r.amax() < 1e-12);
+        // Any other solution differs by a null vector, which has no primal part.
+        let shifted: Vec<f64> = x
+            .iter()
+            .enumerate()
+            .map(|(i, v)| if (15..18).contains(&i) { v + 1.0 } else { *v })
+            .collect();
+        let r_shifted = &dense * DVector::from_vec(shifted) - DVector::from_vec(b);
+        assert!(
+            r_shifted.amax() < 1e-12,
+            "(1, 1, 1) on the three rows is the null space"
+        );
+    }
+}
