@@ -11,16 +11,19 @@
 //! `sᵀz = 0` — the sign convention of Clarabel's `(x, s, z)`, so the polish and the
 //! backward pass work on either solver's output.
 //!
-//! The method is the path-following algorithm of CVXOPT's `coneqp` (Vandenberghe, *The
-//! CVXOPT linear and quadratic cone program solvers*, 2010, §§3, 6–8): Nesterov–Todd
-//! scaling per cone, Mehrotra's predictor–corrector, an infeasible start. The Newton
-//! system
+//! The method is the primal–dual path-following algorithm of CVXOPT's `coneqp`
+//! (Vandenberghe, *The CVXOPT linear and quadratic cone program solvers*, 2010; function
+//! `coneqp` in `cvxopt/src/python/coneprog.py`, NT scaling in `misc.compute_scaling`):
+//! Nesterov–Todd scaling per cone, Mehrotra's predictor–corrector with full residuals
+//! (`η = 0`), `coneqp`'s default infeasible starting point, and a step of `0.99` times
+//! the exact step to the cones' boundary. The Newton system
 //!
 //! ```text
 //! K dx + Aᵀ dz = bx,    A dx + ds = bz,    λ ∘ (W dz + W⁻¹ ds) = bs
 //! ```
 //!
-//! is reduced by eliminating `ds` and `dz` cone by cone (CVXOPT notes Eq. 49–50):
+//! is reduced by eliminating `ds` and `dz` cone by cone — `coneqp`'s KKT system
+//! `[P Gᵀ; G −WᵀW]` with `P = K`, `G = A` and no equality constraints, `W` symmetric:
 //! `dz = W⁻² (A dx − bz + W (λ ⋄ bs))`, leaving
 //!
 //! ```text
@@ -30,7 +33,15 @@
 //! Because the first row of `A_e` is zero, `Aᵀ W⁻² A = Σ_e D_eᵀ G_e D_e` with `G_e` the
 //! lower-right `3 × 3` block of `W_e⁻²`: a matrix of `3 × 3` vertex blocks with exactly
 //! the sparsity of the mesh edges, factorised by one sparse Cholesky whose symbolic
-//! analysis is done once per mesh. Predictor and corrector share that factor.
+//! analysis is done once per mesh. Predictor and corrector share that factor. `G_e` is
+//! `(I + 2 w̄₁ w̄₁ᵀ)/β²` (see [`NtScaling`]); `ds` is recovered from `A dx + ds = bz`.
+//!
+//! The solve stops when the relative primal residual `‖Aδ + s − b‖∞ / max(1, ‖b‖∞)`, the
+//! relative dual residual `‖Kδ + Aᵀz‖∞ / max(1, ‖Kδ‖∞, ‖Aᵀz‖∞)` and the relative gap
+//! `sᵀz / max(1, ½ δᵀKδ)` are all below the tolerance — or earlier, when the caller
+//! certifies an optimum from an iterate (the polish, see [`ReducedIpm::solve`]). Too many
+//! iterations, a non-finite residual, a point leaving the cones' interior or a vanishing
+//! step is a typed [`Error::SolverFailed`], never a NaN.
 
 use std::time::Instant;
 
@@ -39,7 +50,7 @@ use weft_linalg::CholeskyFactor;
 use crate::error::{Error, Result};
 use crate::kkt::{Block3, EdgeSystem};
 
-/// Fraction of the step to the cone boundary that is taken (CVXOPT's `STEP = 0.99`).
+/// Fraction of the exact step to the cones' boundary that is taken.
 const STEP_FRACTION: f64 = 0.99;
 
 /// Settings of one interior-point solve (a subset of `SocpSettings`).
@@ -145,9 +156,10 @@ impl<'a> ReducedIpm<'a> {
         }
     }
 
-    /// The CVXOPT initial point (Vandenberghe §… "Starting point"): `x` minimises
-    /// `½ xᵀKx + ½ ‖Ax − b‖²`, `s = b − Ax`, `z = Ax − b`, each then shifted along the
-    /// cone's identity `e = [1; 0]` into the interior if it is not already there.
+    /// `coneqp`'s default starting point: `[K Aᵀ; A −I] [x; z] = [0; b]`, i.e. `x`
+    /// minimises `½ xᵀKx + ½ ‖Ax − b‖²`, `s = b − Ax`, `z = Ax − b`; each of `s`, `z` is
+    /// then shifted along the cones' identity `e = [1; 0]` by `1 + t`, `t` minus its
+    /// smallest eigenvalue, unless `t < −10⁻⁸ max(‖·‖₂, 1)` (already well inside).
     fn initial_point(&self, b: &[Cone], refine: bool) -> Result<(Vec<f64>, Vec<Cone>, Vec<Cone>)> {
         let n = self.system.weights().len() * 3;
         let identity = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; b.len()];
@@ -166,7 +178,7 @@ impl<'a> ReducedIpm<'a> {
                 .iter()
                 .map(|c| norm3(&c[1..4]) - c[0])
                 .fold(f64::NEG_INFINITY, f64::max);
-            let scale = max_abs(v.as_flattened()).max(1.0);
+            let scale = dot(v.as_flattened(), v.as_flattened()).sqrt().max(1.0);
             if t >= -1e-8 * scale {
                 v.iter_mut().for_each(|c| c[0] += 1.0 + t);
             }
@@ -260,7 +272,9 @@ impl<'a> ReducedIpm<'a> {
             let mut bs: Vec<Cone> = lambda_sq.iter().map(|l| l.map(|v| -v)).collect();
             let affine = newton.solve(&bx, &bz, &bs);
             let alpha_affine = max_step(&scalings, &s, &z, &affine).min(1.0);
-            // Mehrotra's centring σ = (1 − α_aff)³ (CVXOPT's `EXPON = 3`).
+            // Mehrotra's centring σ = (1 − α_aff)³, Clarabel's rule (`centering_parameter`
+            // in its `solver/core/solver.rs`). CVXOPT's `(gap_aff / gap)³` took the same
+            // 14 iterations on the paper-size sheet.
             let sigma = (1.0 - alpha_affine).powi(3);
             let mu = res.gap / m as f64;
 
@@ -340,7 +354,7 @@ struct NewtonSystem<'a> {
 
 impl NewtonSystem<'_> {
     /// Solves `K dx + Aᵀ dz = bx`, `A dx + ds = bz`, `λ ∘ (W dz + W⁻¹ ds) = bs` through the
-    /// reduced system (CVXOPT notes Eq. 49–50).
+    /// reduced system (see the module doc).
     fn solve(&self, bx: &[f64], bz: &[Cone], bs: &[Cone]) -> NewtonStep {
         // t = λ ⋄ bs (so W dz + W⁻¹ ds = t) and y = W⁻²(bz − W t).
         let y: Vec<Cone> = self
@@ -381,7 +395,7 @@ impl NewtonSystem<'_> {
     }
 }
 
-/// The Nesterov–Todd scaling of one `Q⁴` cone (CVXOPT notes §6.2, Eq. 55–57):
+/// The Nesterov–Todd scaling of one `Q⁴` cone, as CVXOPT's `misc.compute_scaling`:
 /// `W = β (2 v vᵀ − J)`, `J = diag(1, −1, −1, −1)`, `vᵀ J v = 1`, with `W z = W⁻¹ s = λ`.
 /// `W² = β² (2 w̄ w̄ᵀ − J)` maps `z` to `s`; `v` is its hyperbolic square root.
 #[derive(Debug, Clone, Copy)]
@@ -413,7 +427,7 @@ impl NtScaling {
         ];
         let root = (2.0 * (w[0] + 1.0)).sqrt();
         let v = [(w[0] + 1.0) / root, w[1] / root, w[2] / root, w[3] / root];
-        // λ = W z without forming W (CVXOPT notes Eq. 57): λ̄₀ = γ,
+        // λ = W z without forming W (as `compute_scaling`): λ̄₀ = γ,
         // λ̄₁ = ((γ + z̄₀) s̄₁ + (γ + s̄₀) z̄₁) / (s̄₀ + z̄₀ + 2γ), λ = √(‖s‖_J ‖z‖_J) λ̄.
         let scale = (s_norm * z_norm).sqrt();
         let denom = sb[0] + zb[0] + 2.0 * gamma;

@@ -6,9 +6,10 @@
 //! `min_r Σ_i ½ k_i ‖r_i − r̂_i‖²  s.t.  ‖r_a − r_b‖ ≤ (1 + ε) l̄_e  ∀ e`, with `k_i` the
 //! rest mesh's lumped vertex masses (normalised to mean 1; only their ratios matter).
 //!
-//! Geng et al. Eq. 3 moves the objective into one large cone `Q^{3n+1}`. Clarabel takes a
-//! quadratic objective directly, so we keep it quadratic and solve for the displacement
-//! `δ = r − r̂` in units of the mean rest length `ℓ` (translation- and scale-invariant):
+//! Geng et al. Eq. 3 moves the objective into one large cone `Q^{3n+1}`. Interior-point
+//! methods for quadratic cone programs take a quadratic objective directly, so we keep it
+//! quadratic and solve for the displacement `δ = r − r̂` in units of the mean rest length
+//! `ℓ` (translation- and scale-invariant):
 //!
 //! ```text
 //! min_δ ½ δᵀ K δ   s.t.   s_e = b_e − A_e δ ∈ Q⁴,   b_e = [l_e^max; r̂_a − r̂_b] / ℓ,
@@ -18,9 +19,18 @@
 //! so `s_e = [l_e^max; r_a − r_b] / ℓ` exactly as Geng's `s_e` (Eq. 3), and `r̂` enters
 //! only through `b`.
 //!
+//! By default the primal–dual interior-point method of `crate::ipm` solves it: Nesterov–
+//! Todd scaling, Mehrotra's predictor–corrector, and per iteration one sparse Cholesky
+//! of the reduced `3V × 3V` matrix `K + Σ_e D_eᵀ G_e D_e` (the mesh-edge sparsity).
+//! Clarabel on the full conic KKT system is kept as [`ConicSolver::Clarabel`] for
+//! cross-checks. Both return `(x, s, z)` with the same conventions. The polish (Newton on
+//! the active-set conditions, Eq. 2) then makes the KKT conditions hold to round-off;
+//! with the reduced IPM it is first tried from an iterate within
+//! [`SocpSettings::early_polish_gap`], whose certificate ends the solve.
+//!
 //! # Backward (Geng et al. Eq. 6–11, our formulation)
 //!
-//! Clarabel's optimality conditions are `Kδ + Aᵀz = 0`, `Aδ + s = b`, `s, z ∈ K`,
+//! The optimality conditions are `Kδ + Aᵀz = 0`, `Aδ + s = b`, `s, z ∈ K`,
 //! `s ∘ z = 0`. Differentiating (Eq. 7) and writing `dr = dr̂ + dδ`:
 //!
 //! ```text
@@ -46,13 +56,17 @@
 //! row would be nearly decoupled (`2z⁰/γ ≤ k̄`) is eliminated exactly instead (its Schur
 //! complement `(2z⁰/γ) D_eᵀ v_e v_eᵀ D_e` is added to the primal block) so the matrix
 //! stays well scaled. The backward pass is Eq. 11: solve `𝒦 [η; ν] = [∂E/∂r*; 0]` once
-//! with the regularised sparse LDLᵀ of weft-linalg, then `∂E/∂r̂ = K η`.
+//! with a regularised sparse LDLᵀ, then `∂E/∂r̂ = K η`. The LDLᵀ orders every constraint
+//! row first (`crate::kkt`): `1 × 1` row pivots, regularised sign-aware to `≤ −δ`, then
+//! the Cholesky factor of their Schur complement, which has the mesh-edge sparsity; after
+//! the polish only the active edges carry force, and the factorisation runs over their
+//! pattern, the one the polish already analysed.
 //!
 //! The null space of Appendix A (e.g. three collinear, maximally stretched edges,
 //! Fig. 11) lies entirely in the multipliers `dz⁰`: the primal block is positive definite,
 //! so `dr` (and `η`) is unique. The `−γ/(2z⁰)` diagonal left by the interior-point
-//! solution and the LDLᵀ's sign-aware dynamic regularisation pick one multiplier
-//! solution; iterative refinement against the unregularised matrix then restores `η`.
+//! solution and the LDLᵀ's sign-aware regularisation pick one multiplier solution;
+//! iterative refinement against the unregularised matrix then restores `η`.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -148,6 +162,8 @@ impl SocpSettings {
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SocpReport {
     /// The interior-point method's final status (`Solved`, or Clarabel's `AlmostSolved`).
+    /// With an accepted early polish the reduced IPM reports `Solved` at the iterate it
+    /// handed over (see [`SocpSettings::early_polish_gap`]).
     pub status: String,
     /// Interior-point iterations of whichever [`ConicSolver`] ran.
     pub iterations: u32,
