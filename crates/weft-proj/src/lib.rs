@@ -5,8 +5,10 @@
 //!
 //! - [`InextensibilityLayer`] (§3–4): the mass-weighted closest configuration whose
 //!   edges stretch at most `(1 + ε)` times their rest length — a second-order cone
-//!   program solved by Clarabel's interior-point method, differentiated through the
-//!   conic optimality conditions with one sparse LDLᵀ solve (Eq. 6–11, Appendix A).
+//!   program solved by our primal–dual interior-point method on the reduced `3V × 3V`
+//!   normal equations (Clarabel selectable for cross-checks) and polished by Newton on
+//!   its active set, differentiated through the conic optimality conditions with one
+//!   sparse LDLᵀ solve (Eq. 6–11, Appendix A).
 //! - [`QuasistaticLayer`] (§5–6): the equilibrium of edge, bending and axial springs tied
 //!   to `r̂` by zero-length springs of scale `μ` (global or per vertex), solved by
 //!   weft-sim's Newton method and differentiated by one adjoint solve (Eq. 12–16),
@@ -38,6 +40,8 @@
 
 pub mod axial;
 pub mod error;
+mod ipm;
+mod kkt;
 pub mod metrics;
 pub mod quasistatic;
 pub mod rest;
@@ -50,4 +54,4 @@ pub use quasistatic::{
     QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution, ZeroLengthScaling,
 };
 pub use rest::RestShape;
-pub use socp::{BackwardReport, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution};
+pub use socp::{BackwardReport, ConicSolver, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution};

@@ -6,9 +6,10 @@
 //! `min_r Σ_i ½ k_i ‖r_i − r̂_i‖²  s.t.  ‖r_a − r_b‖ ≤ (1 + ε) l̄_e  ∀ e`, with `k_i` the
 //! rest mesh's lumped vertex masses (normalised to mean 1; only their ratios matter).
 //!
-//! Geng et al. Eq. 3 moves the objective into one large cone `Q^{3n+1}`. Clarabel takes a
-//! quadratic objective directly, so we keep it quadratic and solve for the displacement
-//! `δ = r − r̂` in units of the mean rest length `ℓ` (translation- and scale-invariant):
+//! Geng et al. Eq. 3 moves the objective into one large cone `Q^{3n+1}`. Interior-point
+//! methods for quadratic cone programs take a quadratic objective directly, so we keep it
+//! quadratic and solve for the displacement `δ = r − r̂` in units of the mean rest length
+//! `ℓ` (translation- and scale-invariant):
 //!
 //! ```text
 //! min_δ ½ δᵀ K δ   s.t.   s_e = b_e − A_e δ ∈ Q⁴,   b_e = [l_e^max; r̂_a − r̂_b] / ℓ,
@@ -18,9 +19,18 @@
 //! so `s_e = [l_e^max; r_a − r_b] / ℓ` exactly as Geng's `s_e` (Eq. 3), and `r̂` enters
 //! only through `b`.
 //!
+//! By default the primal–dual interior-point method of `crate::ipm` solves it: Nesterov–
+//! Todd scaling, Mehrotra's predictor–corrector, and per iteration one sparse Cholesky
+//! of the reduced `3V × 3V` matrix `K + Σ_e D_eᵀ G_e D_e` (the mesh-edge sparsity).
+//! Clarabel on the full conic KKT system is kept as [`ConicSolver::Clarabel`] for
+//! cross-checks. Both return `(x, s, z)` with the same conventions. The polish (Newton on
+//! the active-set conditions, Eq. 2) then makes the KKT conditions hold to round-off;
+//! with the reduced IPM it is first tried from an iterate within
+//! [`SocpSettings::early_polish_gap`], whose certificate ends the solve.
+//!
 //! # Backward (Geng et al. Eq. 6–11, our formulation)
 //!
-//! Clarabel's optimality conditions are `Kδ + Aᵀz = 0`, `Aδ + s = b`, `s, z ∈ K`,
+//! The optimality conditions are `Kδ + Aᵀz = 0`, `Aδ + s = b`, `s, z ∈ K`,
 //! `s ∘ z = 0`. Differentiating (Eq. 7) and writing `dr = dr̂ + dδ`:
 //!
 //! ```text
@@ -46,13 +56,17 @@
 //! row would be nearly decoupled (`2z⁰/γ ≤ k̄`) is eliminated exactly instead (its Schur
 //! complement `(2z⁰/γ) D_eᵀ v_e v_eᵀ D_e` is added to the primal block) so the matrix
 //! stays well scaled. The backward pass is Eq. 11: solve `𝒦 [η; ν] = [∂E/∂r*; 0]` once
-//! with the regularised sparse LDLᵀ of weft-linalg, then `∂E/∂r̂ = K η`.
+//! with a regularised sparse LDLᵀ, then `∂E/∂r̂ = K η`. The LDLᵀ orders every constraint
+//! row first (`crate::kkt`): `1 × 1` row pivots, regularised sign-aware to `≤ −δ`, then
+//! the Cholesky factor of their Schur complement, which has the mesh-edge sparsity; after
+//! the polish only the active edges carry force, and the factorisation runs over their
+//! pattern, the one the polish already analysed.
 //!
 //! The null space of Appendix A (e.g. three collinear, maximally stretched edges,
 //! Fig. 11) lies entirely in the multipliers `dz⁰`: the primal block is positive definite,
 //! so `dr` (and `η`) is unique. The `−γ/(2z⁰)` diagonal left by the interior-point
-//! solution and the LDLᵀ's sign-aware dynamic regularisation pick one multiplier
-//! solution; iterative refinement against the unregularised matrix then restores `η`.
+//! solution and the LDLᵀ's sign-aware regularisation pick one multiplier solution;
+//! iterative refinement against the unregularised matrix then restores `η`.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -62,37 +76,65 @@ use clarabel::solver::{
     DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT, SupportedConeT::SecondOrderConeT,
 };
 use rayon::prelude::*;
-use weft_linalg::{LdltSettings, LdltSolver, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TriMesh;
 
 use crate::error::{Error, Result, check_output};
+use crate::ipm::{IpmSettings, ReducedIpm};
+use crate::kkt::{EdgeBlock, EdgeSystem, KktFactor};
 use crate::rest::{RestShape, edge_vector};
+
+/// Which interior-point method solves the forward SOCP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConicSolver {
+    /// Our primal–dual method on the reduced `3V × 3V` normal equations (`crate::ipm`):
+    /// one sparse Cholesky of a mesh-edge-sparse matrix per iteration.
+    #[default]
+    ReducedIpm,
+    /// Clarabel on the full conic KKT system (QDLDL); kept for cross-checking.
+    Clarabel,
+}
 
 /// Settings of [`InextensibilityLayer`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SocpSettings {
-    /// Clarabel's gap (absolute and relative) and feasibility tolerances.
+    pub solver: ConicSolver,
+    /// The interior-point tolerance on the relative primal and dual residuals and the
+    /// relative gap (for Clarabel: its absolute and relative gap and feasibility
+    /// tolerances).
     pub tolerance: f64,
     pub max_iterations: u32,
     /// Largest accepted relative excess of an edge over its bound: `l/l^max − 1`.
     pub feasibility_tolerance: f64,
-    /// Regularisation and refinement of the backward LDLᵀ.
+    /// Regularisation of the polish and backward LDLᵀ (a constraint-row pivot above
+    /// `−δ` becomes `−δ`) and its steps of iterative refinement against the
+    /// unregularised matrix.
     pub ldlt_delta: f64,
     pub refinement_steps: usize,
-    /// Clarabel's iterative refinement of its own KKT solves (about 25 % of its time on
-    /// the paper-sized sheet; on by default for accuracy on degenerate problems).
+    /// Iterative refinement of the interior-point method's linear solves: for the
+    /// reduced IPM a residual check per solve and one refinement step when it is above
+    /// `√ε`; for Clarabel its own refinement (about 25 % of its time on the paper-sized
+    /// sheet). On by default for accuracy on degenerate problems.
     pub iterative_refinement: bool,
-    /// Print Clarabel's iteration log.
+    /// Print the interior-point iteration log.
     pub verbose: bool,
     /// Polish the interior-point solution by Newton's method on the active-set KKT
     /// conditions (Eq. 2), so they hold to round-off.
     pub polish: bool,
+    /// With the polish on and the reduced IPM, the polish is first tried from the first
+    /// iterate whose relative gap and residuals are below this value. An accepted polish
+    /// satisfies the KKT conditions to round-off with non-negative multipliers and every
+    /// bound held, which certifies the (unique) optimum, and ends the solve; a rejected
+    /// one lets the interior-point method continue to `tolerance`. `0` turns the early
+    /// try off.
+    pub early_polish_gap: f64,
 }
 
 impl Default for SocpSettings {
     fn default() -> Self {
         Self {
+            solver: ConicSolver::default(),
             tolerance: 1e-8,
             max_iterations: 100,
             feasibility_tolerance: 1e-6,
@@ -101,6 +143,7 @@ impl Default for SocpSettings {
             iterative_refinement: true,
             verbose: false,
             polish: true,
+            early_polish_gap: 1e-3,
         }
     }
 }
@@ -118,17 +161,22 @@ impl SocpSettings {
 /// What one forward solve did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SocpReport {
-    /// Clarabel's final status (`Solved` or `AlmostSolved`).
+    /// The interior-point method's final status (`Solved`, or Clarabel's `AlmostSolved`).
+    /// With an accepted early polish the reduced IPM reports `Solved` at the iterate it
+    /// handed over (see [`SocpSettings::early_polish_gap`]).
     pub status: String,
+    /// Interior-point iterations of whichever [`ConicSolver`] ran.
     pub iterations: u32,
     /// Newton iterations of the active-set polish, `None` if it was off or rejected (the
     /// interior-point solution is returned then).
     pub polish_iterations: Option<usize>,
     /// Wall time of the whole forward pass, including the conic solve (s).
     pub time_seconds: f64,
-    /// Clarabel's own solve time (s).
+    /// The interior-point method's own solve time (s).
     pub solver_seconds: f64,
-    /// Clarabel's primal and dual residuals.
+    /// Time in the polish (s), including an early attempt that was rejected.
+    pub polish_seconds: f64,
+    /// The interior-point method's primal and dual residuals.
     pub primal_residual: f64,
     pub dual_residual: f64,
     /// Relative KKT residual at the returned point: the largest of stationarity
@@ -149,6 +197,8 @@ pub struct SocpSolution {
     positions: Vec<f64>,
     s: Vec<f64>,
     z: Vec<f64>,
+    /// The polish's system over its active edges, reused by the backward pass.
+    active_system: Option<Arc<EdgeSystem>>,
 }
 
 impl SocpSolution {
@@ -161,6 +211,30 @@ impl SocpSolution {
     }
 }
 
+/// A conic solution `(x, s, z)` of either [`ConicSolver`] and what it took.
+#[derive(Debug)]
+struct ConicSolution {
+    x: Vec<f64>,
+    s: Vec<f64>,
+    z: Vec<f64>,
+    status: String,
+    iterations: u32,
+    seconds: f64,
+    primal_residual: f64,
+    dual_residual: f64,
+}
+
+/// A solution certified by the polish: the active-set KKT conditions hold to round-off.
+#[derive(Debug)]
+struct Polished {
+    x: Vec<f64>,
+    s: Vec<f64>,
+    z: Vec<f64>,
+    iterations: usize,
+    /// The edge system over the final active set, kept for the backward pass.
+    system: Arc<EdgeSystem>,
+}
+
 /// What one backward solve did.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct BackwardReport {
@@ -169,26 +243,6 @@ pub struct BackwardReport {
     pub linear_residual: f64,
     /// Edges kept as constraint rows in the differentiated KKT system.
     pub constraint_rows: usize,
-}
-
-/// One edge's contribution to a KKT matrix over `[r_a, r_b, row_e]`: `D_eᵀ B D_e` in the
-/// primal block, `D_eᵀ c` coupling to the edge's row, `σ` on its diagonal.
-#[derive(Debug, Clone, Copy)]
-struct EdgeBlock {
-    primal: nalgebra::Matrix3<f64>,
-    coupling: Option<nalgebra::Vector3<f64>>,
-    diagonal: f64,
-}
-
-impl EdgeBlock {
-    /// An edge without a constraint row: its multiplier decouples (`−1 · ν = 0`).
-    fn decoupled() -> Self {
-        Self {
-            primal: nalgebra::Matrix3::zeros(),
-            coupling: None,
-            diagonal: -1.0,
-        }
-    }
 }
 
 /// Geng et al.'s inextensibility projection as a layer: built once per rest mesh and
@@ -204,12 +258,9 @@ pub struct InextensibilityLayer {
     p: CscMatrix<f64>,
     a: CscMatrix<f64>,
     cones: Vec<SupportedConeT<f64>>,
-    kkt: LdltSolver,
-    /// For every edge, the KKT slots of its local 7 × 7 matrix over
-    /// `[3a, 3a+1, 3a+2, 3b, 3b+1, 3b+2, 3V+e]` (`usize::MAX` for the lower triangle).
-    kkt_slots: Vec<[usize; 49]>,
-    /// KKT slots of the diagonal of the primal block.
-    diag_slots: Vec<usize>,
+    /// `K + Σ_e D_eᵀ G_e D_e` and its symbolic Cholesky factor: the linear algebra of
+    /// the interior-point method, the polish and the backward pass.
+    system: Arc<EdgeSystem>,
 }
 
 impl InextensibilityLayer {
@@ -219,6 +270,13 @@ impl InextensibilityLayer {
             return Err(Error::InvalidParameter {
                 name: "epsilon",
                 value: epsilon,
+                reason: "must be finite and ≥ 0",
+            });
+        }
+        if !(settings.early_polish_gap.is_finite() && settings.early_polish_gap >= 0.0) {
+            return Err(Error::InvalidParameter {
+                name: "early_polish_gap",
+                value: settings.early_polish_gap,
                 reason: "must be finite and ≥ 0",
             });
         }
@@ -261,58 +319,7 @@ impl InextensibilityLayer {
         let a = CscMatrix::new_from_triplets(4 * m, n, ri, ci, vals);
         let cones = vec![SecondOrderConeT(4); m];
 
-        // Pattern of the differentiated KKT system (primal 3V + one row per edge).
-        let mut entries = Vec::with_capacity(m * 49 + 6 * nv);
-        for v in 0..nv {
-            for r in 0..3 {
-                for c in r..3 {
-                    entries.push((3 * v + r, 3 * v + c));
-                }
-            }
-        }
-        let local_dofs = |e: usize, [va, vb]: [usize; 2]| -> [usize; 7] {
-            [3 * va, 3 * va + 1, 3 * va + 2, 3 * vb, 3 * vb + 1, 3 * vb + 2, n + e]
-        };
-        for (e, &edge) in edges.iter().enumerate() {
-            let dofs = local_dofs(e, edge);
-            for &r in &dofs {
-                for &c in &dofs {
-                    if r <= c {
-                        entries.push((r, c));
-                    }
-                }
-            }
-        }
-        let pattern = Arc::new(SymmetricPattern::new(n + m, entries));
-        let slot = |r: usize, c: usize| {
-            pattern
-                .slot(r, c)
-                .unwrap_or_else(|| unreachable!("({r}, {c}) was added"))
-        };
-        let kkt_slots = edges
-            .iter()
-            .enumerate()
-            .map(|(e, &edge)| {
-                let dofs = local_dofs(e, edge);
-                let mut s = [usize::MAX; 49];
-                for (i, &r) in dofs.iter().enumerate() {
-                    for (j, &c) in dofs.iter().enumerate() {
-                        if r <= c {
-                            s[7 * i + j] = slot(r, c);
-                        }
-                    }
-                }
-                s
-            })
-            .collect();
-        let diag_slots = (0..n).map(|i| slot(i, i)).collect();
-        let signs = (0..n + m).map(|i| if i < n { 1 } else { -1 }).collect();
-        let ldlt = LdltSettings {
-            delta: settings.ldlt_delta,
-            refinement_steps: settings.refinement_steps,
-            ..LdltSettings::default()
-        };
-        let kkt = LdltSolver::new(pattern, signs, ldlt)?;
+        let system = Arc::new(EdgeSystem::new(nv, &edges, rest.weights())?);
         Ok(Self {
             rest,
             epsilon,
@@ -322,9 +329,7 @@ impl InextensibilityLayer {
             p,
             a,
             cones,
-            kkt,
-            kkt_slots,
-            diag_slots,
+            system,
         })
     }
 
@@ -348,7 +353,9 @@ impl InextensibilityLayer {
         self.rest.weights()
     }
 
-    fn new_solver(&self, b: &[f64]) -> Result<DefaultSolver<f64>> {
+    /// Solves the SOCP for `b` with Clarabel. A fresh solver per call keeps results
+    /// independent of call order and thread.
+    fn solve_clarabel(&self, b: &[f64]) -> Result<ConicSolution> {
         let tol = self.settings.tolerance;
         let settings = DefaultSettings {
             verbose: self.settings.verbose,
@@ -361,8 +368,63 @@ impl InextensibilityLayer {
             ..DefaultSettings::default()
         };
         let q = vec![0.0; 3 * self.num_vertices()];
-        DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings)
-            .map_err(|e| Error::SolverSetup(e.to_string()))
+        let mut solver = DefaultSolver::new(&self.p, &q, &self.a, b, &self.cones, settings)
+            .map_err(|e| Error::SolverSetup(e.to_string()))?;
+        solver.solve();
+        let sol = &solver.solution;
+        let status = format!("{:?}", sol.status);
+        if !matches!(sol.status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
+            return Err(Error::SolverFailed {
+                status,
+                iterations: sol.iterations,
+            });
+        }
+        Ok(ConicSolution {
+            x: sol.x.clone(),
+            s: sol.s.clone(),
+            z: sol.z.clone(),
+            status,
+            iterations: sol.iterations,
+            seconds: sol.solve_time,
+            primal_residual: sol.r_prim,
+            dual_residual: sol.r_dual,
+        })
+    }
+
+    /// Solves the SOCP for `b` with the reduced-system interior-point method. With the
+    /// polish on, its first iterate within `early_polish_gap` is polished; if the polish
+    /// certifies the optimum there, that ends the solve (the seconds in the polish are
+    /// returned apart from the interior-point time).
+    fn solve_reduced_ipm(&self, b: &[f64]) -> Result<(ConicSolution, Option<Polished>, f64)> {
+        let settings = IpmSettings {
+            tolerance: self.settings.tolerance,
+            max_iterations: self.settings.max_iterations,
+            iterative_refinement: self.settings.iterative_refinement,
+            verbose: self.settings.verbose,
+            early_finish_gap: if self.settings.polish {
+                self.settings.early_polish_gap
+            } else {
+                0.0
+            },
+        };
+        let mut polish_seconds = 0.0;
+        let (sol, polished) = ReducedIpm::new(&self.system).solve(b, &settings, |x, s, z| {
+            let start = Instant::now();
+            let polished = self.polish(b, x, s, z);
+            polish_seconds += start.elapsed().as_secs_f64();
+            polished
+        })?;
+        let conic = ConicSolution {
+            x: sol.x,
+            s: sol.s,
+            z: sol.z,
+            status: "Solved".to_string(),
+            iterations: sol.iterations,
+            seconds: sol.seconds - polish_seconds,
+            primal_residual: sol.primal_residual,
+            dual_residual: sol.dual_residual,
+        };
+        Ok((conic, polished, polish_seconds))
     }
 
     /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
@@ -378,28 +440,30 @@ impl InextensibilityLayer {
             b[4 * e] = self.max_lengths[e] / ell;
             b[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
         }
-        // A fresh solver per call keeps results independent of call order and thread.
-        let mut solver = self.new_solver(&b)?;
-        solver.solve();
-        let sol = &solver.solution;
-        let status = sol.status;
-        let iterations = sol.iterations;
-        if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
-            return Err(Error::SolverFailed {
-                status: format!("{status:?}"),
-                iterations,
-            });
-        }
-        check_output("conic solution", &sol.x)?;
-        check_output("conic slacks", &sol.s)?;
-        check_output("conic duals", &sol.z)?;
-        let mut x = sol.x.clone();
-        let mut s = sol.s.clone();
-        let mut z = sol.z.clone();
-        let polish_iterations = if self.settings.polish {
-            self.polish(&b, &mut x, &mut s, &mut z)
-        } else {
-            None
+        let (conic, early, mut polish_seconds) = match self.settings.solver {
+            ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b)?,
+            ConicSolver::Clarabel => (self.solve_clarabel(&b)?, None, 0.0),
+        };
+        check_output("conic solution", &conic.x)?;
+        check_output("conic slacks", &conic.s)?;
+        check_output("conic duals", &conic.z)?;
+        let polished = early.or_else(|| {
+            let start = Instant::now();
+            let polished = self
+                .settings
+                .polish
+                .then(|| self.polish(&b, &conic.x, &conic.s, &conic.z))
+                .flatten();
+            polish_seconds += start.elapsed().as_secs_f64();
+            polished
+        });
+        let (polish_iterations, active_system) = match &polished {
+            Some(p) => (Some(p.iterations), Some(p.system.clone())),
+            None => (None, None),
+        };
+        let (x, s, z) = match polished {
+            Some(p) => (p.x, p.s, p.z),
+            None => (conic.x, conic.s, conic.z),
         };
 
         let positions: Vec<f64> = pred.iter().zip(&x).map(|(p, d)| p + ell * d).collect();
@@ -427,19 +491,26 @@ impl InextensibilityLayer {
         }
         let (stationarity, complementarity) = self.kkt_residuals(&x, &s, &z);
         let report = SocpReport {
-            status: format!("{status:?}"),
-            iterations,
+            status: conic.status,
+            iterations: conic.iterations,
             polish_iterations,
             time_seconds: start.elapsed().as_secs_f64(),
-            solver_seconds: sol.solve_time,
-            primal_residual: sol.r_prim,
-            dual_residual: sol.r_dual,
+            solver_seconds: conic.seconds,
+            polish_seconds,
+            primal_residual: conic.primal_residual,
+            dual_residual: conic.dual_residual,
             kkt_residual: stationarity.max(complementarity).max(max_violation.max(0.0)),
             max_violation,
             active_constraints: active,
             num_constraints: m,
         };
-        Ok((SocpSolution { positions, s, z }, report))
+        let solution = SocpSolution {
+            positions,
+            s,
+            z,
+            active_system,
+        };
+        Ok((solution, report))
     }
 
     /// Relative stationarity `‖Kδ + Aᵀz‖∞ / max(‖Kδ‖∞, ‖Aᵀz‖∞)` and relative
@@ -473,20 +544,25 @@ impl InextensibilityLayer {
     /// Whether the conic pair `(s_e, z_e)` is kept as a constraint row: `2 z⁰ > γ`, i.e.
     /// eliminating it would add a stiffness `2z⁰/γ` above the mean weight `k̄ = 1`.
     fn is_active(s: &[f64], z: &[f64]) -> bool {
+        Self::is_loaded_above(s, z, 1.0)
+    }
+
+    /// Whether `2 z⁰ > threshold · γ` (`γ = (s⁰² − ‖s¹‖²)/s⁰`) with `z⁰, s⁰ > 0`.
+    fn is_loaded_above(s: &[f64], z: &[f64], threshold: f64) -> bool {
         let (s0, z0) = (s[0], z[0]);
         if !(z0 > 0.0 && s0 > 0.0) {
             return false;
         }
         let s1n = (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
-        2.0 * z0 > ((s0 - s1n) * (s0 + s1n) / s0).max(0.0)
+        2.0 * z0 > threshold * ((s0 - s1n) * (s0 + s1n) / s0).max(0.0)
     }
 
     /// Polishes the interior-point solution: Newton's method on the KKT conditions of
     /// Eq. 2 restricted to the active edges (`‖d_e‖ = l_e^max`), so the returned point
     /// satisfies them to round-off rather than to the interior-point tolerance.
     /// Accepted only if it converges with non-negative multipliers and every other edge
-    /// within its bound; returns the Newton iterations, or `None` if it was rejected.
-    fn polish(&self, b: &[f64], x: &mut [f64], s: &mut [f64], z: &mut [f64]) -> Option<usize> {
+    /// within its bound; returns the polished point, or `None` if it was rejected.
+    fn polish(&self, b: &[f64], x: &[f64], s: &[f64], z: &[f64]) -> Option<Polished> {
         let m = self.num_constraints();
         let edges = self.rest.edges();
         let d_at = |delta: &[f64], e: usize| {
@@ -500,13 +576,28 @@ impl InextensibilityLayer {
         let mut active: Vec<bool> = (0..m)
             .map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
             .collect();
-        let lambda0: Vec<f64> = (0..m).map(|e| z[4 * e]).collect();
+        let mut start: (Vec<f64>, Vec<f64>) = (x.to_vec(), (0..m).map(|e| z[4 * e]).collect());
         let mut total = 0;
         // A primal active-set loop around Newton: the interior-point solution's active
         // set is nearly always right; an edge that needs a negative multiplier is
-        // released, one that ends up over its bound is added.
+        // released, one that ends up over its bound is added. Each round starts from the
+        // previous round's Newton solution, which differs only near the changed edges.
+        // The rounds share one system over the candidate edges `20 z⁰ > γ` — ten times
+        // below the activity threshold — so that a round that adds an edge rarely needs a
+        // new symbolic analysis (on the paper-size sheet every added edge was a candidate
+        // when the polish started from relative gaps of 1e-3 and 1e-4).
+        let candidates: Vec<bool> = (0..m)
+            .map(|e| Self::is_loaded_above(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4], 0.1))
+            .collect();
+        let mut system = self.system_over(&candidates).ok()?;
         for _ in 0..6 {
-            let (delta, lambda, norm, iterations) = self.polish_newton(b, &active, x, &lambda0, &d_at)?;
+            if !covers(&system, &active) {
+                let mut keep = active.clone();
+                system.ids().iter().for_each(|&e| keep[e] = true);
+                system = self.system_over(&keep).ok()?;
+            }
+            let (delta, lambda, norm, iterations) =
+                self.polish_newton(b, &system, &active, &start.0, &start.1, &d_at)?;
             total += iterations;
             if norm > 1e-12 {
                 return None;
@@ -523,9 +614,11 @@ impl InextensibilityLayer {
                 }
             }
             if changed {
+                start = (delta, lambda);
                 continue;
             }
-            x.copy_from_slice(&delta);
+            let mut s = vec![0.0; 4 * m];
+            let mut z = vec![0.0; 4 * m];
             for e in 0..m {
                 let d = d_at(&delta, e);
                 s[4 * e] = b[4 * e];
@@ -538,9 +631,28 @@ impl InextensibilityLayer {
                     z[4 * e + 1 + c] = -le * u[c];
                 }
             }
-            return Some(total);
+            return Some(Polished {
+                x: delta,
+                s,
+                z,
+                iterations: total,
+                system,
+            });
         }
         None
+    }
+
+    /// The edge system over the edges with `keep[e]`: the layer's full one when most
+    /// edges are kept, else a restricted one (its symbolic analysis costs about as much
+    /// as two numeric factorisations of the full pattern and makes each factorisation
+    /// several times cheaper).
+    fn system_over(&self, keep: &[bool]) -> Result<Arc<EdgeSystem>> {
+        let kept = keep.iter().filter(|&&k| k).count();
+        if 2 * kept > keep.len() {
+            Ok(self.system.clone())
+        } else {
+            Ok(Arc::new(self.system.restricted(keep)?))
+        }
     }
 
     /// Newton's method on Eq. 2 with the edges in `active` held at their bounds, from the
@@ -549,6 +661,7 @@ impl InextensibilityLayer {
     fn polish_newton(
         &self,
         b: &[f64],
+        system: &EdgeSystem,
         active: &[bool],
         x0: &[f64],
         lambda0: &[f64],
@@ -585,9 +698,12 @@ impl InextensibilityLayer {
         let mut iterations = 0;
         while norm > 1e-14 && iterations < 10 {
             iterations += 1;
-            // The Jacobian of Eq. 2: [K + Σ λ_e D_eᵀ (I − u uᵀ)/l D_e, D_eᵀu_e; u_eᵀD_e, 0].
-            let blocks: Vec<EdgeBlock> = (0..m)
-                .map(|e| {
+            // The Jacobian of Eq. 2: [K + Σ λ_e D_eᵀ (I − u uᵀ)/l D_e, D_eᵀu_e; u_eᵀD_e, 0],
+            // one row per edge of `system` (those of inactive edges decouple).
+            let blocks: Vec<EdgeBlock> = system
+                .ids()
+                .iter()
+                .map(|&e| {
                     if !active[e] {
                         return EdgeBlock::decoupled();
                     }
@@ -602,13 +718,20 @@ impl InextensibilityLayer {
                     }
                 })
                 .collect();
-            let factor = self.kkt.factorize(&self.assemble(&blocks)).ok()?;
-            let mut step: Vec<f64> = r.iter().chain(&r_len).map(|v| -v).collect();
+            let factor = self.factorize_kkt(system, blocks).ok()?;
+            let mut step: Vec<f64> = r
+                .iter()
+                .chain(system.ids().iter().map(|&e| &r_len[e]))
+                .map(|v| -v)
+                .collect();
             factor.solve_in_place(&mut step);
             let trial: Vec<f64> = delta.iter().zip(&step).map(|(d, s)| d + s).collect();
-            let trial_lambda: Vec<f64> = (0..m)
-                .map(|e| if active[e] { lambda[e] + step[n + e] } else { 0.0 })
-                .collect();
+            let mut trial_lambda = vec![0.0; m];
+            for (k, &e) in system.ids().iter().enumerate() {
+                if active[e] {
+                    trial_lambda[e] = lambda[e] + step[n + k];
+                }
+            }
             let (tr, tr_len, tnorm) = residual(&trial, &trial_lambda);
             // Newton from an interior-point solution is in its region of quadratic
             // convergence; an occasional first-step increase (the multipliers of nearly
@@ -621,42 +744,10 @@ impl InextensibilityLayer {
         Some((delta, lambda, norm, iterations))
     }
 
-    /// Assembles the symmetric KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e; c_eᵀ D_e, σ_e]`.
-    fn assemble(&self, blocks: &[EdgeBlock]) -> SymmetricMatrix {
-        let w = self.rest.weights();
-        let mut kkt = SymmetricMatrix::zeros(self.kkt.pattern().clone());
-        let values = kkt.values_mut();
-        for (i, &slot) in self.diag_slots.iter().enumerate() {
-            values[slot] += w[i / 3];
-        }
-        for (e, block) in blocks.iter().enumerate() {
-            let slots = &self.kkt_slots[e];
-            let mut local = [0.0; 49];
-            for i in 0..3 {
-                for j in 0..3 {
-                    let bij = block.primal[(i, j)];
-                    local[7 * i + j] = bij;
-                    local[7 * (i + 3) + (j + 3)] = bij;
-                    local[7 * i + (j + 3)] = -bij;
-                    local[7 * (i + 3) + j] = -bij;
-                }
-            }
-            if let Some(c) = block.coupling {
-                for i in 0..3 {
-                    local[7 * i + 6] = c[i];
-                    local[7 * (i + 3) + 6] = -c[i];
-                    local[7 * 6 + i] = c[i];
-                    local[7 * 6 + i + 3] = -c[i];
-                }
-            }
-            local[48] = block.diagonal;
-            for k in 0..49 {
-                if slots[k] != usize::MAX && local[k] != 0.0 {
-                    values[slots[k]] += local[k];
-                }
-            }
-        }
-        kkt
+    /// The regularised LDLᵀ of the edge KKT matrix `[K + Σ D_eᵀ B_e D_e, D_eᵀ c_e;
+    /// c_eᵀ D_e, σ_e]` (rows first, see `crate::kkt`).
+    fn factorize_kkt<'a>(&self, system: &'a EdgeSystem, blocks: Vec<EdgeBlock>) -> Result<KktFactor<'a>> {
+        system.factorize_kkt(blocks, self.settings.ldlt_delta, self.settings.refinement_steps)
     }
 
     /// `∂E/∂r̂` from `∂E/∂r*` (`grad_out`) at a forward solution (Geng et al. Eq. 11).
@@ -681,13 +772,23 @@ impl InextensibilityLayer {
                 got: solution.s.len(),
             });
         }
+        // Edges carrying force (Appendix A, last paragraph: the others decouple). After
+        // the polish they are its active edges, whose system (and symbolic factor) the
+        // solution carries.
+        let (s_all, z_all) = (&solution.s, &solution.z);
+        let loaded: Vec<bool> = (0..m).map(|e| z_all[4 * e] > 0.0 && s_all[4 * e] > 0.0).collect();
+        let system = match &solution.active_system {
+            Some(system) if covers(system, &loaded) => system.clone(),
+            _ => self.system_over(&loaded)?,
+        };
         let mut rows = 0;
-        let blocks: Vec<EdgeBlock> = (0..m)
-            .map(|e| {
-                let (s, z) = (&solution.s[4 * e..4 * e + 4], &solution.z[4 * e..4 * e + 4]);
+        let blocks: Vec<EdgeBlock> = system
+            .ids()
+            .iter()
+            .map(|&e| {
+                let (s, z) = (&s_all[4 * e..4 * e + 4], &z_all[4 * e..4 * e + 4]);
                 let (s0, z0) = (s[0], z[0]);
-                if !(z0 > 0.0 && s0 > 0.0) {
-                    // No force on the edge (Appendix A, last paragraph): it decouples.
+                if !loaded[e] {
                     return EdgeBlock::decoupled();
                 }
                 let s1 = nalgebra::Vector3::new(s[1], s[2], s[3]);
@@ -712,8 +813,8 @@ impl InextensibilityLayer {
                 }
             })
             .collect();
-        let factor = self.kkt.factorize(&self.assemble(&blocks))?;
-        let mut rhs = vec![0.0; n + m];
+        let factor = self.factorize_kkt(&system, blocks)?;
+        let mut rhs = vec![0.0; n + system.ids().len()];
         rhs[..n].copy_from_slice(grad_out);
         let linear_residual = factor.solve_in_place(&mut rhs);
         let w = self.rest.weights();
@@ -751,4 +852,11 @@ impl InextensibilityLayer {
             .map(|(s, g)| self.backward(s, g.as_ref()))
             .collect()
     }
+}
+
+/// Whether every edge with `needed[e]` is in `system`.
+fn covers(system: &EdgeSystem, needed: &[bool]) -> bool {
+    let mut inside = vec![false; needed.len()];
+    system.ids().iter().for_each(|&e| inside[e] = true);
+    needed.iter().zip(&inside).all(|(&n, &i)| !n || i)
 }

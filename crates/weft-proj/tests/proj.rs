@@ -4,7 +4,8 @@
 use nalgebra::Vector3;
 use weft_mesh::{TriMesh, generators};
 use weft_proj::{
-    Error, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling, strain_summary,
+    ConicSolver, Error, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling,
+    strain_summary,
 };
 use weft_sim::Energy;
 use weft_testkit::{TestRng, assert_close, fd_gradient, max_norm_rel_error};
@@ -40,7 +41,8 @@ fn predict(rest: &TriMesh, sx: f64, noise: f64, rng: &mut TestRng) -> Vec<f64> {
         .collect()
 }
 
-fn max_edge_ratio(layer: &InextensibilityLayer, x: &[f64]) -> f64 {
+/// Every edge's length over its rest length at the flat positions `x`.
+fn edge_ratios(layer: &InextensibilityLayer, x: &[f64]) -> Vec<f64> {
     let rest = layer.rest();
     rest.edges()
         .iter()
@@ -53,7 +55,20 @@ fn max_edge_ratio(layer: &InextensibilityLayer, x: &[f64]) -> f64 {
             );
             d.norm() / l0
         })
-        .fold(0.0, f64::max)
+        .collect()
+}
+
+/// A prediction stretched 60 % in-plane: with ε = 0.05, most constraints are active.
+fn stretch_in_plane(rest: &TriMesh, rng: &mut TestRng) -> Vec<f64> {
+    predict(rest, 1.0, 0.02, rng)
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 2 { *x } else { 1.6 * x })
+        .collect()
+}
+
+fn max_edge_ratio(layer: &InextensibilityLayer, x: &[f64]) -> f64 {
+    edge_ratios(layer, x).into_iter().fold(0.0, f64::max)
 }
 
 /// Dykstra's alternating projections in the `K`-weighted norm: converges to the
@@ -177,11 +192,7 @@ fn socp_backward_matches_finite_differences_on_random_meshes() {
 fn socp_backward_matches_finite_differences_with_most_constraints_active() {
     let mut rng = TestRng::new(20);
     let rest = random_sheet(5, &mut rng);
-    let pred: Vec<f64> = predict(&rest, 1.0, 0.02, &mut rng)
-        .iter()
-        .enumerate()
-        .map(|(i, x)| if i % 3 == 2 { *x } else { 1.6 * x })
-        .collect();
+    let pred = stretch_in_plane(&rest, &mut rng);
     let layer = InextensibilityLayer::new(&rest, 0.05, SocpSettings::tight()).unwrap();
     let (active, total) = check_socp_backward(&layer, &pred, 21);
     assert!(
@@ -199,18 +210,8 @@ fn socp_backward_matches_finite_differences_with_most_constraints_active() {
 /// of the degenerate triangle and every coordinate of the other two vertices.
 #[test]
 fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
-    let p = vec![
-        Vector3::new(-1.0, 0.0, 0.0),
-        Vector3::new(0.0, 0.0, 0.0),
-        Vector3::new(1.0, 0.0, 0.0),
-        Vector3::new(0.0, 1.0, 0.0),
-        Vector3::new(0.0, -1.0, 0.0),
-    ];
-    let rest = TriMesh::new(p, vec![[0, 1, 3], [1, 2, 3], [0, 2, 1], [0, 4, 2]]).unwrap();
+    let (rest, pred) = collinear_case();
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::tight()).unwrap();
-    let pred = vec![
-        -1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0,
-    ];
     let (sol, report) = layer.forward(&pred).unwrap();
     let x = sol.positions();
     let len = |a: usize, b: usize| {
@@ -253,6 +254,202 @@ fn socp_backward_is_robust_in_the_collinear_degenerate_case() {
     );
 }
 
+/// Edges within a relative `1e-6` of their bound at the flat positions `x`.
+fn active_edges(layer: &InextensibilityLayer, x: &[f64]) -> Vec<bool> {
+    let bound = 1.0 + layer.epsilon();
+    edge_ratios(layer, x)
+        .into_iter()
+        .map(|r| r / bound > 1.0 - 1e-6)
+        .collect()
+}
+
+/// The rest mesh and prediction of Geng et al. Fig. 11: a zero-area rest triangle
+/// (0, 2, 1) whose three edges are all stretched along one line.
+fn collinear_case() -> (TriMesh, Vec<f64>) {
+    let p = vec![
+        Vector3::new(-1.0, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, 0.0),
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, -1.0, 0.0),
+    ];
+    let rest = TriMesh::new(p, vec![[0, 1, 3], [1, 2, 3], [0, 2, 1], [0, 4, 2]]).unwrap();
+    let pred = vec![
+        -1.5, 0.0, 0.0, 0.1, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, -0.3, 0.0,
+    ];
+    (rest, pred)
+}
+
+/// Stretched sheets with mixed active sets, one with most constraints active, and the
+/// degenerate collinear case: (rest mesh, prediction, ε).
+fn cross_check_cases() -> Vec<(TriMesh, Vec<f64>, f64)> {
+    let mut cases = Vec::new();
+    for seed in 0..3 {
+        let mut rng = TestRng::new(100 + seed);
+        let rest = random_sheet(6, &mut rng);
+        let pred = predict(&rest, 1.15 + 0.05 * seed as f64, 0.04, &mut rng);
+        cases.push((rest, pred, 0.1));
+    }
+    let mut rng = TestRng::new(110);
+    let rest = random_sheet(6, &mut rng);
+    let pred = stretch_in_plane(&rest, &mut rng);
+    cases.push((rest, pred, 0.05));
+    let (rest, pred) = collinear_case();
+    cases.push((rest, pred, 0.1));
+    cases
+}
+
+#[test]
+fn reduced_ipm_agrees_with_clarabel() {
+    let with = |solver, polish| SocpSettings {
+        solver,
+        polish,
+        ..SocpSettings::tight()
+    };
+    let mut mostly_active = false;
+    for (rest, pred, eps) in cross_check_cases() {
+        for polish in [true, false] {
+            let ipm = InextensibilityLayer::new(&rest, eps, with(ConicSolver::ReducedIpm, polish)).unwrap();
+            let clarabel = InextensibilityLayer::new(&rest, eps, with(ConicSolver::Clarabel, polish)).unwrap();
+            let (a, report_a) = ipm.forward(&pred).unwrap();
+            let (b, report_b) = clarabel.forward(&pred).unwrap();
+            let err = max_norm_rel_error(a.positions(), b.positions());
+            // Polished, both are the exact projection. Unpolished, each stops at a relative
+            // gap of 1e-10; on weakly active edges (s_e, z_e both ~√μ) positions then
+            // carry errors ~√gap, measured at up to 1.8e-7 for either solver.
+            let allowed = if polish { 1e-10 } else { 1e-6 };
+            assert!(
+                err < allowed,
+                "polish {polish}: IPM vs Clarabel {err:e}\n{report_a:?}\n{report_b:?}"
+            );
+            assert_eq!(report_a.polish_iterations.is_some(), polish, "{report_a:?}");
+            if polish {
+                assert_eq!(
+                    active_edges(&ipm, a.positions()),
+                    active_edges(&clarabel, b.positions())
+                );
+                assert_eq!(report_a.active_constraints, report_b.active_constraints);
+            }
+            mostly_active |= report_a.active_constraints * 10 >= report_a.num_constraints * 8;
+        }
+    }
+    assert!(mostly_active, "one case must have most constraints active");
+}
+
+#[test]
+fn reduced_ipm_alone_meets_bounds_and_kkt_to_its_tolerance() {
+    for (rest, pred, eps) in cross_check_cases() {
+        for tolerance in [1e-6, 1e-9] {
+            let settings = SocpSettings {
+                solver: ConicSolver::ReducedIpm,
+                polish: false,
+                tolerance,
+                ..SocpSettings::default()
+            };
+            let layer = InextensibilityLayer::new(&rest, eps, settings).unwrap();
+            let (sol, report) = layer.forward(&pred).unwrap();
+            assert_eq!(report.status, "Solved");
+            assert!(report.polish_iterations.is_none());
+            assert!(report.iterations > 0 && report.iterations < 50, "{report:?}");
+            assert!(
+                report.primal_residual <= tolerance && report.dual_residual <= tolerance,
+                "{report:?}"
+            );
+            // Every bound holds to the primal tolerance, and the KKT conditions hold to
+            // within a small multiple of it (complementarity is relative per edge).
+            assert!(report.max_violation <= tolerance, "{report:?}");
+            assert!(max_edge_ratio(&layer, sol.positions()) <= (1.0 + eps) * (1.0 + tolerance));
+            assert!(report.kkt_residual <= 100.0 * tolerance, "{report:?}");
+        }
+    }
+}
+
+/// Forward and backward (output gradient `g`) on a fresh layer: positions, forward
+/// report, input gradient; the backward's linear residual is checked.
+fn forward_backward(
+    rest: &TriMesh,
+    eps: f64,
+    settings: SocpSettings,
+    pred: &[f64],
+    g: &[f64],
+) -> (Vec<f64>, weft_proj::SocpReport, Vec<f64>) {
+    let layer = InextensibilityLayer::new(rest, eps, settings).unwrap();
+    let (sol, report) = layer.forward(pred).unwrap();
+    let (grad, back) = layer.backward_with_report(&sol, g).unwrap();
+    assert!(back.linear_residual < 1e-8, "{back:?}");
+    (sol.into_positions(), report, grad)
+}
+
+/// Without the polish every edge carries some force and the backward pass factorises
+/// the full edge system; with it, the active edges' system that the polish built. On
+/// the mixed-active-set sheets both give the same gradient up to the interior-point
+/// tolerance (measured ≤ 1.1e-6; weakly active edges of an interior point still carry
+/// part of their force, so the unpolished derivative is only close to the exact one).
+#[test]
+fn socp_backward_agrees_with_and_without_polish() {
+    for (rest, pred, eps) in cross_check_cases().into_iter().take(3) {
+        let g: Vec<f64> = (0..pred.len()).map(|i| (0.37 * i as f64).sin()).collect();
+        let gradient = |polish| {
+            let settings = SocpSettings {
+                polish,
+                ..SocpSettings::tight()
+            };
+            forward_backward(&rest, eps, settings, &pred, &g).2
+        };
+        let err = max_norm_rel_error(&gradient(false), &gradient(true));
+        assert!(err < 1e-5, "unpolished vs polished backward: {err:e}");
+    }
+}
+
+/// The polish tried early (the default: from the first iterate with a relative gap
+/// below `early_polish_gap`) or only after the interior-point method converged must
+/// certify the same projection and give the same gradient: an accepted polish is the
+/// unique optimum to round-off.
+#[test]
+fn early_polish_gives_the_same_projection_and_gradient() {
+    let mut handed_over_early = false;
+    for (rest, pred, eps) in cross_check_cases() {
+        let g: Vec<f64> = (0..pred.len()).map(|i| (0.37 * i as f64).cos()).collect();
+        let run = |early_polish_gap| {
+            let settings = SocpSettings {
+                early_polish_gap,
+                ..SocpSettings::default()
+            };
+            let (positions, report, grad) = forward_backward(&rest, eps, settings, &pred, &g);
+            assert!(
+                report.polish_iterations.is_some() && report.kkt_residual < 1e-12,
+                "{report:?}"
+            );
+            (positions, grad, report.iterations)
+        };
+        let (late, early) = (run(0.0), run(SocpSettings::default().early_polish_gap));
+        assert!(early.2 <= late.2);
+        handed_over_early |= early.2 < late.2;
+        assert!(max_norm_rel_error(&early.0, &late.0) < 1e-12);
+        assert!(max_norm_rel_error(&early.1, &late.1) < 1e-8);
+    }
+    assert!(handed_over_early, "no case accepted the early polish");
+}
+
+#[test]
+fn reduced_ipm_reports_non_convergence_as_a_typed_error() {
+    let mut rng = TestRng::new(120);
+    let rest = random_sheet(5, &mut rng);
+    let pred = predict(&rest, 1.3, 0.02, &mut rng);
+    let settings = SocpSettings {
+        max_iterations: 2,
+        ..SocpSettings::default()
+    };
+    let layer = InextensibilityLayer::new(&rest, 0.1, settings).unwrap();
+    match layer.forward(&pred) {
+        Err(Error::SolverFailed { status, iterations }) => {
+            assert_eq!(status, "MaxIterations");
+            assert_eq!(iterations, 2);
+        }
+        other => panic!("expected SolverFailed, got {other:?}"),
+    }
+}
+
 #[test]
 fn socp_batch_matches_serial() {
     let mut rng = TestRng::new(40);
@@ -279,6 +476,17 @@ fn socp_rejects_bad_input() {
     assert!(matches!(
         InextensibilityLayer::new(&rest, f64::NAN, SocpSettings::default()),
         Err(Error::InvalidParameter { .. })
+    ));
+    let negative_gap = SocpSettings {
+        early_polish_gap: -1.0,
+        ..SocpSettings::default()
+    };
+    assert!(matches!(
+        InextensibilityLayer::new(&rest, 0.1, negative_gap),
+        Err(Error::InvalidParameter {
+            name: "early_polish_gap",
+            ..
+        })
     ));
     let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
     let mut pred = rest.flat_positions();
