@@ -5,7 +5,7 @@
 //!
 //! Every linear solve of the layer — each interior-point iteration, each polish Newton
 //! step, the backward pass — reduces to one matrix of that form, so one
-//! [`CholeskySolver`] (symbolic analysis once per mesh, AMD on the vertex graph) serves
+//! [`CholeskySolver`] (ordering and symbolic analysis once per mesh) serves
 //! them all.
 //!
 //! # The KKT systems as a rows-first block LDLᵀ

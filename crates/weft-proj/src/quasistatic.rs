@@ -15,7 +15,9 @@
 //!
 //! Minimised by weft-sim's Newton solver from `r̂` itself (which may be stretched or
 //! inverted): per-spring PSD projection of the Hessian (the definiteness fix of Teran et
-//! al. 2005), an Armijo line search, sparse Cholesky with the symbolic factor reused.
+//! al. 2005), an Armijo line search, sparse Cholesky with the symbolic factor reused and
+//! each numeric factor kept for further steps while they contract the residual force
+//! tenfold (Shamanskii's method; `NewtonSettings::reuse_factorization`).
 //!
 //! # Backward (Geng et al. Eq. 12–16)
 //!
@@ -223,9 +225,13 @@ impl QuasistaticLayer {
         )?;
         let axial = AxialSprings::new(&rest, params.axial_stiffness)?;
         let mean_length = rest.rest_lengths().iter().sum::<f64>() / rest.rest_lengths().len() as f64;
+        // Factorisations are reused across Newton steps while they keep contracting the
+        // residual (Shamanskii): the factorisation is most of a step's cost, and near the
+        // equilibrium the Hessian hardly changes between steps.
         let newton = NewtonSettings {
             tolerance: params.tolerance * params.stretch_stiffness * mean_length,
             max_iterations: params.max_iterations,
+            reuse_factorization: true,
             ..NewtonSettings::default()
         };
         Ok(Self {
@@ -329,12 +335,16 @@ impl QuasistaticLayer {
             ..self.newton
         };
         let second = solver.minimize(terms, x, &fine)?;
+        let mut history = first.residual_history;
+        history.extend(&second.residual_history);
         Ok(weft_sim::NewtonReport {
             iterations: first.iterations + second.iterations,
             initial_residual: first.initial_residual,
             line_search_halvings: first.line_search_halvings + second.line_search_halvings,
             regularizations: first.regularizations + second.regularizations,
+            factorizations: first.factorizations + second.factorizations,
             time: first.time + second.time,
+            residual_history: history,
             ..second
         })
     }

@@ -26,7 +26,20 @@ pub struct NewtonSettings {
     pub max_line_search: usize,
     /// When to project element Hessians to PSD (needed whenever an energy is non-convex).
     pub projection: HessianProjection,
+    /// Reuse a factorisation for the next step while it keeps contracting the residual
+    /// force: after a fresh Newton step that cut the residual at least
+    /// [`REUSE_AFTER_FRESH`]-fold, and after a reused step that cut it at least
+    /// [`REUSE_AFTER_REUSED`]-fold, both with a full step. Near a minimiser Newton
+    /// converges quadratically and the Hessian barely changes, so such chord steps
+    /// (Shamanskii's method) cost one solve instead of one factorisation. Off by default.
+    pub reuse_factorization: bool,
 }
+
+/// Residual contraction of a fresh Newton step above which its factor is kept
+/// (see [`NewtonSettings::reuse_factorization`]).
+pub const REUSE_AFTER_FRESH: f64 = 10.0;
+/// Residual contraction of a step with a reused factor above which it is kept again.
+pub const REUSE_AFTER_REUSED: f64 = 4.0;
 
 /// How Newton makes its matrix positive definite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -49,6 +62,7 @@ impl Default for NewtonSettings {
             armijo: 1e-4,
             max_line_search: 40,
             projection: HessianProjection::WhenIndefinite,
+            reuse_factorization: false,
         }
     }
 }
@@ -66,6 +80,9 @@ pub struct NewtonReport {
     pub line_search_halvings: usize,
     /// Times a diagonal shift was needed to make the Newton matrix positive definite.
     pub regularizations: usize,
+    /// Numeric factorisations (equal to `iterations` unless
+    /// [`NewtonSettings::reuse_factorization`] is on).
+    pub factorizations: usize,
     #[serde(with = "duration_seconds")]
     pub time: Duration,
     /// Residual after each iteration (N), for convergence studies.
@@ -254,9 +271,11 @@ impl NewtonSolver {
             energy,
             line_search_halvings: 0,
             regularizations: 0,
+            factorizations: 0,
             time: Duration::ZERO,
             residual_history: Vec::new(),
         };
+        let mut held: Option<weft_linalg::CholeskyFactor> = None;
         let result = (|| {
             while residual > settings.tolerance {
                 if report.iterations >= settings.max_iterations {
@@ -267,8 +286,15 @@ impl NewtonSolver {
                     });
                 }
                 report.iterations += 1;
-                let (factor, shifts) = self.factorize_at(terms, x, settings.projection)?;
-                report.regularizations += shifts;
+                let (factor, fresh) = match held.take() {
+                    Some(f) => (f, false),
+                    None => {
+                        let (f, shifts) = self.factorize_at(terms, x, settings.projection)?;
+                        report.regularizations += shifts;
+                        report.factorizations += 1;
+                        (f, true)
+                    }
+                };
                 for i in 0..n {
                     self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
                 }
@@ -304,9 +330,11 @@ impl NewtonSolver {
                 // Then judge steps by the residual force instead (backtracking from the
                 // full Newton step), keeping the tiny Armijo step only if that fails too.
                 let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy.abs();
+                let mut full_step = accepted && alpha == 1.0;
                 if !accepted || alpha < MIN_TRUSTED_STEP || !measurable {
                     let tiny = accepted.then(|| (self.trial.clone(), trial_energy));
                     accepted = false;
+                    full_step = false;
                     let mut beta = 1.0;
                     for _ in 0..12 {
                         for i in 0..n {
@@ -318,6 +346,7 @@ impl NewtonSolver {
                         if e.is_finite() && r.is_finite() && r < residual {
                             trial_energy = e;
                             accepted = true;
+                            full_step = beta == 1.0;
                             break;
                         }
                         beta *= 0.5;
@@ -350,8 +379,15 @@ impl NewtonSolver {
                         dof: i,
                     });
                 }
+                let previous = residual;
                 residual = self.free_residual(&grad);
                 report.residual_history.push(residual);
+                if settings.reuse_factorization && full_step {
+                    let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
+                    if residual * needed <= previous {
+                        held = Some(factor);
+                    }
+                }
             }
             Ok(())
         })();

@@ -47,6 +47,58 @@ fn newton_converges_quadratically_near_the_solution() {
 }
 
 #[test]
+fn reused_factorisations_reach_the_same_minimiser_with_fewer_factorisations() {
+    // The stretched pinned sheet again, from a rougher start so that several steps are
+    // needed: with `reuse_factorization` Newton must converge to the same point, factorise
+    // fewer times than it iterates, and without it factorise once per iteration.
+    let m = generators::sheet(9, 1.0).unwrap();
+    let t = Topology::new(&m);
+    let springs = Springs::stretch(&m, &t, 100.0).unwrap();
+    let boundary = t.boundary_vertices(m.num_vertices());
+    let mut rng = TestRng::new(2);
+    let mut x0: Vec<f64> = m.flat_positions().iter().map(|v| 1.1 * v).collect();
+    let mut fixed = vec![false; x0.len()];
+    for (v, &b) in boundary.iter().enumerate() {
+        for k in 0..3 {
+            fixed[3 * v + k] = b;
+            if !b {
+                x0[3 * v + k] += rng.uniform(-0.04, 0.04);
+            }
+        }
+    }
+    let terms: [&dyn Energy; 1] = [&springs];
+    let mut solver = NewtonSolver::new(x0.len(), &terms, fixed).unwrap();
+    let run = |solver: &mut NewtonSolver, reuse: bool| {
+        let settings = NewtonSettings {
+            tolerance: 1e-10,
+            projection: HessianProjection::Never,
+            reuse_factorization: reuse,
+            ..Default::default()
+        };
+        let mut x = x0.clone();
+        let report = solver.minimize(&terms, &mut x, &settings).unwrap();
+        (x, report)
+    };
+    let (plain, plain_report) = run(&mut solver, false);
+    let (reused, reused_report) = run(&mut solver, true);
+    assert_eq!(plain_report.factorizations, plain_report.iterations);
+    assert!(
+        reused_report.factorizations < reused_report.iterations,
+        "{} factorisations in {} iterations",
+        reused_report.factorizations,
+        reused_report.iterations
+    );
+    assert!(reused_report.factorizations < plain_report.factorizations);
+    assert!(reused_report.residual <= 1e-10);
+    let diff = plain
+        .iter()
+        .zip(&reused)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(diff < 1e-9, "minimisers differ by {diff}");
+}
+
+#[test]
 fn free_fall_moves_the_centre_of_mass_by_half_g_t_squared_within_o_dt() {
     let m = generators::sheet(5, 0.5).unwrap();
     let t = Topology::new(&m);
