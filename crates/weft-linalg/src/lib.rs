@@ -8,9 +8,9 @@
 //! numeric factorisation is repeated.
 //!
 //! It is deliberately small: upper-triangle CSC storage with O(1) assembly through
-//! precomputed slots, a Cholesky solver for SPD matrices ([`CholeskySolver`]) and a
-//! regularised LDLᵀ with iterative refinement for quasi-definite saddle-point (KKT)
-//! matrices ([`LdltSolver`]). It knows nothing of meshes or physics.
+//! precomputed slots and a Cholesky solver for SPD matrices ([`CholeskySolver`]). It
+//! knows nothing of meshes or physics. (The projection layers' KKT systems are
+//! factorised rows-first through this Cholesky, in weft-proj — the only user of them.)
 //!
 //! faer runs single-threaded here: at weft's sizes two threads made faer 2–6× slower on
 //! this project's 2-core machines (see `shared/docs/dependencies.md`) because its `Par`
@@ -48,10 +48,9 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 mod ordering;
 mod two_domain;
 
-use faer::linalg::cholesky::ldlt::factor::{LdltParams, LdltRegularization};
 use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side, Spec};
@@ -64,8 +63,6 @@ use two_domain::{Domain, TwoDomain, TwoDomainFactor};
 pub enum Error {
     #[error("matrix is not positive definite (Cholesky failed); an SPD projection or more regularisation is needed")]
     NotPositiveDefinite,
-    #[error("LDLᵀ factorisation failed: {0}")]
-    Ldlt(String),
     #[error("factorisation setup failed: {0}")]
     Setup(String),
     #[error("{what}: expected length {expected}, got {got}")]
@@ -584,152 +581,6 @@ impl CholeskyFactor {
             }
         }
     }
-}
-
-/// Settings of the regularised LDLᵀ.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LdltSettings {
-    /// A pivot whose magnitude falls below `epsilon` (or has the wrong sign) is replaced
-    /// by `±delta`.
-    pub epsilon: f64,
-    pub delta: f64,
-    /// Steps of iterative refinement against the unregularised matrix.
-    pub refinement_steps: usize,
-}
-
-impl Default for LdltSettings {
-    fn default() -> Self {
-        Self {
-            epsilon: 1e-13,
-            delta: 1e-9,
-            refinement_steps: 3,
-        }
-    }
-}
-
-/// Sparse LDLᵀ for symmetric quasi-definite matrices (saddle-point / KKT systems),
-/// with sign-aware dynamic regularisation and iterative refinement.
-///
-/// `signs[i]` is the expected sign of pivot `i`: +1 for primal unknowns, −1 for
-/// multipliers. faer's LDLᵀ on a KKT matrix with a zero block fails with a zero pivot
-/// unless regularised (see `shared/docs/dependencies.md`); refinement against the
-/// original matrix then removes the regularisation's bias to the solve's accuracy.
-#[derive(Debug, Clone)]
-pub struct LdltSolver {
-    pattern: Arc<SymmetricPattern>,
-    symbolic: Arc<SymbolicCholesky<usize>>,
-    signs: Vec<i8>,
-    settings: LdltSettings,
-}
-
-/// A numeric LDLᵀ factor with the matrix kept for refinement.
-#[derive(Debug, Clone)]
-pub struct LdltFactor {
-    symbolic: Arc<SymbolicCholesky<usize>>,
-    values: Vec<f64>,
-    matrix: SymmetricMatrix,
-    refinement_steps: usize,
-}
-
-impl LdltSolver {
-    pub fn new(pattern: Arc<SymmetricPattern>, signs: Vec<i8>, settings: LdltSettings) -> Result<Self> {
-        single_threaded();
-        if signs.len() != pattern.dim() {
-            return Err(Error::DimensionMismatch {
-                what: "LDLᵀ pivot signs",
-                expected: pattern.dim(),
-                got: signs.len(),
-            });
-        }
-        let symbolic = factorize_symbolic_cholesky(
-            pattern.symbolic.as_ref(),
-            Side::Upper,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| Error::Setup(format!("{e:?}")))?;
-        Ok(Self {
-            pattern,
-            symbolic: Arc::new(symbolic),
-            signs,
-            settings,
-        })
-    }
-
-    pub fn pattern(&self) -> &Arc<SymmetricPattern> {
-        &self.pattern
-    }
-
-    pub fn factorize(&self, a: &SymmetricMatrix) -> Result<LdltFactor> {
-        a.check_finite()?;
-        let mut values = vec![0.0; self.symbolic.len_val()];
-        let par = Par::Seq;
-        let params: Spec<LdltParams, f64> = Default::default();
-        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_ldlt_scratch::<f64>(par, params));
-        let reg = LdltRegularization {
-            dynamic_regularization_signs: Some(&self.signs),
-            dynamic_regularization_delta: self.settings.delta,
-            dynamic_regularization_epsilon: self.settings.epsilon,
-        };
-        self.symbolic
-            .factorize_numeric_ldlt::<f64>(
-                &mut values,
-                a.as_faer(),
-                Side::Upper,
-                reg,
-                par,
-                MemStack::new(&mut mem),
-                params,
-            )
-            .map_err(|e| Error::Ldlt(format!("{e:?}")))?;
-        Ok(LdltFactor {
-            symbolic: self.symbolic.clone(),
-            values,
-            matrix: a.clone(),
-            refinement_steps: self.settings.refinement_steps,
-        })
-    }
-}
-
-impl LdltFactor {
-    fn raw_solve(&self, rhs: &mut [f64]) {
-        let n = self.matrix.dim();
-        let par = Par::Seq;
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
-        LdltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, 1),
-            par,
-            MemStack::new(&mut mem),
-        );
-    }
-
-    /// Solves `A x = b` in place, refining against the stored (unregularised) `A`.
-    /// Returns the final relative residual `‖b − A x‖ / ‖b‖`.
-    pub fn solve_in_place(&self, rhs: &mut [f64]) -> f64 {
-        let n = self.matrix.dim();
-        assert_eq!(rhs.len(), n, "right-hand side length");
-        let b = rhs.to_vec();
-        let bnorm = norm(&b).max(f64::MIN_POSITIVE);
-        self.raw_solve(rhs);
-        let mut ax = vec![0.0; n];
-        let mut rel = 0.0;
-        for step in 0..=self.refinement_steps {
-            self.matrix.mul_vec(rhs, &mut ax);
-            let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
-            rel = norm(&r) / bnorm;
-            if step == self.refinement_steps || rel < 1e-15 {
-                break;
-            }
-            self.raw_solve(&mut r);
-            rhs.iter_mut().zip(&r).for_each(|(x, d)| *x += d);
-        }
-        rel
-    }
-}
-
-fn norm(x: &[f64]) -> f64 {
-    x.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
 #[cfg(test)]

@@ -73,52 +73,6 @@ fn cholesky_rejects_indefinite_and_nan_matrices() {
 }
 
 #[test]
-fn ldlt_solves_a_saddle_point_system_with_zero_block() {
-    // [[H, Aᵀ], [A, 0]] with H SPD (random) and A = selection of 3 unknowns.
-    let mut rng = TestRng::new(3);
-    let n = 30;
-    let h = random_spd(n, &mut rng);
-    let pins = [2usize, 11, 25];
-    let m = pins.len();
-    let mut entries: Vec<(usize, usize)> = Vec::new();
-    let hp = h.pattern();
-    for c in 0..n {
-        for r in 0..=c {
-            if hp.slot(r, c).is_some() {
-                entries.push((r, c));
-            }
-        }
-    }
-    for (k, &p) in pins.iter().enumerate() {
-        entries.push((p, n + k));
-    }
-    let pattern = Arc::new(SymmetricPattern::new(n + m, entries));
-    let mut kkt = SymmetricMatrix::zeros(pattern.clone());
-    for c in 0..n {
-        for r in 0..=c {
-            let v = h.get(r, c);
-            if v != 0.0 {
-                kkt.add(r, c, v);
-            }
-        }
-    }
-    for (k, &p) in pins.iter().enumerate() {
-        kkt.add(p, n + k, 1.0);
-    }
-    let signs: Vec<i8> = (0..n + m).map(|i| if i < n { 1 } else { -1 }).collect();
-    let solver = LdltSolver::new(pattern, signs, LdltSettings::default()).unwrap();
-    let f = solver.factorize(&kkt).unwrap();
-    let b = rng.vec(n + m, -1.0, 1.0);
-    let mut x = b.clone();
-    let rel = f.solve_in_place(&mut x);
-    assert!(rel < 1e-12, "relative residual {rel}");
-    // The constraint rows say x[pin] = b[n + k] exactly.
-    for (k, &p) in pins.iter().enumerate() {
-        assert!((x[p] - b[n + k]).abs() < 1e-10);
-    }
-}
-
-#[test]
 fn pattern_slots_are_symmetric_and_include_the_diagonal() {
     let p = SymmetricPattern::from_vertex_pairs(3, [(0, 2)]);
     assert_eq!(p.dim(), 9);

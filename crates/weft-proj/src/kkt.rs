@@ -32,7 +32,7 @@
 //! A row of an active edge has `σ_e = 0` (polish) or `σ_e ≈ 0` (backward), so its pivot
 //! is regularised, sign-aware, to `p_e = min(σ_e, −δ)`; iterative refinement against the
 //! unregularised `𝒦` then removes the regularisation's bias, exactly as for a
-//! dynamically regularised sparse LDLᵀ (`weft_linalg::LdltSolver`). For dependent
+//! dynamically regularised sparse LDLᵀ. For dependent
 //! constraint rows (Geng et al. Appendix A) the regularisation picks one multiplier
 //! solution and refinement converges on the consistent part.
 

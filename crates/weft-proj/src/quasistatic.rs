@@ -397,17 +397,6 @@ impl QuasistaticLayer {
         solutions: &[QuasistaticSolution],
         grads: &[G],
     ) -> Result<Vec<QuasistaticGradient>> {
-        if solutions.len() != grads.len() {
-            return Err(Error::LengthMismatch {
-                what: "batch gradients",
-                expected: solutions.len(),
-                got: grads.len(),
-            });
-        }
-        solutions
-            .par_iter()
-            .zip(grads.par_iter())
-            .map(|(s, g)| self.backward(s, g.as_ref()))
-            .collect()
+        crate::error::backward_batch(solutions, grads, |s, g| self.backward(s, g))
     }
 }

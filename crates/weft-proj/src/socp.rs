@@ -839,18 +839,7 @@ impl InextensibilityLayer {
         solutions: &[SocpSolution],
         grads: &[G],
     ) -> Result<Vec<Vec<f64>>> {
-        if solutions.len() != grads.len() {
-            return Err(Error::LengthMismatch {
-                what: "batch gradients",
-                expected: solutions.len(),
-                got: grads.len(),
-            });
-        }
-        solutions
-            .par_iter()
-            .zip(grads.par_iter())
-            .map(|(s, g)| self.backward(s, g.as_ref()))
-            .collect()
+        crate::error::backward_batch(solutions, grads, |s, g| self.backward(s, g))
     }
 }
 
