@@ -1,12 +1,11 @@
 //! Fill-reducing orderings and graph separators on the *vertex* graph of a pattern of
 //! `3 × 3` blocks (a third of the unknowns to order, supernodes aligned with vertices).
 //!
-//! Two candidate orderings are built and the one whose symbolic factor is smaller wins
-//! (see `CholeskySolver::new`): AMD, best on surface-like and compact meshes, and a
-//! level-set (Cuthill–McKee-like) order from a pseudo-peripheral vertex, which on
-//! elongated bodies — a beam, a limb — gives a banded factor with large dense
-//! supernodes (on the 50 k-tet limb, 7 % less fill and a faster numeric factorisation
-//! than AMD; measured with `cargo bench -p weft-sim --bench fem`).
+//! Two candidate orderings are built and compared by the fill of the vertex graph's
+//! elimination tree (`Graph::best_order`): AMD, best on surface-like and compact
+//! meshes, and a level-set (Cuthill–McKee-like) order from a pseudo-peripheral vertex,
+//! which on elongated bodies — a beam, a limb — gives a banded factor with large dense
+//! supernodes.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMat;
@@ -207,8 +206,7 @@ impl Graph {
     /// Of the level-set and AMD orders of this graph, the faster to factorise, with its
     /// factor's length: the banded one unless AMD's factor is over 20 % smaller — a
     /// banded factor's supernodes are whole cross-sections, dense blocks on which faer
-    /// runs several times faster per entry (default beam: banded 0.38 M entries factorise
-    /// in 4.3 ms, AMD's 0.33 M in 4.7 ms), while on sheets AMD's factor is 2–3× smaller.
+    /// runs faster per entry, while on sheets AMD's factor is several times smaller.
     pub(crate) fn best_order(&self) -> Result<(Vec<usize>, usize)> {
         let (banded, _) = self.level_order();
         let amd = self.amd_order()?;

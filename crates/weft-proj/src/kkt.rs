@@ -25,9 +25,7 @@
 //! no fill: eliminating a row couples only `a` and `b`, already coupled by the mesh edge.
 //! (A scalar AMD on `𝒦` nearly chooses this order itself — rows have the smallest
 //! degree — but orders scalars rather than vertex blocks and pays per-row supernode
-//! overhead. On the paper-size sheet's KKT pattern, in a scratch faer program under
-//! similar load, faer's LDLᵀ with scalar AMD took 33–34 ms against 19–20 ms for a
-//! factorisation of the primal vertex pattern alone.)
+//! overhead.)
 //!
 //! A row of an active edge has `σ_e = 0` (polish) or `σ_e ≈ 0` (backward), so its pivot
 //! is regularised, sign-aware, to `p_e = min(σ_e, −δ)`; iterative refinement against the
