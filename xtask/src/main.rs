@@ -5,9 +5,13 @@
 //! reports. `cargo xtask <command> --help` documents every option.
 
 mod acap;
+mod dataset;
+mod evaluate;
 mod mesh;
 mod output;
 mod project;
+mod record;
+mod report;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -36,6 +40,12 @@ enum Command {
     /// Project a predicted cloth onto physics: inextensibility SOCP or quasistatic springs (Geng et al.).
     #[command(subcommand)]
     Project(project::ProjectCommand),
+    /// Generate a dataset of independent simulated sequences (sharded, resumable, checksummed), or merge shards.
+    Dataset(dataset::DatasetArgs),
+    /// Run every method against its reference and write results.json, tables.md, plots and index.html.
+    Evaluate(evaluate::EvaluateArgs),
+    /// Check that an evaluation's outputs exist and parse, including every record's fields (CI runs this).
+    CheckReport(report::CheckArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -45,5 +55,8 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::Acap(cmd) => acap::run(cmd),
         Command::Project(cmd) => project::run(cmd),
+        Command::Dataset(args) => dataset::run(args),
+        Command::Evaluate(args) => evaluate::run(args),
+        Command::CheckReport(args) => report::check(args),
     }
 }

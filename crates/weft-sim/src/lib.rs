@@ -6,8 +6,11 @@
 //! Euler in variational form (Tan et al. Eq. 4). A scene lists the terms it needs and
 //! only those are built: no obstacle, no collision code runs.
 //!
-//! This crate is not a learning library (it never touches candle) and does no file I/O
-//! beyond parsing scene descriptions handed to it as text.
+//! Every scene kind (cloth, volumetric, soft tissue) loads through one [`load`] from a
+//! built-in name or a TOML file.
+//!
+//! This crate is not a learning library (it never touches candle); its only file I/O is
+//! reading scene files and the meshes they name.
 //!
 //! Units: SI throughout — metres, kilograms, seconds, newtons, joules.
 //!
@@ -32,6 +35,7 @@ pub mod energies;
 pub mod energy;
 pub mod error;
 pub mod implicit_euler;
+pub mod load;
 pub mod newmark;
 pub mod newton;
 pub mod prefactorized;
@@ -43,6 +47,7 @@ pub mod volume_scene;
 pub use energy::Energy;
 pub use error::{Error, Result};
 pub use implicit_euler::{ImplicitEuler, StepReport};
+pub use load::{AnyScene, LoadedScene, builtin_names, load};
 pub use newmark::{Newmark, NewmarkReport};
 pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};

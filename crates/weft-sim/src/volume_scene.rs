@@ -404,6 +404,24 @@ impl VolumeSimulation {
     pub fn frame_index(&self) -> usize {
         self.frame
     }
+    /// Current node positions (flat, m).
+    pub fn positions(&self) -> Vec<f64> {
+        match &self.solver {
+            Solver::Euler(ie) => ie.positions().to_vec(),
+            Solver::Newmark(nm) => nm.positions().to_vec(),
+            Solver::Quasistatic { x, .. } => x.clone(),
+            Solver::Linear(lin) => lin.positions(),
+        }
+    }
+    /// The Newton settings of the dynamic solves (implicit Euler, Newmark); `None` for
+    /// the quasistatic and linear solves. Evaluations tighten them for a reference run.
+    pub fn newton_settings_mut(&mut self) -> Option<&mut crate::NewtonSettings> {
+        match &mut self.solver {
+            Solver::Euler(ie) => Some(&mut ie.settings),
+            Solver::Newmark(nm) => Some(&mut nm.settings),
+            _ => None,
+        }
+    }
 
     /// Advances one frame (a time step, or the next load increment).
     pub fn step(&mut self) -> Result<VolumeFrame> {

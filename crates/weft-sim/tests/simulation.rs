@@ -362,3 +362,21 @@ fn grasp_indices_are_validated() {
     s.grasp = GraspVertices::Indices(vec![]);
     assert!(ClothSimulation::new(s, None).is_err());
 }
+
+#[test]
+fn full_size_mass_spring_ball_converges_through_its_buckling_frame() {
+    // Regression: with a cap of 100 Newton iterations the built-in `ball-ms` failed with
+    // NotConverged at frame 2 (found by `cargo xtask dataset ball-ms --size standard`).
+    let mut sim = ClothSimulation::new(Scene::builtin("ball-ms", false).unwrap(), None).unwrap();
+    let tolerance = sim.integrator().settings.tolerance;
+    let mut iterations = Vec::new();
+    for _ in 0..3 {
+        let f = sim.step().unwrap();
+        assert!(f.report.newton.residual <= tolerance);
+        iterations.push(f.report.newton.iterations);
+    }
+    assert!(
+        iterations[1] > 100,
+        "frame 2 no longer buckles ({iterations:?}); revisit the iteration cap"
+    );
+}

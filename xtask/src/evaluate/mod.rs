@@ -1,0 +1,213 @@
+//! `cargo xtask evaluate`: every method against its reference, speed beside accuracy.
+//!
+//! Each experiment (`sim`, `proj`; later issues add theirs) runs its methods and a tight
+//! reference in one process, so time ratios compare one machine state, and returns an
+//! [`ExperimentOutput`]: tidy [`Record`]s, roll-out curves, energies and renders. Outputs
+//! are cached per experiment in `OUT/experiments/<name>.json`, so an interrupted
+//! evaluation resumes with the experiments it has not finished. The report (results.json,
+//! tables.md, plots, index.html) is then rebuilt from every cached experiment.
+//! `docs/RESULTS.md` documents every name that appears in `results.json`.
+
+pub mod paper;
+pub mod proj;
+pub mod results;
+pub mod sim;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use crate::dataset::Size;
+use crate::output::write_json;
+pub use results::{Curve, EnergyBar, ExperimentOutput};
+
+/// Experiments `evaluate` runs, in order.
+pub const EXPERIMENTS: [&str; 2] = ["sim", "proj"];
+
+#[derive(Args)]
+pub struct EvaluateArgs {
+    /// quick (minutes; small meshes) or standard (the committed evaluation in docs/results/).
+    #[arg(long, value_enum, default_value_t = Size::Standard)]
+    size: Size,
+    /// Shorthand for --size quick.
+    #[arg(long)]
+    quick: bool,
+    /// Run only these experiments (comma-separated): sim, proj.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Output directory (default: out/evaluate-<size>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Re-run experiments whose cached output exists in OUT/experiments/ (default: resume, reusing them).
+    #[arg(long)]
+    force: bool,
+    /// Hide progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// After the run, copy the report (results.json, tables.md, index.html, plots/, renders/; not the large
+    /// predictions/) to this directory with a PROVENANCE.md naming the command, machine and code version —
+    /// how docs/results/ is made.
+    #[arg(long)]
+    publish: Option<PathBuf>,
+}
+
+/// What an experiment needs from the command line.
+pub struct EvalContext {
+    pub size: Size,
+    pub out: PathBuf,
+    pub quiet: bool,
+}
+
+pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
+    let size = if args.quick { Size::Quick } else { args.size };
+    if size == Size::Paper {
+        bail!("evaluate runs at --size quick or standard; paper-size datasets are for training (cargo xtask dataset)");
+    }
+    let selected: Vec<&str> = if args.only.is_empty() {
+        EXPERIMENTS.to_vec()
+    } else {
+        for o in &args.only {
+            if !EXPERIMENTS.contains(&o.as_str()) {
+                bail!("--only {o:?}: experiments are {}", EXPERIMENTS.join(", "));
+            }
+        }
+        EXPERIMENTS
+            .iter()
+            .copied()
+            .filter(|e| args.only.iter().any(|o| o == e))
+            .collect()
+    };
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("out/evaluate-{}", size.as_str())));
+    std::fs::create_dir_all(out.join("experiments")).with_context(|| format!("creating {}", out.display()))?;
+    let ctx = EvalContext {
+        size,
+        out: out.clone(),
+        quiet: args.quiet,
+    };
+    let start = Instant::now();
+    for name in &selected {
+        let cache = out.join("experiments").join(format!("{name}.json"));
+        if !args.force {
+            if let Some(cached) = read_cached(&cache, size)? {
+                eprintln!(
+                    "{name}: reusing {} ({} records; --force re-runs it)",
+                    cache.display(),
+                    cached.records.len()
+                );
+                continue;
+            }
+        }
+        eprintln!("{name}: running ({} size)", size.as_str());
+        let t = Instant::now();
+        let mut output = match *name {
+            "sim" => sim::run(&ctx)?,
+            "proj" => proj::run(&ctx)?,
+            other => unreachable!("experiment {other} listed but not dispatched"),
+        };
+        output.wall_seconds = t.elapsed().as_secs_f64();
+        results::validate(&output.records)?;
+        write_json(&cache, &output)?;
+        eprintln!(
+            "{name}: {} records in {:.1} s{}",
+            output.records.len(),
+            output.wall_seconds,
+            if output.failures.is_empty() {
+                String::new()
+            } else {
+                format!(", {} failure(s) recorded", output.failures.len())
+            }
+        );
+    }
+    // The report covers every experiment cached in OUT at this size.
+    let mut outputs = Vec::new();
+    for name in EXPERIMENTS {
+        let cache = out.join("experiments").join(format!("{name}.json"));
+        if let Some(o) = read_cached(&cache, size)? {
+            outputs.push(o);
+        }
+    }
+    crate::report::write(&out, size, &outputs, start.elapsed().as_secs_f64())?;
+    println!(
+        "report: {} (results.json, tables.md, plots/, predictions/, renders/)",
+        out.join("index.html").display()
+    );
+    if let Some(dest) = &args.publish {
+        publish(&out, dest, size, &selected)?;
+        println!("published to {}", dest.display());
+    }
+    Ok(())
+}
+
+/// Copies the report to `dest` with its provenance.
+fn publish(out: &Path, dest: &Path, size: Size, selected: &[&str]) -> anyhow::Result<()> {
+    for sub in ["plots", "renders"] {
+        let _ = std::fs::remove_dir_all(dest.join(sub));
+    }
+    std::fs::create_dir_all(dest)?;
+    for f in ["results.json", "tables.md", "index.html"] {
+        std::fs::copy(out.join(f), dest.join(f)).with_context(|| format!("copying {f}"))?;
+    }
+    for sub in ["plots", "renders"] {
+        copy_tree(&out.join(sub), &dest.join(sub))?;
+    }
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|s| s.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let only = if selected.len() == EXPERIMENTS.len() {
+        String::new()
+    } else {
+        format!(" --only {}", selected.join(","))
+    };
+    let text = format!(
+        "# Provenance\n\nProduced by\n\n```sh\ncargo xtask evaluate --size {}{only} --publish {}\n```\n\non {cores} cores of          {cpu}, code version {}. The per-experiment wall times are at the top of `tables.md`; `index.html` is the          whole report in one file. The predictions (every method's positions beside the reference) are not          committed: the same command writes them to `out/evaluate-{}/predictions/`.\n",
+        size.as_str(),
+        dest.display(),
+        crate::dataset::code_version(),
+        size.as_str()
+    );
+    crate::output::write_text(&dest.join("PROVENANCE.md"), &text)
+}
+
+fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(to)?;
+    for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
+        let p = e?.path();
+        let target = to.join(p.file_name().context("unnamed file")?);
+        if p.is_dir() {
+            copy_tree(&p, &target)?;
+        } else {
+            std::fs::copy(&p, &target)?;
+        }
+    }
+    Ok(())
+}
+
+fn read_cached(path: &Path, size: Size) -> anyhow::Result<Option<ExperimentOutput>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    match serde_json::from_slice::<ExperimentOutput>(&bytes) {
+        Ok(o) if o.size == size => Ok(Some(o)),
+        Ok(o) => bail!(
+            "{} holds a {} evaluation; use another --out for {} or pass --force",
+            path.display(),
+            o.size.as_str(),
+            size.as_str()
+        ),
+        // An output of an older format is recomputed rather than trusted.
+        Err(_) => Ok(None),
+    }
+}

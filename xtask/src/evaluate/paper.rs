@@ -1,0 +1,250 @@
+//! The papers' tables in their layout, with the paper's numbers beside ours. A table is
+//! plain data ([`Table`]) rendered to Markdown (`tables.md`) and HTML (`index.html`).
+//! Paper figures are quoted as printed; ours come from the records of this run.
+
+use super::results::{ExperimentOutput, Record};
+
+/// A table: title, caption, header and rows of cells.
+#[derive(Debug, Clone)]
+pub struct Table {
+    pub title: String,
+    pub caption: String,
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    pub fn markdown(&self) -> String {
+        let mut s = format!("### {}\n\n{}\n\n", self.title, self.caption);
+        s.push_str(&format!("| {} |\n", self.header.join(" | ")));
+        s.push_str(&format!("|{}\n", "---|".repeat(self.header.len())));
+        for r in &self.rows {
+            s.push_str(&format!("| {} |\n", r.join(" | ")));
+        }
+        s.push('\n');
+        s
+    }
+}
+
+fn find<'a>(records: &'a [Record], scene: &str, method: &str, metric: &str) -> Option<&'a Record> {
+    records
+        .iter()
+        .find(|r| r.scene == scene && r.method == method && r.metric == metric)
+}
+
+/// Seconds as milliseconds with 3 significant digits, or "—" if not measured.
+fn ms(r: Option<&Record>) -> String {
+    r.map_or("—".into(), |r| format_ms(r.value))
+}
+
+pub fn format_ms(s: f64) -> String {
+    let ms = 1e3 * s;
+    if ms >= 100.0 {
+        format!("{ms:.0} ms")
+    } else if ms >= 10.0 {
+        format!("{ms:.1} ms")
+    } else {
+        format!("{ms:.2} ms")
+    }
+}
+
+/// Every table this run can fill.
+pub fn tables(outputs: &[ExperimentOutput]) -> Vec<Table> {
+    let mut out = Vec::new();
+    for o in outputs {
+        match o.experiment.as_str() {
+            "sim" => {
+                out.push(nnwarp_table_1(&o.records));
+                out.extend(speed_accuracy(o, "m-rms", "M_rms"));
+            }
+            "proj" => {
+                out.push(geng_timings(&o.records));
+                out.extend(speed_accuracy(o, "sqrt-mse", "SqrtMSE"));
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// NNWarp Table 1 ("Time performance"), the columns that need no network.
+fn nnwarp_table_1(records: &[Record]) -> Table {
+    let row = |paper_model: &str, paper: [&str; 3], scene: &str| {
+        let tets = find(records, scene, "prefactorized-linear", "tetrahedra")
+            .map_or("—".into(), |r| format!("{:.0}", r.value));
+        vec![
+            format!("{paper_model} / ours: {scene}"),
+            format!("{} / {tets}", paper[0]),
+            format!(
+                "{} / {}",
+                paper[1],
+                ms(find(records, scene, "prefactorized-linear", "factorization-seconds"))
+            ),
+            format!(
+                "{} / {}",
+                paper[2],
+                ms(find(records, scene, "prefactorized-linear", "solve-seconds"))
+            ),
+            ms(find(records, scene, "neo-hookean", "frame-seconds")),
+        ]
+    };
+    Table {
+        title: "NNWarp (Luo et al.) Table 1 — time performance, paper / ours".into(),
+        caption: "Pre-factorised linear FEM: factorisation of the system matrix, then one solve per frame (paper: \
+                  Eigen SimplicialLLT on an 8-core i7 at 3.0 GHz; ours: weft-linalg's Cholesky on the 2-core machine \
+                  of this run). The NNWarp correction columns need the trained network (experiment `nnwarp`). The \
+                  last column, ours only, is one full Neo-Hookean implicit-Euler frame on the same body."
+            .into(),
+        header: [
+            "Model",
+            "# Tetrahedra",
+            "Factorization",
+            "Solve",
+            "Full Neo-Hookean frame (ours)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: vec![
+            row("Beam", ["2,629", "6.9 ms", "< 1 ms"], "beam"),
+            row("Dragon", ["51,850", "307 ms", "15 ms"], "limb"),
+        ],
+    }
+}
+
+/// Geng et al. §4.1 and §6.1: the layers' per-example cost.
+fn geng_timings(records: &[Record]) -> Table {
+    let scene = records
+        .iter()
+        .find(|r| r.method == "ipm")
+        .map_or("", |r| r.scene.as_str());
+    let mut rows = Vec::new();
+    for (what, paper, method, metric) in [
+        ("SOCP forward (our IPM)", "3–4 s", "ipm", "forward-seconds"),
+        ("SOCP forward (Clarabel)", "3–4 s", "clarabel", "forward-seconds"),
+        ("SOCP backward", "0.5 s", "ipm", "backward-seconds"),
+        (
+            "Quasistatic forward, μ = 1",
+            "0.07 s",
+            "quasistatic-mu-1",
+            "forward-seconds",
+        ),
+        (
+            "Quasistatic forward, μ = 0.1",
+            "0.07 s",
+            "quasistatic-mu-0.1",
+            "forward-seconds",
+        ),
+        (
+            "Quasistatic forward, μ = 0.01",
+            "0.07 s",
+            "quasistatic-mu-0.01",
+            "forward-seconds",
+        ),
+        (
+            "Quasistatic backward, μ = 0.1",
+            "0.01 s",
+            "quasistatic-mu-0.1",
+            "backward-seconds",
+        ),
+    ] {
+        rows.push(vec![
+            what.into(),
+            paper.into(),
+            ms(find(records, scene, method, metric)),
+        ]);
+    }
+    Table {
+        title: format!("Geng et al. §4.1 and §6.1 — projection cost per example ({scene})"),
+        caption:
+            "Paper: a 2969-vertex shirt with 8787 edge constraints, its CPU not stated. Ours: a sheet of the same \
+                  size under a stretched, noisy prediction, on this run's machine. The paper's errors (Tables 1–4) \
+                  need the trained network (experiment `drape`)."
+                .into(),
+        header: ["Quantity", "Paper", "Ours"].map(String::from).to_vec(),
+        rows,
+    }
+}
+
+/// Ours only (no paper measures it): every method's time and error per scene.
+fn speed_accuracy(o: &ExperimentOutput, metric: &str, label: &str) -> Vec<Table> {
+    let mut scenes: Vec<&str> = Vec::new();
+    for r in o.records.iter().filter(|r| r.metric == metric) {
+        if !scenes.contains(&r.scene.as_str()) {
+            scenes.push(&r.scene);
+        }
+    }
+    scenes
+        .into_iter()
+        .map(|scene| {
+            let rows = o
+                .records
+                .iter()
+                .filter(|r| r.scene == scene && r.metric == metric)
+                .map(|r| {
+                    let t = r.seconds_per_frame.unwrap_or(f64::NAN);
+                    let gt = r.ground_truth_seconds_per_frame.unwrap_or(f64::NAN);
+                    let max = o
+                        .records
+                        .iter()
+                        .find(|q| {
+                            q.scene == scene
+                                && q.method == r.method
+                                && (q.metric == "max-error" || q.metric == "max-dist")
+                        })
+                        .map_or("—".into(), |q| format!("{:.3e}", q.value));
+                    vec![
+                        r.method.clone(),
+                        format_ms(t),
+                        format!("{:.3}", t / gt),
+                        format!("{:.3e}", r.value),
+                        max,
+                    ]
+                })
+                .collect();
+            Table {
+                title: format!(
+                    "Speed–accuracy, {} / {scene} (ours; no paper measures this)",
+                    o.experiment
+                ),
+                caption: format!(
+                    "Time per frame (per example for projections) and its ratio to the ground truth's, timed in the \
+                     same run; {label} and the largest vertex error against the tight reference, in mm."
+                ),
+                header: [
+                    "Method",
+                    "Time",
+                    "Ratio to ground truth",
+                    &format!("{label} (mm)"),
+                    "Max error (mm)",
+                ]
+                .map(String::from)
+                .to_vec(),
+                rows,
+            }
+        })
+        .collect()
+}
+
+/// The papers' tables that later experiments fill, with the experiment that will.
+pub const PENDING: [(&str, &str); 5] = [
+    (
+        "Tan et al. Tables I–IV (M_rms, M_STED, M_phys of the embedding and the latent simulator)",
+        "embed",
+    ),
+    (
+        "Alt-ConvLSTM Tables 1–2 (per-vertex error, single-step and roll-out, known and unseen motions)",
+        "altconv",
+    ),
+    (
+        "NNWarp Table 1 correction columns and the error curves (Figs. 13, 15, 18–19)",
+        "nnwarp",
+    ),
+    (
+        "Geng et al. Tables 1–3 (SqrtMSE, MaxDist of network, postprocess and trained postprocess)",
+        "drape",
+    ),
+    (
+        "Geng et al. Table 4 (compression and stretching energy errors)",
+        "drape",
+    ),
+];

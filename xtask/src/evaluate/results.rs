@@ -1,0 +1,259 @@
+//! The evaluation's data: tidy records (one per measured figure, the rows of
+//! `results.json`), roll-out curves and energies for the plots, and shared error metrics.
+
+use anyhow::ensure;
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::Size;
+
+/// One measured figure. Field names and meanings are documented in `docs/RESULTS.md`;
+/// fields that do not apply are `null`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    pub experiment: String,
+    pub scene: String,
+    pub method: String,
+    pub metric: String,
+    pub split: Option<String>,
+    pub value: f64,
+    pub unit: String,
+    /// The paper's figure for the same quantity, where a paper prints one.
+    pub paper_value: Option<f64>,
+    /// The method's wall time per frame (per example for projections), in seconds.
+    pub seconds_per_frame: Option<f64>,
+    /// The ground-truth solver's wall time per frame, measured in the same run (s).
+    pub ground_truth_seconds_per_frame: Option<f64>,
+}
+
+/// Roll-out error of one method against the reference, frame by frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Curve {
+    pub scene: String,
+    pub method: String,
+    /// Scene frames (time / the scene's frame time).
+    pub frames: Vec<f64>,
+    /// Per-frame RMS error per coordinate (mm, M_rms of that frame).
+    pub error_mm: Vec<f64>,
+}
+
+/// One bar of an energy chart.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnergyBar {
+    pub scene: String,
+    pub method: String,
+    /// What energy (`potential`, `kinetic`, `stretching`, `compression`).
+    pub kind: String,
+    pub value: f64,
+    pub unit: String,
+}
+
+/// Everything one experiment measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExperimentOutput {
+    pub experiment: String,
+    pub size: Size,
+    pub records: Vec<Record>,
+    pub curves: Vec<Curve>,
+    pub energies: Vec<EnergyBar>,
+    /// Rendered error images, relative to the output directory.
+    pub renders: Vec<String>,
+    /// Methods that failed, with the typed error (never a NaN passed on).
+    pub failures: Vec<String>,
+    /// Settings and facts the tables cite (meshes, tolerances, time steps).
+    pub notes: Vec<String>,
+    pub wall_seconds: f64,
+}
+
+impl ExperimentOutput {
+    pub fn new(experiment: &str, size: Size) -> Self {
+        Self {
+            experiment: experiment.into(),
+            size,
+            records: Vec::new(),
+            curves: Vec::new(),
+            energies: Vec::new(),
+            renders: Vec::new(),
+            failures: Vec::new(),
+            notes: Vec::new(),
+            wall_seconds: 0.0,
+        }
+    }
+
+    /// Adds a record with no paper value.
+    pub fn record(&mut self, scene: &str, method: &str, metric: &str, value: f64, unit: &str, timing: Timing) {
+        self.records.push(Record {
+            experiment: self.experiment.clone(),
+            scene: scene.into(),
+            method: method.into(),
+            metric: metric.into(),
+            split: None,
+            value,
+            unit: unit.into(),
+            paper_value: None,
+            seconds_per_frame: timing.seconds_per_frame,
+            ground_truth_seconds_per_frame: timing.ground_truth_seconds_per_frame,
+        });
+    }
+
+    /// Sets the paper value of the last record.
+    pub fn paper(&mut self, value: f64) {
+        if let Some(r) = self.records.last_mut() {
+            r.paper_value = Some(value);
+        }
+    }
+
+    pub fn energy(&mut self, scene: &str, method: &str, kind: &str, value: f64, unit: &str) {
+        self.energies.push(EnergyBar {
+            scene: scene.into(),
+            method: method.into(),
+            kind: kind.into(),
+            value,
+            unit: unit.into(),
+        });
+    }
+}
+
+/// A method's time per frame beside the ground truth's, both from the same run.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timing {
+    pub seconds_per_frame: Option<f64>,
+    pub ground_truth_seconds_per_frame: Option<f64>,
+}
+
+impl Timing {
+    pub fn new(method: f64, ground_truth: f64) -> Self {
+        Self {
+            seconds_per_frame: Some(method),
+            ground_truth_seconds_per_frame: Some(ground_truth),
+        }
+    }
+}
+
+/// Every name is lower-case kebab-case and every number finite: the checks CI runs on a
+/// report (and `evaluate` runs before writing one).
+pub fn validate(records: &[Record]) -> anyhow::Result<()> {
+    let kebab = |s: &str| {
+        !s.is_empty()
+            && s.chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-' || c == '.' || c == '/')
+    };
+    for r in records {
+        for (field, v) in [
+            ("experiment", r.experiment.as_str()),
+            ("scene", &r.scene),
+            ("method", &r.method),
+            ("metric", &r.metric),
+        ] {
+            ensure!(kebab(v), "record {r:?}: {field} {v:?} is not lower-case kebab-case");
+        }
+        if let Some(s) = &r.split {
+            ensure!(kebab(s), "record {r:?}: split {s:?} is not lower-case kebab-case");
+        }
+        ensure!(!r.unit.is_empty(), "record {r:?}: empty unit");
+        let finite = |x: Option<f64>| x.is_none_or(f64::is_finite);
+        ensure!(
+            r.value.is_finite()
+                && finite(r.paper_value)
+                && finite(r.seconds_per_frame)
+                && finite(r.ground_truth_seconds_per_frame),
+            "record {r:?}: a number is not finite"
+        );
+        ensure!(
+            r.seconds_per_frame.is_none_or(|s| s >= 0.0) && r.ground_truth_seconds_per_frame.is_none_or(|s| s > 0.0),
+            "record {r:?}: negative or zero time"
+        );
+    }
+    Ok(())
+}
+
+/// Sum of squared coordinate differences between `a` and `b` restricted to `map`
+/// (`a` vertex i ↔ `b` vertex `map[i]`), and the largest vertex distance (m).
+pub fn frame_error(a: &[f64], b: &[f64], map: &[usize]) -> (f64, f64) {
+    let mut sq = 0.0;
+    let mut max = 0.0f64;
+    for (i, &j) in map.iter().enumerate() {
+        let d2: f64 = (0..3).map(|k| (a[3 * i + k] - b[3 * j + k]).powi(2)).sum();
+        sq += d2;
+        max = max.max(d2.sqrt());
+    }
+    (sq, max)
+}
+
+/// Accumulates Kavan et al.'s E_RMS (`docs/RESULTS.md`): 1000 × the RMS over every
+/// coordinate of every vertex of every frame, raw coordinates in metres (so: mm).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct RmsAccumulator {
+    sum_sq: f64,
+    count: usize,
+    max_m: f64,
+}
+
+impl RmsAccumulator {
+    /// Adds one frame; returns that frame's own M_rms (mm).
+    pub fn add(&mut self, a: &[f64], b: &[f64], map: &[usize]) -> f64 {
+        let (sq, max) = frame_error(a, b, map);
+        self.sum_sq += sq;
+        self.count += 3 * map.len();
+        self.max_m = self.max_m.max(max);
+        1e3 * (sq / (3 * map.len()).max(1) as f64).sqrt()
+    }
+    pub fn m_rms_mm(&self) -> f64 {
+        1e3 * (self.sum_sq / self.count.max(1) as f64).sqrt()
+    }
+    pub fn max_error_mm(&self) -> f64 {
+        1e3 * self.max_m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn m_rms_is_kavan_per_coordinate_and_max_error_is_per_vertex() {
+        // One vertex off by (3, 4, 0) mm, one exact: per-coordinate RMS = sqrt(25/6) mm.
+        let a = [0.003, 0.004, 0.0, 1.0, 1.0, 1.0];
+        let b = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+        let mut acc = RmsAccumulator::default();
+        let frame = acc.add(&a, &b, &[0, 1]);
+        assert!((frame - (25.0f64 / 6.0).sqrt()).abs() < 1e-9);
+        assert!((acc.m_rms_mm() - frame).abs() < 1e-12);
+        assert!((acc.max_error_mm() - 5.0).abs() < 1e-9);
+        // A vertex map compares a coarse vertex with its fine counterpart.
+        let fine = [9.0, 9.0, 9.0, 0.0, 0.0, 0.0];
+        let (sq, _) = frame_error(&b[..3], &fine, &[1]);
+        assert_eq!(sq, 0.0);
+    }
+
+    #[test]
+    fn validation_rejects_non_kebab_names_and_nan() {
+        let good = Record {
+            experiment: "sim".into(),
+            scene: "sheet-ms".into(),
+            method: "dt-2x".into(),
+            metric: "m-rms".into(),
+            split: None,
+            value: 1.0,
+            unit: "mm".into(),
+            paper_value: None,
+            seconds_per_frame: Some(0.1),
+            ground_truth_seconds_per_frame: Some(0.2),
+        };
+        assert!(validate(std::slice::from_ref(&good)).is_ok());
+        let bad_name = Record {
+            method: "Dt 2x".into(),
+            ..good.clone()
+        };
+        assert!(validate(&[bad_name]).is_err());
+        let nan = Record {
+            value: f64::NAN,
+            ..good.clone()
+        };
+        assert!(validate(&[nan]).is_err());
+        let zero_gt = Record {
+            ground_truth_seconds_per_frame: Some(0.0),
+            ..good
+        };
+        assert!(validate(&[zero_gt]).is_err());
+    }
+}

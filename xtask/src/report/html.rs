@@ -1,0 +1,150 @@
+//! `index.html`: one self-contained page (SVG charts inline, PNG renders as data URIs,
+//! no external file or script) with the tables, the Pareto, roll-out and energy charts
+//! and the error renders of every experiment.
+
+use std::path::Path;
+
+use base64::Engine;
+
+use super::Charts;
+use crate::dataset::Size;
+use crate::evaluate::paper::{PENDING, Table};
+use crate::evaluate::results::ExperimentOutput;
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Markdown-ish inline code (`x`) to <code>.
+fn inline(s: &str) -> String {
+    let mut out = String::new();
+    for (i, part) in escape(s).split('`').enumerate() {
+        if i % 2 == 1 {
+            out.push_str(&format!("<code>{part}</code>"));
+        } else {
+            out.push_str(part);
+        }
+    }
+    out
+}
+
+fn table_html(t: &Table) -> String {
+    let mut s = format!(
+        "<h3>{}</h3>\n<p class=\"cap\">{}</p>\n<table>\n<tr>",
+        escape(&t.title),
+        inline(&t.caption)
+    );
+    for h in &t.header {
+        s.push_str(&format!("<th>{}</th>", escape(h)));
+    }
+    s.push_str("</tr>\n");
+    for r in &t.rows {
+        s.push_str("<tr>");
+        for c in r {
+            s.push_str(&format!("<td>{}</td>", escape(c)));
+        }
+        s.push_str("</tr>\n");
+    }
+    s.push_str("</table>\n");
+    s
+}
+
+fn svg_inline(dir: &Path, stem: &str) -> anyhow::Result<String> {
+    let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg")))?;
+    // Drop any XML prolog; the <svg> element embeds as is.
+    let start = svg.find("<svg").unwrap_or(0);
+    Ok(format!("<div class=\"chart\">{}</div>\n", &svg[start..]))
+}
+
+fn png_inline(dir: &Path, rel: &str) -> anyhow::Result<String> {
+    let bytes = std::fs::read(dir.join(rel))?;
+    let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
+    Ok(format!(
+        "<figure><img alt=\"{0}\" src=\"data:image/png;base64,{b64}\"><figcaption>{0}</figcaption></figure>\n",
+        escape(rel)
+    ))
+}
+
+pub fn page(
+    dir: &Path,
+    size: Size,
+    outputs: &[ExperimentOutput],
+    tables: &[Table],
+    charts: &[Charts],
+    wall: f64,
+) -> anyhow::Result<String> {
+    let mut body = String::new();
+    body.push_str(&format!(
+        "<h1>weft evaluation — {} size</h1>\n<p>Every figure on this page was measured by <code>cargo xtask evaluate \
+         --size {}</code> in one run ({wall:.0} s). Speed is always shown beside accuracy: time per frame as a ratio to \
+         the ground-truth solver timed in the same run, error against a tight reference. The same figures are in \
+         <code>results.json</code> (tidy records), <code>tables.md</code>, <code>plots/</code> (PNG and SVG) and \
+         <code>predictions/</code> (every method's positions beside the reference).</p>\n",
+        size.as_str(),
+        size.as_str()
+    ));
+    body.push_str("<h2>Tables</h2>\n");
+    for t in tables {
+        body.push_str(&table_html(t));
+    }
+    body.push_str("<h3>Tables that later experiments fill</h3>\n<ul>\n");
+    for (what, exp) in PENDING {
+        body.push_str(&format!("<li>{} — experiment <code>{exp}</code></li>\n", escape(what)));
+    }
+    body.push_str("</ul>\n");
+    for (o, c) in outputs.iter().zip(charts) {
+        body.push_str(&format!(
+            "<h2>Experiment <code>{}</code> ({:.0} s)</h2>\n",
+            escape(&o.experiment),
+            o.wall_seconds
+        ));
+        if !c.pareto.is_empty() {
+            body.push_str("<h3>Speed against accuracy (Pareto)</h3>\n");
+            for (_, stem) in &c.pareto {
+                body.push_str(&svg_inline(dir, stem)?);
+            }
+        }
+        if !c.rollout.is_empty() {
+            body.push_str("<h3>Roll-out error against frame</h3>\n");
+            for (_, stem) in &c.rollout {
+                body.push_str(&svg_inline(dir, stem)?);
+            }
+        }
+        if !c.energy.is_empty() {
+            body.push_str("<h3>Energies</h3>\n");
+            for (_, stem) in &c.energy {
+                body.push_str(&svg_inline(dir, stem)?);
+            }
+        }
+        if !o.renders.is_empty() {
+            body.push_str("<h3>Per-vertex error (one colour scale per scene)</h3>\n<div class=\"renders\">\n");
+            for r in &o.renders {
+                body.push_str(&png_inline(dir, r)?);
+            }
+            body.push_str("</div>\n");
+        }
+        body.push_str("<h3>Notes</h3>\n<ul>\n");
+        for n in &o.notes {
+            body.push_str(&format!("<li>{}</li>\n", escape(n)));
+        }
+        for f in &o.failures {
+            body.push_str(&format!("<li><b>failed:</b> {}</li>\n", escape(f)));
+        }
+        body.push_str("</ul>\n");
+    }
+    Ok(format!(
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>weft evaluation ({})</title>\n\
+         <style>\nbody {{ font-family: sans-serif; max-width: 1600px; margin: 2em auto; padding: 0 1em; color: #222; }}\n\
+         table {{ border-collapse: collapse; margin-bottom: 1.5em; }}\n\
+         th, td {{ border: 1px solid #bbb; padding: 4px 10px; text-align: left; }}\n\
+         th {{ background: #eee; }}\n.cap {{ color: #555; max-width: 70em; }}\n\
+         .chart {{ display: inline-block; width: 49%; margin: 2px; }}\n\
+         .chart svg {{ width: 100%; height: auto; }}\n\
+         .renders {{ display: flex; flex-wrap: wrap; }}\nfigure {{ margin: 4px; }}\n\
+         figcaption {{ font-size: 12px; color: #555; }}\n</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
+        size.as_str()
+    ))
+}

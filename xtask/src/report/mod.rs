@@ -1,0 +1,271 @@
+//! The evaluation report: `results.json`, `tables.md`, plots (PNG and SVG), rendered
+//! error images and one self-contained `index.html`, all rebuilt from the experiments'
+//! outputs. Also the check CI runs on a report (`cargo xtask check-report`).
+
+pub mod html;
+pub mod plots;
+pub mod render;
+
+use std::path::Path;
+
+use anyhow::{Context, ensure};
+use clap::Args;
+
+use crate::dataset::Size;
+use crate::evaluate::paper::{self, PENDING};
+use crate::evaluate::results::{self, ExperimentOutput, Record};
+use crate::output::{write_json, write_text};
+use plots::ParetoPoint;
+
+/// Fonts for PNG text: DejaVu Sans, embedded, so no system font is needed.
+pub mod fonts {
+    use std::sync::Once;
+
+    static REGISTER: Once = Once::new();
+
+    pub fn register() {
+        REGISTER.call_once(|| {
+            // Registering an embedded, valid TTF cannot fail but for a malformed font.
+            let _ = plotters::style::register_font(
+                "sans-serif",
+                plotters::style::FontStyle::Normal,
+                dejavu::sans::regular(),
+            );
+        });
+    }
+}
+
+/// The error metric each experiment's Pareto plot uses.
+fn pareto_metric(experiment: &str) -> (&'static str, &'static str) {
+    match experiment {
+        "proj" => ("sqrt-mse", "SqrtMSE against the tight reference (mm)"),
+        _ => ("m-rms", "M_rms against the tight reference (mm)"),
+    }
+}
+
+/// The charts of one experiment, as (title, file stem relative to the report).
+pub struct Charts {
+    pub pareto: Vec<(String, String)>,
+    pub rollout: Vec<(String, String)>,
+    pub energy: Vec<(String, String)>,
+}
+
+pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> anyhow::Result<()> {
+    let records: Vec<Record> = outputs.iter().flat_map(|o| o.records.iter().cloned()).collect();
+    results::validate(&records)?;
+    write_json(&out.join("results.json"), &records)?;
+    let plot_dir = out.join("plots");
+    std::fs::create_dir_all(&plot_dir)?;
+    let mut charts = Vec::new();
+    for o in outputs {
+        let mut c = Charts {
+            pareto: Vec::new(),
+            rollout: Vec::new(),
+            energy: Vec::new(),
+        };
+        let (metric, label) = pareto_metric(&o.experiment);
+        for scene in scenes(
+            o.records
+                .iter()
+                .filter(|r| r.metric == metric)
+                .map(|r| r.scene.as_str()),
+        ) {
+            let points: Vec<ParetoPoint> = o
+                .records
+                .iter()
+                .filter(|r| r.scene == scene && r.metric == metric)
+                .filter_map(|r| {
+                    Some(ParetoPoint {
+                        method: r.method.clone(),
+                        time_ratio: r.seconds_per_frame? / r.ground_truth_seconds_per_frame?,
+                        error: r.value,
+                    })
+                })
+                .collect();
+            let stem = format!("plots/pareto-{}-{}", o.experiment, slug(scene));
+            let title = format!("{} / {scene}: speed against accuracy", o.experiment);
+            plots::pareto(&out.join(&stem), &title, label, &points)?;
+            c.pareto.push((title, stem));
+        }
+        for scene in scenes(o.curves.iter().map(|c| c.scene.as_str())) {
+            let curves: Vec<_> = o.curves.iter().filter(|c| c.scene == scene).collect();
+            let stem = format!("plots/rollout-{}-{}", o.experiment, slug(scene));
+            let title = format!("{} / {scene}: roll-out error against frame", o.experiment);
+            plots::rollout(&out.join(&stem), &title, &curves)?;
+            c.rollout.push((title, stem));
+        }
+        for scene in scenes(o.energies.iter().map(|e| e.scene.as_str())) {
+            let bars: Vec<_> = o.energies.iter().filter(|e| e.scene == scene).collect();
+            let stem = format!("plots/energy-{}-{}", o.experiment, slug(scene));
+            let title = format!("{} / {scene}: mean energies", o.experiment);
+            plots::energy(&out.join(&stem), &title, &bars)?;
+            c.energy.push((title, stem));
+        }
+        charts.push(c);
+    }
+    let tables = paper::tables(outputs);
+    write_text(
+        &out.join("tables.md"),
+        &tables_markdown(size, outputs, &tables, wall_seconds),
+    )?;
+    let page = html::page(out, size, outputs, &tables, &charts, wall_seconds)?;
+    write_text(&out.join("index.html"), &page)?;
+    Ok(())
+}
+
+/// Distinct names in first-seen order.
+fn scenes<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut v: Vec<&str> = Vec::new();
+    for n in names {
+        if !v.contains(&n) {
+            v.push(n);
+        }
+    }
+    v
+}
+
+fn slug(s: &str) -> String {
+    s.replace('/', "-")
+}
+
+fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Table], wall: f64) -> String {
+    let mut s = format!(
+        "# weft evaluation ({} size)\n\nEvery figure below was measured by `cargo xtask evaluate --size {}` in one run \
+         (report assembled after {:.0} s; experiments: {}). Time ratios compare methods timed in the same run.\n\n",
+        size.as_str(),
+        size.as_str(),
+        wall,
+        outputs
+            .iter()
+            .map(|o| format!("`{}` {:.0} s", o.experiment, o.wall_seconds))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for t in tables {
+        s.push_str(&t.markdown());
+    }
+    s.push_str("## Tables that later experiments fill\n\n");
+    for (what, exp) in PENDING {
+        s.push_str(&format!("- {what}: experiment `{exp}`, not yet in this evaluation.\n"));
+    }
+    s.push_str("\n## Notes\n\n");
+    for o in outputs {
+        for n in &o.notes {
+            s.push_str(&format!("- {n}\n"));
+        }
+        for f in &o.failures {
+            s.push_str(&format!("- **failed**: {f}\n"));
+        }
+    }
+    s
+}
+
+#[derive(Args)]
+pub struct CheckArgs {
+    /// A directory written by `cargo xtask evaluate`.
+    dir: std::path::PathBuf,
+}
+
+/// `cargo xtask check-report DIR`: every output exists and parses, every record has every
+/// field with a valid value, every prediction file reads back with matching shapes.
+pub fn check(args: CheckArgs) -> anyhow::Result<()> {
+    let dir = &args.dir;
+    let text = std::fs::read_to_string(dir.join("results.json")).context("reading results.json")?;
+    let raw: Vec<serde_json::Value> = serde_json::from_str(&text).context("results.json is not a JSON array")?;
+    ensure!(!raw.is_empty(), "results.json holds no record");
+    const FIELDS: [&str; 10] = [
+        "experiment",
+        "scene",
+        "method",
+        "metric",
+        "split",
+        "value",
+        "unit",
+        "paper_value",
+        "seconds_per_frame",
+        "ground_truth_seconds_per_frame",
+    ];
+    for (i, r) in raw.iter().enumerate() {
+        let obj = r.as_object().with_context(|| format!("record {i} is not an object"))?;
+        for f in FIELDS {
+            ensure!(obj.contains_key(f), "record {i} lacks field {f:?}: {r}");
+        }
+        ensure!(
+            obj.len() == FIELDS.len(),
+            "record {i} has fields beyond the documented ten: {r}"
+        );
+    }
+    let records: Vec<Record> = serde_json::from_str(&text).context("results.json records do not parse")?;
+    results::validate(&records)?;
+    for f in ["tables.md", "index.html"] {
+        let t = std::fs::read_to_string(dir.join(f)).with_context(|| format!("reading {f}"))?;
+        ensure!(t.len() > 100, "{f} is nearly empty");
+    }
+    let html = std::fs::read_to_string(dir.join("index.html"))?;
+    ensure!(
+        !html.contains("src=\"plots/") && !html.contains("src=\"renders/"),
+        "index.html links files instead of embedding them"
+    );
+    let mut files = 0;
+    for sub in ["plots", "renders", "predictions"] {
+        for path in walk(&dir.join(sub))? {
+            let bytes = std::fs::read(&path)?;
+            match path.extension().and_then(|e| e.to_str()) {
+                Some("png") => ensure!(bytes.starts_with(b"\x89PNG"), "{} is not a PNG", path.display()),
+                Some("svg") => ensure!(
+                    String::from_utf8_lossy(&bytes).contains("<svg"),
+                    "{} is not an SVG",
+                    path.display()
+                ),
+                Some("safetensors") => {
+                    let st = safetensors::SafeTensors::deserialize(&bytes)
+                        .with_context(|| format!("{} does not parse", path.display()))?;
+                    let p = st
+                        .tensor("positions")
+                        .with_context(|| format!("{}: no positions", path.display()))?;
+                    let g = st
+                        .tensor("ground_truth")
+                        .with_context(|| format!("{}: no ground_truth", path.display()))?;
+                    ensure!(
+                        p.shape() == g.shape(),
+                        "{}: positions and ground truth differ in shape",
+                        path.display()
+                    );
+                }
+                _ => continue,
+            }
+            files += 1;
+        }
+    }
+    // Every experiment/scene/method with an error metric has its predictions.
+    for r in records.iter().filter(|r| r.metric == "m-rms" || r.metric == "sqrt-mse") {
+        let p = dir
+            .join("predictions")
+            .join(&r.experiment)
+            .join(&r.scene)
+            .join(format!("{}.safetensors", r.method));
+        ensure!(p.exists(), "{} is missing", p.display());
+    }
+    println!(
+        "{}: {} records, {files} plot, render and prediction files — all parse",
+        dir.display(),
+        records.len()
+    );
+    Ok(())
+}
+
+fn walk(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    let mut out = Vec::new();
+    if !dir.exists() {
+        anyhow::bail!("{} is missing", dir.display());
+    }
+    for e in std::fs::read_dir(dir)? {
+        let p = e?.path();
+        if p.is_dir() {
+            out.extend(walk(&p)?);
+        } else {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}

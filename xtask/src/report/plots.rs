@@ -1,0 +1,295 @@
+//! The report's charts, each as PNG and SVG: Pareto plots of time ratio against error,
+//! roll-out error against frame, and energy bar charts.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::fonts;
+use crate::evaluate::{Curve, EnergyBar};
+
+/// One method's point on a Pareto plot.
+#[derive(Debug, Clone)]
+pub struct ParetoPoint {
+    pub method: String,
+    /// Time per frame over the ground truth's, same run.
+    pub time_ratio: f64,
+    pub error: f64,
+}
+
+const SIZE: (u32, u32) = (760, 520);
+
+fn palette(i: usize) -> RGBColor {
+    const C: [RGBColor; 10] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+        RGBColor(188, 189, 34),
+        RGBColor(23, 190, 207),
+    ];
+    C[i % C.len()]
+}
+
+/// Renders `draw` to `stem.png` and `stem.svg`.
+fn both(
+    stem: &Path,
+    draw: impl Fn(DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
+    draw_png: impl Fn(DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    fonts::register();
+    let png = stem.with_extension("png");
+    let svg = stem.with_extension("svg");
+    {
+        let root = BitMapBackend::new(&png, SIZE).into_drawing_area();
+        draw_png(root)?;
+    }
+    let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
+    draw(root)
+}
+
+/// Draws the legend and writes the chart out.
+fn finish<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    root: &DrawingArea<DB, Shift>,
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.3))
+        .position(position)
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    Ok(())
+}
+
+/// Log–log bounds padded by a factor on each side.
+fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    if lo > hi {
+        return (0.1, 10.0);
+    }
+    (lo / 2.0, hi * 2.0)
+}
+
+/// Indices of the points no other point beats in both time and error.
+pub fn pareto_front(points: &[ParetoPoint]) -> Vec<usize> {
+    let mut front: Vec<usize> = (0..points.len())
+        .filter(|&i| {
+            !points.iter().enumerate().any(|(j, q)| {
+                j != i
+                    && q.time_ratio <= points[i].time_ratio
+                    && q.error <= points[i].error
+                    && (q.time_ratio < points[i].time_ratio || q.error < points[i].error)
+            })
+        })
+        .collect();
+    front.sort_by(|&a, &b| points[a].time_ratio.total_cmp(&points[b].time_ratio));
+    front
+}
+
+fn pareto_on<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    error_label: &str,
+    points: &[ParetoPoint],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    // A zero error (a method identical to the reference) sits at the axis floor.
+    let (ylo, yhi) = log_range(points.iter().map(|p| p.error));
+    let (xlo, xhi) = log_range(points.iter().map(|p| p.time_ratio));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((xlo..xhi).log_scale(), (ylo..yhi).log_scale())
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("time per frame / ground truth's (same run)")
+        .y_desc(error_label)
+        .x_label_formatter(&|v| format!("{v:.2}"))
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let clamp = |p: &ParetoPoint| (p.time_ratio.max(xlo), p.error.max(ylo));
+    let front = pareto_front(points);
+    chart
+        .draw_series(LineSeries::new(
+            front.iter().map(|&i| clamp(&points[i])),
+            ShapeStyle::from(&BLACK.mix(0.4)).stroke_width(2),
+        ))
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.mix(0.4)));
+    for (i, p) in points.iter().enumerate() {
+        let c = palette(i);
+        chart
+            .draw_series(std::iter::once(Circle::new(clamp(p), 6, c.filled())))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label(p.method.clone())
+            .legend(move |(x, y)| Circle::new((x + 9, y), 5, c.filled()));
+    }
+    finish(&root, &mut chart, SeriesLabelPosition::UpperRight)
+}
+
+pub fn pareto(stem: &Path, title: &str, error_label: &str, points: &[ParetoPoint]) -> anyhow::Result<()> {
+    both(
+        stem,
+        |r| pareto_on(r, title, error_label, points),
+        |r| pareto_on(r, title, error_label, points),
+    )
+}
+
+fn rollout_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, curves: &[&Curve]) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let xmax = curves
+        .iter()
+        .flat_map(|c| c.frames.iter().copied())
+        .fold(1.0f64, f64::max);
+    let (ylo, yhi) = log_range(curves.iter().flat_map(|c| c.error_mm.iter().copied()));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..xmax, (ylo..yhi).log_scale())
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("frame")
+        .y_desc("M_rms of the frame (mm)")
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    for (i, c) in curves.iter().enumerate() {
+        let colour = palette(i);
+        chart
+            .draw_series(LineSeries::new(
+                c.frames.iter().zip(&c.error_mm).map(|(x, y)| (*x, y.max(ylo))),
+                ShapeStyle::from(&colour).stroke_width(2),
+            ))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label(c.method.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+    }
+    finish(&root, &mut chart, SeriesLabelPosition::LowerRight)
+}
+
+pub fn rollout(stem: &Path, title: &str, curves: &[&Curve]) -> anyhow::Result<()> {
+    both(stem, |r| rollout_on(r, title, curves), |r| rollout_on(r, title, curves))
+}
+
+fn energy_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut methods: Vec<&str> = Vec::new();
+    let mut kinds: Vec<&str> = Vec::new();
+    for b in bars {
+        if !methods.contains(&b.method.as_str()) {
+            methods.push(&b.method);
+        }
+        if !kinds.contains(&b.kind.as_str()) {
+            kinds.push(&b.kind);
+        }
+    }
+    let unit = bars.first().map_or("J", |b| b.unit.as_str());
+    let xmax = bars.iter().map(|b| b.value.abs()).fold(0.0f64, f64::max).max(1e-30) * 1.4;
+    let n = methods.len() as f64;
+    // Horizontal bars: one row per method (first at the top), one bar per energy kind.
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(190)
+        .build_cartesian_2d(0.0..xmax, 0.0..n)
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let names = methods.clone();
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(methods.len() * 2 + 1)
+        .y_label_formatter(&|y| {
+            let row = (n - y).floor();
+            let i = row as usize;
+            if ((n - y) - row - 0.5).abs() < 0.26 && i < names.len() {
+                names[i].to_string()
+            } else {
+                String::new()
+            }
+        })
+        .x_desc(format!("mean energy ({unit})"))
+        .x_label_formatter(&|v| format!("{v:.2e}"))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let width = 0.8 / kinds.len() as f64;
+    for (k, kind) in kinds.iter().enumerate() {
+        let colour = palette(k);
+        let rects: Vec<_> = bars
+            .iter()
+            .filter(|b| b.kind == *kind)
+            .filter_map(|b| {
+                let i = methods.iter().position(|m| *m == b.method)? as f64;
+                let top = n - i - 0.1 - k as f64 * width;
+                Some(Rectangle::new(
+                    [(0.0, top), (b.value.abs(), top - width)],
+                    colour.filled(),
+                ))
+            })
+            .collect();
+        chart
+            .draw_series(rects)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label(kind.to_string())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
+    }
+    finish(&root, &mut chart, SeriesLabelPosition::LowerRight)
+}
+
+pub fn energy(stem: &Path, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<()> {
+    both(stem, |r| energy_on(r, title, bars), |r| energy_on(r, title, bars))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_keeps_exactly_the_undominated_points() {
+        let p = |m: &str, t, e| ParetoPoint {
+            method: m.into(),
+            time_ratio: t,
+            error: e,
+        };
+        let points = vec![
+            p("a", 1.0, 1.0),
+            p("b", 0.5, 2.0),
+            p("c", 2.0, 0.5),
+            p("d", 1.5, 1.5),
+            p("e", 0.5, 3.0),
+        ];
+        // d is beaten by a; e is beaten by b (same time, more error).
+        assert_eq!(pareto_front(&points), [1, 0, 2]);
+    }
+}
