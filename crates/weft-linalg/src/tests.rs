@@ -1,4 +1,5 @@
 use super::*;
+use std::sync::Arc;
 use weft_testkit::TestRng;
 
 /// A random SPD matrix on a random sparse pattern: B + Bᵀ made diagonally dominant.

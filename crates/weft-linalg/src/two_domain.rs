@@ -2,8 +2,8 @@
 //! both cores.
 //!
 //! faer's supernodal factorisation and solve are sequential over the elimination tree
-//! (its `Par` only splits dense blocks, which at weft's sizes is slower; see
-//! `shared/docs/dependencies.md`). A vertex separator `S` splits the unknowns into two
+//! (its `Par` only splits dense blocks, which at weft's sizes measured slower on this
+//! project's 2-core machines). A vertex separator `S` splits the unknowns into two
 //! interiors `I₁`, `I₂` with no coupling between them; ordering `[I₁, I₂, S]` gives
 //!
 //! ```text

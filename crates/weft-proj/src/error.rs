@@ -43,6 +43,17 @@ pub enum Error {
     ConstraintViolated { edge: usize, ratio: f64, bound: f64 },
     #[error("{what} produced a non-finite value at entry {index}")]
     NonFiniteOutput { what: &'static str, index: usize },
+    #[error(
+        "the quasistatic equilibrium has {count} collapsed edge spring(s) (first: edge {first}); a spring with \
+         coincident ends exerts no force, so this is a stationary point, not a minimum — the prediction is degenerate"
+    )]
+    CollapsedSprings { count: usize, first: usize },
+    #[error(
+        "the quasistatic equilibrium is not a minimum (its Hessian needed {shifts} diagonal shift(s) to factorise), so \
+         its backward pass would differentiate another problem; perturb the prediction out of its symmetric state or \
+         raise μ"
+    )]
+    NotAMinimum { shifts: usize },
 }
 
 /// `Result` with weft-proj's [`Error`].

@@ -547,8 +547,9 @@ fn norm3(v: &[f64]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// Max-norm, `+∞` if any entry is not finite (weft-linalg's, on a slice).
 fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+    weft_linalg::max_abs(v.iter().copied())
 }
 
 #[cfg(test)]

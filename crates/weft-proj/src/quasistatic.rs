@@ -126,9 +126,6 @@ pub struct QuasistaticReport {
     /// Both Newton phases together: iterations, residuals (N), energy (J), line-search
     /// halvings, diagonal shifts.
     pub newton: NewtonReport,
-    /// Diagonal shifts needed to factorise the true Hessian at `r*` for the backward pass
-    /// (0 when `r*` is a strict local minimum, as it should be).
-    pub adjoint_shifts: usize,
     /// Wall time of the forward pass, including the adjoint factorisation (s).
     pub time_seconds: f64,
 }
@@ -296,9 +293,32 @@ impl QuasistaticLayer {
         }
         let (newton, factor, adjoint_shifts) = result?;
         check_output("quasistatic positions", &x)?;
+        // A spring whose ends coincide exerts no force (its direction is undefined), so a
+        // collapsed configuration is stationary although it is an energy maximum along
+        // every spring: Newton would report it as converged.
+        let collapsed: Vec<usize> = (0..self.edge.pairs().len())
+            .filter(|&s| {
+                let [a, b] = self.edge.pairs()[s];
+                let l = (0..3)
+                    .map(|k| (x[3 * a + k] - x[3 * b + k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                l <= 1e-9 * self.edge.rest_lengths()[s]
+            })
+            .collect();
+        if let Some(&first) = collapsed.first() {
+            return Err(Error::CollapsedSprings {
+                count: collapsed.len(),
+                first,
+            });
+        }
+        // The adjoint solve (Eq. 14) needs the true Hessian at r*; an indefinite one means
+        // r* is a saddle, and a shifted matrix would give the gradient of another problem.
+        if adjoint_shifts > 0 {
+            return Err(Error::NotAMinimum { shifts: adjoint_shifts });
+        }
         let report = QuasistaticReport {
             newton,
-            adjoint_shifts,
             time_seconds: start.elapsed().as_secs_f64(),
         };
         Ok((

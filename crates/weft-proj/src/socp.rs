@@ -531,10 +531,12 @@ impl InextensibilityLayer {
                 complementarity = complementarity.max(sz.abs() / (s[4 * e] * z0_max));
             }
         }
-        let scale = grad_obj.iter().chain(&at_z).fold(0.0f64, |m, v| m.max(v.abs()));
+        let scale = weft_linalg::max_abs(grad_obj.iter().chain(&at_z).copied());
         grad_obj.iter_mut().zip(&at_z).for_each(|(g, a)| *g += a);
-        let stationarity = if scale > 0.0 {
-            grad_obj.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale
+        let stationarity = if !scale.is_finite() {
+            f64::INFINITY
+        } else if scale > 0.0 {
+            weft_linalg::max_abs(grad_obj.iter().copied()) / scale
         } else {
             0.0
         };
@@ -674,7 +676,7 @@ impl InextensibilityLayer {
         // Residual of Eq. 2 (solver units): K δ + Σ λ_e D_eᵀ u_e and l_e − l_e^max on active edges.
         let residual = |delta: &[f64], lambda: &[f64]| {
             let mut r: Vec<f64> = (0..n).map(|i| w[i / 3] * delta[i]).collect();
-            let scale = r.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(f64::MIN_POSITIVE);
+            let scale = weft_linalg::max_abs(r.iter().copied()).max(f64::MIN_POSITIVE);
             let mut r_len = vec![0.0; m];
             for e in (0..m).filter(|&e| active[e]) {
                 let d = d_at(delta, e);
@@ -686,8 +688,13 @@ impl InextensibilityLayer {
                 }
                 r_len[e] = l - b[4 * e];
             }
-            let norm = r.iter().fold(0.0f64, |m, v| m.max(v.abs())) / scale;
-            let norm_len = (0..m).map(|e| (r_len[e] / b[4 * e]).abs()).fold(0.0, f64::max);
+            // A non-finite iterate must read as an infinite residual, never as converged.
+            let norm = if scale.is_finite() {
+                weft_linalg::max_abs(r.iter().copied()) / scale
+            } else {
+                f64::INFINITY
+            };
+            let norm_len = weft_linalg::max_abs((0..m).map(|e| r_len[e] / b[4 * e]));
             (r, r_len, norm.max(norm_len))
         };
         let mut delta = x0.to_vec();

@@ -551,7 +551,6 @@ fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
             after.stretching_energy < factor * before.stretching_energy,
             "mu = {mu}: {before:?} → {after:?}"
         );
-        assert_eq!(report.adjoint_shifts, 0, "r* should be a strict local minimum");
     }
     // Weaker anchors let the cloth relax further toward its rest lengths.
     let strain_at = |mu: f64| {
@@ -742,4 +741,64 @@ fn axial_springs_gradient_and_hessian_match_finite_differences() {
     };
     let fd_hv = weft_testkit::fd_directional(grad_at, &x, &v, 1e-6);
     assert!(max_norm_rel_error(&hv, &fd_hv) < 1e-7);
+}
+
+#[test]
+fn quasistatic_rejects_collapsed_predictions_and_saddle_equilibria() {
+    // Regressions: (1) a prediction collapsed to a point "converged" at once, since springs
+    // with coincident ends exert no force, at an energy maximum; (2) a flat prediction
+    // compressed in its plane stays flat under Newton (no out-of-plane force ever
+    // appears), ending at a saddle whose indefinite Hessian was shifted and kept, so the
+    // backward pass differentiated another problem. Both are now typed errors.
+    let rest = generators::sheet(6, 1.0).unwrap();
+    let layer = QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap();
+    let collapsed = vec![0.25; 3 * rest.num_vertices()];
+    assert!(matches!(
+        layer.forward(&collapsed, &ZeroLengthScaling::Global(0.1)),
+        Err(Error::CollapsedSprings { .. })
+    ));
+    let squeezed: Vec<f64> = rest.flat_positions().iter().map(|x| 0.6 * x).collect();
+    for mu in [1.0, 0.1] {
+        assert!(matches!(
+            layer.forward(&squeezed, &ZeroLengthScaling::Global(mu)),
+            Err(Error::NotAMinimum { .. })
+        ));
+    }
+    // The same compression with out-of-plane noise buckles into a genuine minimum.
+    let mut rng = TestRng::new(90);
+    let buckled: Vec<f64> = squeezed
+        .iter()
+        .enumerate()
+        .map(|(i, x)| if i % 3 == 2 { x + rng.uniform(-0.02, 0.02) } else { *x })
+        .collect();
+    assert!(layer.forward(&buckled, &ZeroLengthScaling::Global(0.1)).is_ok());
+}
+
+#[test]
+fn quasistatic_backward_matches_finite_differences_on_compressed_predictions() {
+    // Compressed predictions (70–85 % of rest length) with out-of-plane noise, so the
+    // cloth buckles into a genuine minimum with compressed springs, where the transverse
+    // spring stiffness is negative and projection and true Hessian differ.
+    for (seed, sx, mu) in [(80, 0.85, 0.1), (81, 0.7, 1.0)] {
+        let mut rng = TestRng::new(seed);
+        let rest = random_sheet(5, &mut rng);
+        let layer = QuasistaticLayer::new(&rest, tight_quasistatic()).unwrap();
+        let pred = predict(&rest, sx, 0.05, &mut rng);
+        let before = strain_summary(layer.rest(), &pred, 1.0).unwrap();
+        assert!(
+            before.min_strain < -0.1,
+            "the prediction should be compressed: {before:?}"
+        );
+        let g = rng.vec(pred.len(), -1.0, 1.0);
+        let scaling = ZeroLengthScaling::Global(mu);
+        let (sol, _) = layer.forward(&pred, &scaling).unwrap();
+        let grad = layer.backward(&sol, &g).unwrap();
+        let loss = |x: &[f64]| {
+            let (s, _) = layer.forward(x, &scaling).unwrap();
+            s.positions().iter().zip(&g).map(|(a, b)| a * b).sum::<f64>()
+        };
+        let fd = fd_gradient(loss, &pred, 1e-6);
+        let err = max_norm_rel_error(&grad.pred, &fd);
+        assert!(err < 1e-4, "sx = {sx}, mu = {mu}: ∂E/∂r̂ vs FD relative error {err:e}");
+    }
 }

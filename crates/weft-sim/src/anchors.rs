@@ -96,3 +96,58 @@ pub fn check_prescribed(prescribed: &[(usize, f64)], fixed: &[bool]) -> Result<(
     }
     Ok(())
 }
+
+/// How many of the six rigid motions of the body at `rest` (flat, m) the `fixed` DOFs
+/// leave free. A static solve `K u = f` is singular unless this is 0; relying on Cholesky
+/// to reject a singular `K` is unsafe, since round-off can leave a tiny positive pivot.
+///
+/// The rigid motions at DOF `(v, k)` are the translations `e_j` and the rotations
+/// `(e_j × (x_v − c))/L` about the centroid `c` (scaled by the body size `L` so all six
+/// are of order one). The fixed DOFs remove exactly as many motions as the rank of the
+/// 6 × 6 Gram matrix of their rows; eigenvalues below `10⁻¹⁰` of the largest count as
+/// zero.
+pub fn free_rigid_modes(rest: &[f64], fixed: &[bool]) -> usize {
+    let n = rest.len() / 3;
+    if n == 0 {
+        return 6;
+    }
+    let node = |v: usize| Vector3::new(rest[3 * v], rest[3 * v + 1], rest[3 * v + 2]);
+    let c = (0..n).map(node).sum::<Vector3<f64>>() / n as f64;
+    let size = (0..n)
+        .map(|v| (node(v) - c).norm())
+        .fold(0.0f64, f64::max)
+        .max(f64::MIN_POSITIVE);
+    let mut gram = nalgebra::Matrix6::<f64>::zeros();
+    for (dof, _) in fixed.iter().enumerate().filter(|(_, f)| **f) {
+        let (v, k) = (dof / 3, dof % 3);
+        let d = (node(v) - c) / size;
+        let mut row = nalgebra::Vector6::<f64>::zeros();
+        row[k] = 1.0;
+        for j in 0..3 {
+            row[3 + j] = Vector3::ith(j, 1.0).cross(&d)[k];
+        }
+        gram += row * row.transpose();
+    }
+    let eig = gram.symmetric_eigenvalues();
+    let max = eig.iter().fold(0.0f64, |m, e| m.max(*e));
+    eig.iter().filter(|&&e| e <= 1e-10 * max.max(f64::MIN_POSITIVE)).count()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rigid_modes_left_free_by_one_two_and_three_anchors() {
+        // Four nodes of a unit tetrahedron.
+        let rest = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let mask = |nodes: &[usize]| fixed_dofs(4, nodes).unwrap();
+        assert_eq!(free_rigid_modes(&rest, &mask(&[])), 6);
+        assert_eq!(free_rigid_modes(&rest, &mask(&[0])), 3); // rotations about the node
+        assert_eq!(free_rigid_modes(&rest, &mask(&[0, 1])), 1); // rotation about their line
+        assert_eq!(free_rigid_modes(&rest, &mask(&[0, 1, 2])), 0);
+        // Partial masks: every x and y DOF fixed leaves translation along z free.
+        let xy: Vec<bool> = (0..12).map(|d| d % 3 != 2).collect();
+        assert_eq!(free_rigid_modes(&rest, &xy), 1);
+    }
+}

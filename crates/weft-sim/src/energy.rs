@@ -22,6 +22,41 @@ pub trait Energy: Send + Sync + std::fmt::Debug {
     /// Adds `∂²E/∂x²` into `hessian` (whose pattern includes [`Energy::hessian_pairs`]);
     /// with `project`, each element's block is first made positive semi-definite.
     fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix);
+    /// The DOF count a term with per-DOF or per-vertex data (forces, masses, targets,
+    /// contact over all vertices) was built for; `None` for terms over mesh elements,
+    /// whose vertex indices [`Energy::hessian_pairs`] exposes. Solvers check both against
+    /// their DOF count up front, so a mismatched term is an error, not a panic or a load
+    /// silently truncated.
+    fn num_dofs(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// Checks every term against `num_dofs` (see [`Energy::num_dofs`]) and returns the vertex
+/// pairs of their Hessians.
+pub fn checked_pairs(num_dofs: usize, terms: &[&dyn Energy]) -> crate::Result<Vec<(usize, usize)>> {
+    let mut pairs = Vec::new();
+    for t in terms {
+        if let Some(n) = t.num_dofs() {
+            if n != num_dofs {
+                return Err(crate::Error::LengthMismatch {
+                    what: t.name(),
+                    expected: num_dofs,
+                    got: n,
+                });
+            }
+        }
+        t.hessian_pairs(&mut pairs);
+    }
+    let nv = num_dofs / 3;
+    if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= nv || b >= nv) {
+        return Err(crate::Error::VertexOutOfRange {
+            what: "energy term",
+            index: a.max(b),
+            num_vertices: nv,
+        });
+    }
+    Ok(pairs)
 }
 
 /// Sum of the values of several terms.

@@ -36,6 +36,11 @@ pub enum Error {
         index: usize,
         num_vertices: usize,
     },
+    #[error(
+        "the anchors leave {free_rigid_modes} rigid motion(s) of the body free, so the static system is singular; \
+         anchor at least three non-collinear nodes"
+    )]
+    UnderConstrained { free_rigid_modes: usize },
     #[error("scene error: {0}")]
     Scene(String),
 }

@@ -188,7 +188,7 @@ impl ImplicitEuler {
     }
 
     /// Tan et al.'s `M_phys = ‖∂L_phys/∂p_m‖²` over free DOFs (grasped DOFs carry the
-    /// reaction force and are excluded, `shared/docs/metrics.md` (c)); N².
+    /// reaction force and are excluded, weft's convention, `docs/CLOTH.md`); N².
     pub fn m_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {
         let mut g = vec![0.0; p.len()];
         self.l_phys_gradient(prev2, prev1, p, &mut g)?;

@@ -128,19 +128,8 @@ impl NewtonSolver {
                 got: num_dofs,
             });
         }
-        let mut pairs = Vec::new();
-        for t in terms {
-            t.hessian_pairs(&mut pairs);
-        }
-        let nv = num_dofs / 3;
-        if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= nv || b >= nv) {
-            return Err(Error::VertexOutOfRange {
-                what: "energy term",
-                index: a.max(b),
-                num_vertices: nv,
-            });
-        }
-        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(nv, pairs));
+        let pairs = crate::energy::checked_pairs(num_dofs, terms)?;
+        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(num_dofs / 3, pairs));
         let cholesky = CholeskySolver::new(pattern.clone())?;
         Ok(Self {
             fixed,
@@ -169,12 +158,9 @@ impl NewtonSolver {
         Ok(())
     }
 
-    /// Max-norm of the free-DOF entries of `grad`.
+    /// Max-norm of the free-DOF entries of `grad`; `+∞` if any of them is not finite.
     pub fn free_residual(&self, grad: &[f64]) -> f64 {
-        grad.iter()
-            .zip(&self.fixed)
-            .filter(|(_, f)| !**f)
-            .fold(0.0, |m, (g, _)| m.max(g.abs()))
+        weft_linalg::max_abs(grad.iter().zip(&self.fixed).filter(|(_, f)| !**f).map(|(g, _)| *g))
     }
 
     /// The assembled (unconstrained) Hessian at the last evaluated point, for adjoint solves.

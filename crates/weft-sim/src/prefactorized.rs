@@ -49,17 +49,7 @@ impl RayleighDamping {
 
 /// The matrix pattern coupling every vertex pair some term couples (3 × 3 blocks).
 pub(crate) fn pattern_of(num_vertices: usize, terms: &[&dyn Energy]) -> Result<Arc<SymmetricPattern>> {
-    let mut pairs = Vec::new();
-    for t in terms {
-        t.hessian_pairs(&mut pairs);
-    }
-    if let Some(&(a, b)) = pairs.iter().find(|&&(a, b)| a >= num_vertices || b >= num_vertices) {
-        return Err(Error::VertexOutOfRange {
-            what: "energy term",
-            index: a.max(b),
-            num_vertices,
-        });
-    }
+    let pairs = crate::energy::checked_pairs(3 * num_vertices, terms)?;
     Ok(Arc::new(SymmetricPattern::from_vertex_pairs(num_vertices, pairs)))
 }
 
@@ -126,8 +116,9 @@ pub struct PrefactorizedLinear {
 impl PrefactorizedLinear {
     /// Assembles `K` from `stiffness_terms` at `rest` (flat, m), builds the system
     /// matrix of `mode`, eliminates the `fixed` DOFs and factorises. `masses` (kg per
-    /// vertex) are used by [`LinearSolve::Dynamic`] only. Fails with
-    /// `NotPositiveDefinite` if the anchors leave a rigid mode free in a static solve.
+    /// vertex) are used by [`LinearSolve::Dynamic`] only. A static solve fails with
+    /// `UnderConstrained` if the anchors leave a rigid motion free (checked on the
+    /// geometry, not left to the factorisation).
     pub fn new(
         rest: &[f64],
         stiffness_terms: &[&dyn Energy],
@@ -165,6 +156,12 @@ impl PrefactorizedLinear {
         }
         for &m in &masses {
             check_nonnegative("vertex mass", m)?;
+        }
+        if mode == LinearSolve::Static {
+            let free_rigid_modes = crate::anchors::free_rigid_modes(rest, &fixed);
+            if free_rigid_modes > 0 {
+                return Err(Error::UnderConstrained { free_rigid_modes });
+            }
         }
         let pattern = pattern_of(n / 3, stiffness_terms)?;
         let stiffness = assemble_hessian(&pattern, stiffness_terms, rest, false)?;

@@ -367,6 +367,16 @@ impl Scene {
         for seg in &self.program {
             check_positive("motion period (s)", seg.period)?;
             check_positive("motion cycles", seg.cycles)?;
+            // Each segment is an offset `A sin(2π t / T)` from rest; it ends back at the
+            // rest offset only after a whole number of half periods. Anything else would
+            // teleport the grasped vertices at the next segment boundary.
+            if (2.0 * seg.cycles - (2.0 * seg.cycles).round()).abs() > 1e-9 {
+                return Err(Error::InvalidParameter {
+                    name: "motion cycles",
+                    value: seg.cycles,
+                    reason: "must be a multiple of 0.5 so that consecutive segments meet at the rest offset",
+                });
+            }
             if !seg.amplitude.is_finite() {
                 return Err(Error::InvalidParameter {
                     name: "motion amplitude",
@@ -562,49 +572,63 @@ impl ClothSimulation {
     }
 
     /// Grasp positions and label at frame `m` (time `m·dt`): the program's segments in
-    /// order, repeated.
+    /// order, repeated. Positions are those at `m·dt`; the label is that of the grasp
+    /// velocity over the frame, taken at its midpoint `(m − ½)·dt`, so a frame that ends
+    /// on a segment boundary is labelled by the motion it actually contains.
     pub fn controls_at(&self, m: usize) -> (Vec<Vector3<f64>>, MotionLabel) {
+        let (seg_index, t) = self.segment_at(m as f64 * self.scene.dt);
+        let positions = self.grasp_positions(seg_index, t);
+        let (label_seg, label_t) = self.segment_at((m as f64 - 0.5).max(0.0) * self.scene.dt);
+        (positions, self.label(label_seg, label_t))
+    }
+
+    /// The program segment active at time `t` and the time into it.
+    fn segment_at(&self, time: f64) -> (usize, f64) {
         let total: f64 = self.scene.program.iter().map(|s| s.period * s.cycles).sum();
-        let mut t = (m as f64 * self.scene.dt) % total;
-        let mut seg_index = 0;
+        let mut t = time % total;
         for (i, s) in self.scene.program.iter().enumerate() {
             let len = s.period * s.cycles;
             if t < len || i + 1 == self.scene.program.len() {
-                seg_index = i;
-                break;
+                return (i, t);
             }
             t -= len;
         }
+        (0, t)
+    }
+
+    fn grasp_positions(&self, seg_index: usize, t: f64) -> Vec<Vector3<f64>> {
         let seg = &self.scene.program[seg_index];
         let amp = seg.amplitude * self.jitter[seg_index];
-        let w = 2.0 * PI / seg.period;
-        let offset = amp * (w * t).sin();
-        let forward = (w * t).cos() >= 0.0;
+        let offset = amp * (2.0 * PI / seg.period * t).sin();
         let centroid = self.grasp_rest.iter().sum::<Vector3<f64>>() / self.grasp_rest.len() as f64;
-        let (positions, label) = match seg.motion {
+        match seg.motion {
             Motion::TranslateX | Motion::TranslateY | Motion::TranslateZ => {
-                let (axis, plus, minus) = match seg.motion {
-                    Motion::TranslateX => (Vector3::x(), MotionLabel::PlusX, MotionLabel::MinusX),
-                    Motion::TranslateY => (Vector3::y(), MotionLabel::PlusY, MotionLabel::MinusY),
-                    _ => (Vector3::z(), MotionLabel::PlusZ, MotionLabel::MinusZ),
+                let axis = match seg.motion {
+                    Motion::TranslateX => Vector3::x(),
+                    Motion::TranslateY => Vector3::y(),
+                    _ => Vector3::z(),
                 };
-                let label = if (amp >= 0.0) == forward { plus } else { minus };
-                (self.grasp_rest.iter().map(|p| p + axis * offset).collect(), label)
+                self.grasp_rest.iter().map(|p| p + axis * offset).collect()
             }
             Motion::RotateZ => {
                 let r = Rotation3::from_axis_angle(&Vector3::z_axis(), offset);
-                let label = if (amp >= 0.0) == forward {
-                    MotionLabel::PlusR
-                } else {
-                    MotionLabel::MinusR
-                };
-                (
-                    self.grasp_rest.iter().map(|p| centroid + r * (p - centroid)).collect(),
-                    label,
-                )
+                self.grasp_rest.iter().map(|p| centroid + r * (p - centroid)).collect()
             }
+        }
+    }
+
+    /// The label of the grasp velocity `A ω cos(ω t)` of segment `seg_index` at time `t`.
+    fn label(&self, seg_index: usize, t: f64) -> MotionLabel {
+        let seg = &self.scene.program[seg_index];
+        let amp = seg.amplitude * self.jitter[seg_index];
+        let forward = (2.0 * PI / seg.period * t).cos() >= 0.0;
+        let (plus, minus) = match seg.motion {
+            Motion::TranslateX => (MotionLabel::PlusX, MotionLabel::MinusX),
+            Motion::TranslateY => (MotionLabel::PlusY, MotionLabel::MinusY),
+            Motion::TranslateZ => (MotionLabel::PlusZ, MotionLabel::MinusZ),
+            Motion::RotateZ => (MotionLabel::PlusR, MotionLabel::MinusR),
         };
-        (positions, label)
+        if (amp >= 0.0) == forward { plus } else { minus }
     }
 
     /// Simulates the next frame.

@@ -522,9 +522,51 @@ fn prefactorized_static_handles_moving_anchors_and_force_fields() {
     // Without anchors the static system is singular: a clear error, not NaN.
     let free = vec![false; x0.len()];
     assert!(matches!(
-        PrefactorizedLinear::new(&x0, &[&energy], masses, free, LinearSolve::Static),
-        Err(Error::Linalg(_))
+        PrefactorizedLinear::new(&x0, &[&energy], masses.clone(), free, LinearSolve::Static),
+        Err(Error::UnderConstrained { free_rigid_modes: 6 })
     ));
+}
+
+#[test]
+fn static_prefactorized_solve_rejects_anchors_that_leave_a_rigid_motion_free() {
+    // Regression: one or two anchored nodes leave rotations free, so K is singular; the
+    // check relied on Cholesky rejecting it, which round-off can defeat.
+    let mesh = beam(&BeamParams {
+        cells: [4, 2, 2],
+        size: [1.0, 0.5, 0.5],
+    })
+    .unwrap();
+    let x0 = mesh.flat_positions();
+    let nv = mesh.num_vertices();
+    let energy = TetElasticity::new(&mesh, Material::Linear, lame(1e5, 0.3)).unwrap();
+    let end = nodes_at_min(mesh.positions(), 0, 1e-9).unwrap();
+    let new = |nodes: &[usize]| {
+        PrefactorizedLinear::new(
+            &x0,
+            &[&energy],
+            vec![1.0; nv],
+            fixed_dofs(nv, nodes).unwrap(),
+            LinearSolve::Static,
+        )
+    };
+    assert!(matches!(
+        new(&end[..1]),
+        Err(Error::UnderConstrained { free_rigid_modes: 3 })
+    ));
+    assert!(matches!(
+        new(&end[..2]),
+        Err(Error::UnderConstrained { free_rigid_modes: 1 })
+    ));
+    assert!(new(&end).is_ok());
+    // A dynamic solve is regularised by the mass matrix and needs no anchor at all.
+    let dynamic = LinearSolve::Dynamic {
+        dt: 0.01,
+        damping: RayleighDamping {
+            mass: 0.0,
+            stiffness: 0.0,
+        },
+    };
+    assert!(PrefactorizedLinear::new(&x0, &[&energy], vec![1.0; nv], vec![false; 3 * nv], dynamic).is_ok());
 }
 
 #[test]
@@ -743,4 +785,28 @@ fn limb_sequences_pair_skinned_and_simulated_surfaces_deterministically() {
     assert_eq!(a.skinned, b.skinned);
     let c = simulate_soft_tissue(&LimbParams::quick(), &SoftTissueParams { seed: 8, ..params }, 1).unwrap();
     assert_ne!(c.skinned[1], a.skinned[1]);
+}
+
+#[test]
+fn corotational_stress_derivative_is_exact_for_a_uniformly_shrunken_rotated_element() {
+    // Regression: the twist denominator σ_i + σ_j was clamped at an absolute 1e-6, so an
+    // element shrunk uniformly to 1e-7 of its size (σ all equal, dR perfectly defined)
+    // got a wrong ∂P/∂F. The clamp is now relative to the largest |σ|.
+    let l = lame(1e5, 0.3);
+    let q = Rotation3::from_euler_angles(0.3, -0.5, 0.9).into_inner();
+    for s in [1.0, 1e-7] {
+        let f = q * nalgebra::Matrix3::from_diagonal(&Vector3::new(s, 1.1 * s, 0.9 * s));
+        let analytic = Material::CoRotational.stress_derivative(&l, &f);
+        let h = 1e-6 * s;
+        for k in 0..9 {
+            let mut fp = f;
+            fp.as_mut_slice()[k] += h;
+            let mut fm = f;
+            fm.as_mut_slice()[k] -= h;
+            let fd = (Material::CoRotational.stress(&l, &fp) - Material::CoRotational.stress(&l, &fm)) / (2.0 * h);
+            let column: Vec<f64> = analytic.column(k).iter().copied().collect();
+            let err = max_norm_rel_error(&column, fd.as_slice());
+            assert!(err < 1e-5, "scale {s}, column {k}: relative error {err}");
+        }
+    }
 }

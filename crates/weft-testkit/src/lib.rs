@@ -44,8 +44,12 @@ macro_rules! assert_close {
 /// individual entries may cross zero.
 pub fn max_norm_rel_error(a: &[f64], b: &[f64]) -> f64 {
     assert_eq!(a.len(), b.len(), "slices of different lengths");
-    let scale = b.iter().chain(a.iter()).fold(0.0f64, |m, x| m.max(x.abs()));
-    let diff = a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    // NaN or ∞ anywhere makes the error +∞, so an all-NaN analytic result fails.
+    let scale = weft_linalg::max_abs(b.iter().chain(a.iter()).copied());
+    let diff = weft_linalg::max_abs(a.iter().zip(b).map(|(x, y)| x - y));
+    if !(scale.is_finite() && diff.is_finite()) {
+        return f64::INFINITY;
+    }
     if scale == 0.0 { diff } else { diff / scale }
 }
 

@@ -137,14 +137,14 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         out.join("index.html").display()
     );
     if let Some(dest) = &args.publish {
-        publish(&out, dest, size, &selected)?;
+        publish(&out, dest, size)?;
         println!("published to {}", dest.display());
     }
     Ok(())
 }
 
 /// Copies the report to `dest` with its provenance.
-fn publish(out: &Path, dest: &Path, size: Size, selected: &[&str]) -> anyhow::Result<()> {
+fn publish(out: &Path, dest: &Path, size: Size) -> anyhow::Result<()> {
     for sub in ["plots", "renders"] {
         let _ = std::fs::remove_dir_all(dest.join(sub));
     }
@@ -165,15 +165,12 @@ fn publish(out: &Path, dest: &Path, size: Size, selected: &[&str]) -> anyhow::Re
         })
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
-    let only = if selected.len() == EXPERIMENTS.len() {
-        String::new()
-    } else {
-        format!(" --only {}", selected.join(","))
-    };
     let text = format!(
-        "# Provenance\n\nProduced by\n\n```sh\ncargo xtask evaluate --size {}{only} --publish {}\n```\n\non {cores} cores of          {cpu}, code version {}. The per-experiment wall times are at the top of `tables.md`; `index.html` is the          whole report in one file. The predictions (every method's positions beside the reference) are not          committed: the same command writes them to `out/evaluate-{}/predictions/`.\n",
-        size.as_str(),
-        dest.display(),
+        "# Provenance\n\nProduced by\n\n```sh\ncargo xtask {}\n```\n\non {cores} cores of {cpu}, code version {}. \
+         The per-experiment wall times are at the top of `tables.md`; `index.html` is the whole report in one \
+         file. The predictions (every method's positions beside the reference) are not committed: the same \
+         command writes them to `out/evaluate-{}/predictions/` (or its `--out`).\n",
+        std::env::args().skip(1).collect::<Vec<_>>().join(" "),
         crate::dataset::code_version(),
         size.as_str()
     );

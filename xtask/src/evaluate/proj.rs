@@ -90,9 +90,16 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut reference = Vec::new();
     for p in &preds {
         let (sol, report) = reference_layer.forward(p).context("the reference SOCP solve failed")?;
+        let polish = match report.polish_iterations {
+            Some(k) => format!("polished in {k} Newton iteration(s)"),
+            None => "polish rejected (the interior-point point is the reference)".into(),
+        };
         out.notes.push(format!(
-            "proj/{scene}: reference status {}, polish {:?} iterations, KKT residual {:.1e}, max violation {:.1e}",
-            report.status, report.polish_iterations, report.kkt_residual, report.max_violation
+            "proj/{scene} example {}: reference {}, {polish}, KKT residual {:.1e}, max violation {:.1e}",
+            reference.len(),
+            report.status,
+            report.kkt_residual,
+            report.max_violation
         ));
         reference.push(sol.into_positions());
         bar.inc(1);

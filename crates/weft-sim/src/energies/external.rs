@@ -63,6 +63,9 @@ impl Energy for ZeroLengthSprings {
     fn name(&self) -> &'static str {
         self.name
     }
+    fn num_dofs(&self) -> Option<usize> {
+        Some(self.targets.len())
+    }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {
         self.weights
@@ -133,6 +136,9 @@ impl Energy for Inertia {
     fn name(&self) -> &'static str {
         "inertia"
     }
+    fn num_dofs(&self) -> Option<usize> {
+        Some(3 * self.masses.len())
+    }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {
         self.springs.value(x)
@@ -175,6 +181,9 @@ impl ConstantForce {
 impl Energy for ConstantForce {
     fn name(&self) -> &'static str {
         self.name
+    }
+    fn num_dofs(&self) -> Option<usize> {
+        Some(self.forces.len())
     }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {

@@ -186,6 +186,9 @@ pub struct DihedralBending {
     hinges: Vec<[usize; 4]>,
     rest_angle: Vec<f64>,
     weight: Vec<f64>,
+    /// Squared rest length of each hinge edge: the scale of the degeneracy guard in
+    /// [`angle_gradient`].
+    rest_edge2: Vec<f64>,
     stiffness: f64,
 }
 
@@ -198,6 +201,7 @@ impl DihedralBending {
         let mut hinges = Vec::with_capacity(topology.hinges.len());
         let mut rest_angle = Vec::with_capacity(topology.hinges.len());
         let mut weight = Vec::with_capacity(topology.hinges.len());
+        let mut rest_edge2 = Vec::with_capacity(topology.hinges.len());
         for h in &topology.hinges {
             let [x0, x1] = h.edge_vertices;
             let [x2, x3] = h.opposite;
@@ -205,11 +209,13 @@ impl DihedralBending {
             rest_angle.push(weft_mesh::geometry::dihedral_angle(&p[x0], &p[x1], &p[x2], &p[x3]));
             let abar = (areas[h.faces[0]] + areas[h.faces[1]]) / 3.0;
             weight.push((p[x1] - p[x0]).norm_squared() / abar);
+            rest_edge2.push((p[x1] - p[x0]).norm_squared());
         }
         Ok(Self {
             hinges,
             rest_angle,
             weight,
+            rest_edge2,
             stiffness,
         })
     }
@@ -230,7 +236,7 @@ impl DihedralBending {
             let v = vertex(x, self.hinges[h][k]);
             V3([0, 1, 2].map(|c| Dual::variable(v[c], 3 * k + c)))
         });
-        let g = angle_gradient(&p);
+        let g = angle_gradient(&p, self.rest_edge2[h]);
         let mut out = SMatrix::<f64, 12, 12>::zeros();
         for (k, gk) in g.iter().enumerate() {
             for c in 0..3 {
@@ -246,7 +252,7 @@ impl DihedralBending {
             let v = vertex(x, self.hinges[h][k]);
             V3([v.x, v.y, v.z])
         });
-        let g = angle_gradient(&p);
+        let g = angle_gradient(&p, self.rest_edge2[h]);
         SVector::<f64, 12>::from_fn(|i, _| g[i / 3].0[i % 3])
     }
 
@@ -262,14 +268,21 @@ impl DihedralBending {
 /// (and likewise for B):
 /// `∂θ/∂x2 = −g_A`, `∂θ/∂x3 = −g_B`, `∂θ/∂x0 = (1 − t_A) g_A + (1 − t_B) g_B`,
 /// `∂θ/∂x1 = t_A g_A + t_B g_B`.
-fn angle_gradient<T: Real>(p: &[V3<T>; 4]) -> [V3<T>; 4] {
+///
+/// A collapsed triangle (`n_A → 0`) or hinge edge (`e → 0`) makes these divisions 0/0,
+/// while θ itself stays finite (0 there). The denominators are therefore floored by
+/// `10⁻¹²` of their rest scale (`|ē|²` for `|e|²`, `|ē|⁴` for `|n|²`): below a
+/// relative size of about 10⁻⁶ the gradient is bounded instead of NaN, and above it the
+/// change is below 10⁻¹² relative — invisible to the finite-difference checks.
+fn angle_gradient<T: Real>(p: &[V3<T>; 4], rest_edge2: f64) -> [V3<T>; 4] {
     let e = p[1].sub(&p[0]);
-    let e2 = e.dot(&e);
+    let e2 = e.dot(&e) + T::cst(1e-12 * rest_edge2);
     let le = e2.sqrt();
     let na = e.cross(&p[2].sub(&p[0]));
     let nb = p[3].sub(&p[0]).cross(&e);
-    let ga = na.scale(le / na.dot(&na));
-    let gb = nb.scale(le / nb.dot(&nb));
+    let floor_n2 = T::cst(1e-12 * rest_edge2 * rest_edge2);
+    let ga = na.scale(le / (na.dot(&na) + floor_n2));
+    let gb = nb.scale(le / (nb.dot(&nb) + floor_n2));
     let ta = p[2].sub(&p[0]).dot(&e) / e2;
     let tb = p[3].sub(&p[0]).dot(&e) / e2;
     let one = T::cst(1.0);

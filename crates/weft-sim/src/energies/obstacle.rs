@@ -112,6 +112,17 @@ impl ObstacleShape {
     }
 }
 
+fn check_finite_point(name: &'static str, p: &Vector3<f64>) -> Result<()> {
+    match p.iter().find(|c| !c.is_finite()) {
+        Some(&value) => Err(Error::InvalidParameter {
+            name,
+            value,
+            reason: "every coordinate must be finite",
+        }),
+        None => Ok(()),
+    }
+}
+
 /// Penalty contact energy of all vertices against one obstacle.
 #[derive(Debug, Clone)]
 pub struct ObstaclePenalty {
@@ -126,8 +137,15 @@ impl ObstaclePenalty {
     pub fn new(shape: ObstacleShape, num_vertices: usize, stiffness: f64, margin: f64) -> Result<Self> {
         check_positive("obstacle stiffness (N/m)", stiffness)?;
         check_nonnegative("obstacle margin (m)", margin)?;
-        if let ObstacleShape::Sphere { radius, .. } = &shape {
+        if let ObstacleShape::Sphere { radius, center } = &shape {
             check_positive("sphere radius (m)", *radius)?;
+            check_finite_point("sphere centre", center)?;
+        }
+        if let ObstacleShape::Plane { point, normal } = &shape {
+            // A NaN point or normal would make every distance NaN, every `φ > 0` test
+            // false, and so silently switch the obstacle off.
+            check_finite_point("plane point", point)?;
+            check_finite_point("plane normal", normal)?;
         }
         if let ObstacleShape::Plane { normal, .. } = &shape {
             if !(normal.norm() > 0.0) {
@@ -166,6 +184,9 @@ impl ObstaclePenalty {
 impl Energy for ObstaclePenalty {
     fn name(&self) -> &'static str {
         "obstacle"
+    }
+    fn num_dofs(&self) -> Option<usize> {
+        Some(3 * self.num_vertices)
     }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {

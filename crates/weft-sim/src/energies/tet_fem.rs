@@ -310,13 +310,16 @@ impl RotationVariantSvd {
 
     /// `dR` for the polar rotation `R = U Vᵀ`. Where `σ_i + σ_j` vanishes (an element
     /// flattened to a line or inverted) the polar rotation is not differentiable; the
-    /// denominator is clamped to [`TWIST_DENOMINATOR_MIN`], which bounds the twist
-    /// stiffness instead of producing an infinite or NaN Hessian.
+    /// denominator is clamped to [`TWIST_DENOMINATOR_REL`] times the largest `|σ|`,
+    /// which bounds the twist stiffness instead of producing an infinite or NaN Hessian.
+    /// The clamp is relative so that a uniformly shrunken element (all `σ` small but
+    /// equal, where `dR` is perfectly well defined) is not clamped.
     fn rotation_differential(&self, dF: &Matrix3<f64>) -> Matrix3<f64> {
         let M = self.u.transpose() * dF * self.v;
         let mut omega = Matrix3::zeros();
+        let floor = (TWIST_DENOMINATOR_REL * self.sigma.amax()).max(f64::MIN_POSITIVE);
         for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-            let w = (M[(i, j)] - M[(j, i)]) / (self.sigma[i] + self.sigma[j]).max(TWIST_DENOMINATOR_MIN);
+            let w = (M[(i, j)] - M[(j, i)]) / (self.sigma[i] + self.sigma[j]).max(floor);
             omega[(i, j)] = w;
             omega[(j, i)] = -w;
         }
@@ -324,8 +327,9 @@ impl RotationVariantSvd {
     }
 }
 
-/// Lower bound on `σ_i + σ_j` in the co-rotational rotation differential.
-const TWIST_DENOMINATOR_MIN: f64 = 1e-6;
+/// Lower bound on `σ_i + σ_j` in the co-rotational rotation differential, relative to
+/// the largest `|σ|`.
+const TWIST_DENOMINATOR_REL: f64 = 1e-6;
 
 /// Singular values of `F` with the smallest one signed by `det F`.
 fn signed_singular_values(F: &Matrix3<f64>) -> Vector3<f64> {

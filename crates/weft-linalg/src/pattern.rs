@@ -1,0 +1,299 @@
+//! Symmetric sparsity patterns (upper-triangle CSC with an index of `3 × 3` vertex blocks
+//! for O(1) assembly) and the symmetric matrices stored over them.
+
+use std::sync::Arc;
+
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+
+use crate::ordering::Graph;
+use crate::{Error, Result};
+
+/// The sparsity pattern of a symmetric `n × n` matrix: its upper triangle (diagonal
+/// always included) in compressed-column form.
+#[derive(Debug, Clone)]
+pub struct SymmetricPattern {
+    n: usize,
+    pub(crate) symbolic: SymbolicSparseColMat<usize>,
+    /// For patterns of `3 × 3` vertex blocks: per column vertex `v`, the row vertices
+    /// `u ≤ v` (sorted) and the slot of row `3u` in each of the columns `3v..3v+3`.
+    blocks: Option<VertexBlocks>,
+}
+
+#[derive(Debug, Clone)]
+struct VertexBlocks {
+    offsets: Vec<usize>,
+    rows: Vec<usize>,
+    slots: Vec<[usize; 3]>,
+}
+
+impl SymmetricPattern {
+    /// Builds the pattern from off-diagonal (or diagonal) index pairs in any order and
+    /// either triangle; duplicates are merged and the full diagonal is always present.
+    pub fn new(n: usize, entries: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let mut cols: Vec<Vec<usize>> = (0..n).map(|j| vec![j]).collect();
+        for (r, c) in entries {
+            assert!(r < n && c < n, "pattern entry ({r}, {c}) outside a {n} × {n} matrix");
+            let (r, c) = if r <= c { (r, c) } else { (c, r) };
+            cols[c].push(r);
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        col_ptr.push(0);
+        for mut col in cols {
+            col.sort_unstable();
+            col.dedup();
+            row_idx.extend(col);
+            col_ptr.push(row_idx.len());
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        Self {
+            n,
+            symbolic,
+            blocks: None,
+        }
+    }
+
+    /// Builds the pattern of a matrix made of dense `3 × 3` blocks coupling vertex pairs
+    /// (the usual mesh DOF layout: vertex `v` owns DOFs `3v..3v+3`).
+    pub fn from_vertex_pairs(num_vertices: usize, pairs: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let mut entries = Vec::new();
+        for v in 0..num_vertices {
+            for a in 0..3 {
+                for b in a..3 {
+                    entries.push((3 * v + a, 3 * v + b));
+                }
+            }
+        }
+        for (u, v) in pairs {
+            for a in 0..3 {
+                for b in 0..3 {
+                    entries.push((3 * u + a, 3 * v + b));
+                }
+            }
+        }
+        let mut pattern = Self::new(3 * num_vertices, entries);
+        // Index the vertex blocks so assembly needs one short search per block.
+        let mut offsets = vec![0];
+        let mut rows = Vec::new();
+        let mut slots = Vec::new();
+        for v in 0..num_vertices {
+            let c = 3 * v;
+            let (start, end) = (pattern.col_ptr()[c], pattern.col_ptr()[c + 1]);
+            for k in start..end {
+                let r = pattern.row_idx()[k];
+                if r % 3 == 0 {
+                    let u = r / 3;
+                    let base = |j: usize| pattern.slot(3 * u, c + j).unwrap_or(usize::MAX);
+                    rows.push(u);
+                    slots.push([base(0), base(1), base(2)]);
+                }
+            }
+            offsets.push(rows.len());
+        }
+        pattern.blocks = Some(VertexBlocks { offsets, rows, slots });
+        pattern
+    }
+
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+    pub fn nnz(&self) -> usize {
+        self.symbolic.row_idx().len()
+    }
+
+    /// Slots of the `3 × 3` block at vertex pair `(u, v)` (either order) of a pattern of
+    /// vertex blocks: `slots[i][j]` holds entry `(3u + i, 3v + j)` — one search per
+    /// block, the DOF rows of a block being contiguous in each column.
+    pub(crate) fn block_slots(&self, u: usize, v: usize) -> Option<[[usize; 3]; 3]> {
+        let b = self.blocks.as_ref()?;
+        let (ru, cv) = (u.min(v), u.max(v));
+        let range = b.offsets[cv]..b.offsets[cv + 1];
+        let k = b.rows[range.clone()].binary_search(&ru).ok()?;
+        let base = b.slots[range.start + k];
+        // Stored upper entry of (3u + i, 3v + j): row 3ru + r in column 3cv + c.
+        Some([0, 1, 2].map(|i| {
+            [0, 1, 2].map(|j| {
+                let (r, c) = if u < v || (u == v && i <= j) { (i, j) } else { (j, i) };
+                base[c] + r
+            })
+        }))
+    }
+
+    /// The vertex graph of a pattern of `3 × 3` vertex blocks.
+    pub(crate) fn vertex_graph(&self) -> Option<Graph> {
+        let b = self.blocks.as_ref()?;
+        let nv = b.offsets.len() - 1;
+        let edges = (0..nv).flat_map(move |v| b.rows[b.offsets[v]..b.offsets[v + 1]].iter().map(move |&u| (u, v)));
+        Some(Graph::from_edges(nv, edges))
+    }
+
+    /// Storage slot of entry `(row, col)` (either triangle), or `None` if not in the pattern.
+    pub fn slot(&self, row: usize, col: usize) -> Option<usize> {
+        let (r, c) = if row <= col { (row, col) } else { (col, row) };
+        let start = self.symbolic.col_ptr()[c];
+        let end = self.symbolic.col_ptr()[c + 1];
+        self.symbolic.row_idx()[start..end]
+            .binary_search(&r)
+            .ok()
+            .map(|k| start + k)
+    }
+
+    /// Every stored entry as `(slot, row, col)` with `row <= col`.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        (0..self.n).flat_map(move |c| (cp[c]..cp[c + 1]).map(move |k| (k, ri[k], c)))
+    }
+
+    fn col_ptr(&self) -> &[usize] {
+        self.symbolic.col_ptr()
+    }
+    fn row_idx(&self) -> &[usize] {
+        self.symbolic.row_idx()
+    }
+}
+
+/// A symmetric matrix over a shared [`SymmetricPattern`], upper triangle stored.
+#[derive(Debug, Clone)]
+pub struct SymmetricMatrix {
+    pub(crate) pattern: Arc<SymmetricPattern>,
+    pub(crate) values: Vec<f64>,
+}
+
+impl SymmetricMatrix {
+    pub fn zeros(pattern: Arc<SymmetricPattern>) -> Self {
+        let values = vec![0.0; pattern.nnz()];
+        Self { pattern, values }
+    }
+    pub fn pattern(&self) -> &Arc<SymmetricPattern> {
+        &self.pattern
+    }
+    pub fn dim(&self) -> usize {
+        self.pattern.n
+    }
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+    pub fn values_mut(&mut self) -> &mut [f64] {
+        &mut self.values
+    }
+    pub fn set_zero(&mut self) {
+        self.values.iter_mut().for_each(|v| *v = 0.0);
+    }
+
+    /// Adds `v` to entry `(row, col)` if `row <= col`; lower-triangle entries are
+    /// ignored, so a caller may add a full symmetric block and each pair counts once.
+    ///
+    /// # Panics
+    /// If `(row, col)` is not in the pattern: that is a bug in the caller's pattern.
+    pub fn add(&mut self, row: usize, col: usize, v: f64) {
+        if row <= col {
+            let s = self
+                .pattern
+                .slot(row, col)
+                .unwrap_or_else(|| panic!("entry ({row}, {col}) is not in the pattern"));
+            self.values[s] += v;
+        }
+    }
+
+    /// Adds `v` to the stored slot `slot` (from [`SymmetricPattern::slot`]).
+    pub fn add_to_slot(&mut self, slot: usize, v: f64) {
+        self.values[slot] += v;
+    }
+
+    /// Adds the `3 × 3` block `block` at vertex pair `(u, v)` — DOFs `3u..3u+3` by
+    /// `3v..3v+3` — of a pattern built by [`SymmetricPattern::from_vertex_pairs`]. Only
+    /// the part in the stored upper triangle is added (for `u == v`, its upper half;
+    /// for `u > v`, nothing — the caller adds the transposed block at `(v, u)`). One
+    /// binary search per column instead of one per entry: vertex DOFs are contiguous.
+    pub fn add_vertex_block(&mut self, u: usize, v: usize, block: &[[f64; 3]; 3]) {
+        if u > v {
+            return;
+        }
+        let bases = match &self.pattern.blocks {
+            Some(b) => {
+                let range = b.offsets[v]..b.offsets[v + 1];
+                let k = b.rows[range.clone()]
+                    .binary_search(&u)
+                    .unwrap_or_else(|_| panic!("vertex block ({u}, {v}) is not in the pattern"));
+                b.slots[range.start + k]
+            }
+            None => [0, 1, 2].map(|j| {
+                self.pattern
+                    .slot(3 * u, 3 * v + j)
+                    .unwrap_or_else(|| panic!("vertex block ({u}, {v}) is not in the pattern"))
+            }),
+        };
+        for (j, &base) in bases.iter().enumerate() {
+            let rows = if u == v { j + 1 } else { 3 };
+            for i in 0..rows {
+                self.values[base + i] += block[i][j];
+            }
+        }
+    }
+
+    /// Adds a dense symmetric block over the DOF list `dofs` (row-major `dofs.len()²`).
+    pub fn add_block(&mut self, dofs: &[usize], block: &[f64]) {
+        let k = dofs.len();
+        debug_assert_eq!(block.len(), k * k);
+        for (a, &r) in dofs.iter().enumerate() {
+            for (b, &c) in dofs.iter().enumerate() {
+                self.add(r, c, block[a * k + b]);
+            }
+        }
+    }
+
+    /// Entry `(row, col)` (zero outside the pattern).
+    pub fn get(&self, row: usize, col: usize) -> f64 {
+        self.pattern.slot(row, col).map_or(0.0, |s| self.values[s])
+    }
+
+    /// `y = A x` using both triangles.
+    pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
+        let n = self.dim();
+        assert!(x.len() == n && y.len() == n, "mul_vec dimension mismatch");
+        y.iter_mut().for_each(|v| *v = 0.0);
+        let (cp, ri) = (self.pattern.col_ptr(), self.pattern.row_idx());
+        for c in 0..n {
+            for k in cp[c]..cp[c + 1] {
+                let r = ri[k];
+                let v = self.values[k];
+                y[r] += v * x[c];
+                if r != c {
+                    y[c] += v * x[r];
+                }
+            }
+        }
+    }
+
+    /// Adds `shift` to every diagonal entry.
+    pub fn add_diagonal(&mut self, shift: f64) {
+        for i in 0..self.dim() {
+            self.add(i, i, shift);
+        }
+    }
+
+    /// Dirichlet elimination: zeroes every row and column of a DOF with `fixed[i]` and
+    /// puts 1 on its diagonal, so a solve leaves those DOFs at their right-hand side
+    /// (zero for a Newton step) without changing the free block.
+    pub fn constrain_dofs(&mut self, fixed: &[bool]) {
+        assert_eq!(fixed.len(), self.dim(), "fixed-DOF mask length");
+        let pattern = self.pattern.clone();
+        for (slot, r, c) in pattern.entries() {
+            if fixed[r] || fixed[c] {
+                self.values[slot] = if r == c { 1.0 } else { 0.0 };
+            }
+        }
+    }
+
+    pub(crate) fn check_finite(&self) -> Result<()> {
+        if self.values.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(Error::NonFinite("matrix"))
+        }
+    }
+
+    pub(crate) fn as_faer(&self) -> SparseColMatRef<'_, usize, f64> {
+        SparseColMatRef::new(self.pattern.symbolic.as_ref(), &self.values)
+    }
+}
