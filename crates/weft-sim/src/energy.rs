@@ -30,6 +30,28 @@ pub trait Energy: Send + Sync + std::fmt::Debug {
     fn num_dofs(&self) -> Option<usize> {
         None
     }
+    /// `E(to) − E(from)`. An affine term (gravity, a constant load) overrides it with the
+    /// exact `−f·(to − from)`: its value `−f·x` grows with the distance from the origin,
+    /// and the difference of two such values would lose the change to cancellation.
+    fn value_change(&self, from: &[f64], to: &[f64]) -> f64 {
+        self.value(to) - self.value(from)
+    }
+    /// Whether the term is affine in `x`, so its [`Energy::value_change`] is exact and its
+    /// value carries no round-off that the line search must respect.
+    fn is_affine(&self) -> bool {
+        false
+    }
+}
+
+/// `Σ_k E_k(to) − E_k(from)`, each term by its [`Energy::value_change`].
+pub fn total_value_change(terms: &[&dyn Energy], from: &[f64], to: &[f64]) -> f64 {
+    terms.iter().map(|t| t.value_change(from, to)).sum()
+}
+
+/// The magnitude below which energy differences are round-off: `Σ |E_k(x)|` over the
+/// terms that are not affine.
+pub fn energy_roundoff_scale(terms: &[&dyn Energy], x: &[f64]) -> f64 {
+    terms.iter().filter(|t| !t.is_affine()).map(|t| t.value(x).abs()).sum()
 }
 
 /// Checks every term against `num_dofs` (see [`Energy::num_dofs`]) and returns the vertex

@@ -6,12 +6,16 @@ use std::time::{Duration, Instant};
 
 use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
-use crate::energy::{Energy, total_gradient, total_value};
+use crate::energy::{Energy, energy_roundoff_scale, total_gradient, total_value, total_value_change};
 use crate::error::{Error, Result};
 
 /// Armijo steps shorter than this fraction of the Newton step are not trusted: steps are
 /// then judged by their residual force instead (see [`NewtonSolver::minimize`]).
 const MIN_TRUSTED_STEP: f64 = 1e-6;
+
+/// The residual force's round-off floor in units of `ε · max H_ii · max |x|` (see
+/// [`NewtonSolver::minimize`]).
+const ROUNDOFF_FLOOR_FACTOR: f64 = 64.0;
 
 /// Settings of [`NewtonSolver`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -88,6 +92,9 @@ pub struct NewtonReport {
     /// Residual after each iteration (N), for convergence studies.
     #[serde(skip)]
     pub residual_history: Vec<f64>,
+    /// The round-off floor of the residual force at the last factorisation (N); the
+    /// tolerance applied is the larger of this and the requested one.
+    pub residual_floor: f64,
 }
 
 mod duration_seconds {
@@ -156,6 +163,19 @@ impl NewtonSolver {
         }
         self.fixed = fixed;
         Ok(())
+    }
+
+    /// The round-off floor of the residual force at `x`: `64 ε · max_i H_ii · max_j |x_j|`
+    /// over free DOFs, with `H` the Newton matrix last assembled. Internal forces are sums
+    /// of terms like `k (x_a − x_b)` whose rounding error is about `ε k |x|`, and `H_ii`
+    /// bounds the stiffness `Σ k` meeting at a DOF; below this floor the residual carries
+    /// no information, whatever the requested tolerance. Stiff materials, tiny time steps
+    /// (inertia `m/Δt²`) and coordinates far from the origin all raise it.
+    fn residual_floor(&self, x: &[f64]) -> f64 {
+        let free = || (0..x.len()).filter(|&i| !self.fixed[i]);
+        let h_max = weft_linalg::max_abs(free().map(|i| self.hessian.get(i, i)));
+        let x_max = weft_linalg::max_abs(free().map(|i| x[i]));
+        ROUNDOFF_FLOOR_FACTOR * f64::EPSILON * h_max * x_max
     }
 
     /// Max-norm of the free-DOF entries of `grad`; `+∞` if any of them is not finite.
@@ -260,15 +280,17 @@ impl NewtonSolver {
             factorizations: 0,
             time: Duration::ZERO,
             residual_history: Vec::new(),
+            residual_floor: 0.0,
         };
         let mut held: Option<weft_linalg::CholeskyFactor> = None;
+        let mut floor = 0.0f64;
         let result = (|| {
-            while residual > settings.tolerance {
+            while residual > settings.tolerance.max(floor) {
                 if report.iterations >= settings.max_iterations {
                     return Err(Error::NotConverged {
                         iterations: report.iterations,
                         residual,
-                        tolerance: settings.tolerance,
+                        tolerance: settings.tolerance.max(floor),
                     });
                 }
                 report.iterations += 1;
@@ -278,6 +300,8 @@ impl NewtonSolver {
                         let (f, shifts) = self.factorize_at(terms, x, settings.projection)?;
                         report.regularizations += shifts;
                         report.factorizations += 1;
+                        floor = self.residual_floor(x);
+                        report.residual_floor = floor;
                         (f, true)
                     }
                 };
@@ -297,13 +321,15 @@ impl NewtonSolver {
                 let mut alpha = 1.0;
                 let mut accepted = false;
                 let mut trial_energy = energy;
+                // Energy changes are summed term by term (affine terms exactly), so a body
+                // far from the origin does not drown them in the round-off of `−f·x`.
                 for _ in 0..=settings.max_line_search {
                     for i in 0..n {
                         self.trial[i] = x[i] + alpha * self.dir[i];
                     }
-                    let e = total_value(terms, &self.trial);
-                    if e.is_finite() && e <= energy + settings.armijo * alpha * slope {
-                        trial_energy = e;
+                    let de = total_value_change(terms, x, &self.trial);
+                    if de.is_finite() && de <= settings.armijo * alpha * slope {
+                        trial_energy = energy + de;
                         accepted = true;
                         break;
                     }
@@ -315,7 +341,7 @@ impl NewtonSolver {
                 // minimiser of a stiff problem energy comparisons carry no information.
                 // Then judge steps by the residual force instead (backtracking from the
                 // full Newton step), keeping the tiny Armijo step only if that fails too.
-                let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy.abs();
+                let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy_roundoff_scale(terms, x);
                 let mut full_step = accepted && alpha == 1.0;
                 if !accepted || alpha < MIN_TRUSTED_STEP || !measurable {
                     let tiny = accepted.then(|| (self.trial.clone(), trial_energy));
@@ -327,7 +353,7 @@ impl NewtonSolver {
                             self.trial[i] = x[i] + beta * self.dir[i];
                         }
                         total_gradient(terms, &self.trial, &mut grad);
-                        let e = total_value(terms, &self.trial);
+                        let e = energy + total_value_change(terms, x, &self.trial);
                         let r = self.free_residual(&grad);
                         if e.is_finite() && r.is_finite() && r < residual {
                             trial_energy = e;
@@ -357,6 +383,10 @@ impl NewtonSolver {
                     });
                 }
                 energy = trial_energy;
+                // A step that cannot change any coordinate by more than its rounding means
+                // Newton can make no further progress.
+                let xmax = weft_linalg::max_abs(x.iter().copied());
+                let moved = weft_linalg::max_abs(x.iter().zip(&self.trial).map(|(a, b)| b - a));
                 x.copy_from_slice(&self.trial);
                 total_gradient(terms, x, &mut grad);
                 if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
@@ -368,6 +398,16 @@ impl NewtonSolver {
                 let previous = residual;
                 residual = self.free_residual(&grad);
                 report.residual_history.push(residual);
+                if moved <= 4.0 * f64::EPSILON * xmax {
+                    if residual <= 16.0 * settings.tolerance.max(floor) {
+                        break;
+                    }
+                    return Err(Error::NotConverged {
+                        iterations: report.iterations,
+                        residual,
+                        tolerance: settings.tolerance.max(floor),
+                    });
+                }
                 if settings.reuse_factorization && full_step {
                     let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
                     if residual * needed <= previous {

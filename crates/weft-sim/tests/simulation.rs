@@ -497,3 +497,55 @@ fn grasp_programs_are_continuous_and_boundary_frames_are_labelled_by_their_motio
         })
     ));
 }
+
+/// Three implicit-Euler steps of a 9 × 9 mass-spring sheet (stiffness `k` N/m) pinned at
+/// two corners, falling under gravity, with every position offset by `offset` m; the
+/// Newton tolerance is the scenes' default, 1e-3 of the heaviest vertex's weight.
+fn pinned_sheet_steps(k: f64, dt: f64, offset: f64) -> weft_sim::Result<Vec<f64>> {
+    let m = generators::sheet(9, 1.0).unwrap();
+    let t = Topology::new(&m);
+    let masses = weft_mesh::geometry::lumped_masses_tri(m.positions(), m.faces(), 0.2);
+    let x0: Vec<f64> = m.flat_positions().iter().map(|v| v + offset).collect();
+    let terms: Vec<Box<dyn Energy>> = vec![
+        Box::new(Springs::stretch(&m, &t, k).unwrap()),
+        Box::new(Springs::bend_two_ring(&m, &t, 1e-3 * k).unwrap()),
+        Box::new(ConstantForce::gravity(&masses, [0.0, 0.0, -G]).unwrap()),
+    ];
+    let mut fixed = vec![false; x0.len()];
+    for v in [0, 8] {
+        fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
+    }
+    let mut ie = ImplicitEuler::new(masses.clone(), dt, x0.clone(), terms, fixed).unwrap();
+    ie.settings.tolerance = 1e-3 * masses.iter().fold(0.0f64, |a, b| a.max(*b)) * G;
+    let hold = weft_sim::anchors::hold(&[0, 8], &x0);
+    for _ in 0..3 {
+        ie.step(&hold)?;
+    }
+    Ok(ie.positions().iter().map(|v| v - offset).collect())
+}
+
+#[test]
+fn newton_converges_for_stiff_cloth_tiny_steps_and_bodies_far_from_the_origin() {
+    // Regression: the stopping test compared an absolute force with a fixed tolerance,
+    // but internal forces carry a round-off floor of about ε·k·|x|. Stiff springs, tiny
+    // time steps (inertia m/Δt²) and large coordinates all put that floor above the
+    // tolerance, and every step ended in NotConverged after 100 factorisations.
+    // Each of these failed before the floor (springs of 1e12 and 1e13 N/m; a sheet 1e9 m
+    // from the origin, where ε|x| is 0.2 µm).
+    pinned_sheet_steps(1e12, 1e-2, 0.0).unwrap();
+    pinned_sheet_steps(1e13, 1e-2, 0.0).unwrap();
+    pinned_sheet_steps(1e3, 1e-10, 0.0).unwrap();
+    let reference = pinned_sheet_steps(1e3, 1e-2, 0.0).unwrap();
+    for offset in [1e5, 1e9] {
+        let far = pinned_sheet_steps(1e3, 1e-2, offset).unwrap();
+        let diff = reference
+            .iter()
+            .zip(&far)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // Coordinates near `offset` carry a rounding error of ε·offset per operation.
+        assert!(
+            diff < 1e-6 + 1e3 * f64::EPSILON * offset,
+            "offset {offset} m: moved differently by {diff} m"
+        );
+    }
+}

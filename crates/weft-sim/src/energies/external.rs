@@ -185,6 +185,17 @@ impl Energy for ConstantForce {
     fn num_dofs(&self) -> Option<usize> {
         Some(self.forces.len())
     }
+    fn value_change(&self, from: &[f64], to: &[f64]) -> f64 {
+        -self
+            .forces
+            .iter()
+            .zip(from.iter().zip(to))
+            .map(|(f, (a, b))| f * (b - a))
+            .sum::<f64>()
+    }
+    fn is_affine(&self) -> bool {
+        true
+    }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {
         -self.forces.iter().zip(x).map(|(f, x)| f * x).sum::<f64>()
