@@ -4,7 +4,7 @@
 //! and writes files and shows progress.
 
 use std::fs;
-use std::io::{BufReader, BufWriter};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail, ensure};
@@ -372,22 +372,25 @@ fn parse_pin_positions(text: &str) -> Result<Vec<Vector3<f64>>> {
 
 fn read_safetensors_frames(path: &Path, nv: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
     let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let tensors = safetensors::SafeTensors::deserialize(&bytes)
-        .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+    parse_safetensors_frames(&bytes, nv).with_context(|| format!("in {}", path.display()))
+}
+
+/// The `positions` tensor (f64, `[frames, nv, 3]`) of safetensors bytes.
+fn parse_safetensors_frames(bytes: &[u8], nv: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
+    ensure!(nv > 0, "the rest mesh has no vertex");
+    let tensors = safetensors::SafeTensors::deserialize(bytes).map_err(|e| anyhow::anyhow!("not safetensors: {e}"))?;
     let t = tensors
         .tensor("positions")
-        .map_err(|e| anyhow::anyhow!("{}: no tensor `positions`: {e}", path.display()))?;
+        .map_err(|e| anyhow::anyhow!("no tensor `positions`: {e}"))?;
     ensure!(
         t.dtype() == safetensors::Dtype::F64,
-        "{}: `positions` must be f64, is {:?}",
-        path.display(),
+        "`positions` must be f64, is {:?}",
         t.dtype()
     );
     let shape = t.shape();
     ensure!(
         shape.len() == 3 && shape[1] == nv && shape[2] == 3,
-        "{}: `positions` has shape {shape:?}, expected [frames, {nv}, 3]",
-        path.display()
+        "`positions` has shape {shape:?}, expected [frames, {nv}, 3]"
     );
     let values: Vec<f64> = t
         .data()
@@ -401,12 +404,25 @@ fn read_safetensors_frames(path: &Path, nv: usize) -> Result<Vec<Vec<Vector3<f64
 }
 
 fn read_npy(path: &Path) -> Result<(Vec<u64>, Vec<f64>)> {
-    let file = fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let npy = npyz::NpyFile::new(BufReader::new(file)).with_context(|| format!("reading {}", path.display()))?;
+    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_npy(&bytes).with_context(|| format!("in {}", path.display()))
+}
+
+/// Shape and f64 values of `.npy` bytes. The element count the header claims is checked
+/// against the bytes present before anything is allocated for it.
+fn parse_npy(bytes: &[u8]) -> Result<(Vec<u64>, Vec<f64>)> {
+    let npy = npyz::NpyFile::new(bytes).context("not an .npy file")?;
     let shape = npy.shape().to_vec();
-    let values = npy
-        .into_vec::<f64>()
-        .with_context(|| format!("{}: expected f64 data", path.display()))?;
+    let count = shape
+        .iter()
+        .try_fold(1u64, |a, &d| a.checked_mul(d))
+        .context("the header's shape overflows")?;
+    ensure!(
+        count.checked_mul(8).is_some_and(|b| b <= bytes.len() as u64),
+        "the header claims {count} values ({shape:?}) but the file has {} bytes",
+        bytes.len()
+    );
+    let values = npy.into_vec::<f64>().context("expected f64 data")?;
     Ok((shape, values))
 }
 
@@ -423,4 +439,67 @@ fn write_npy(path: &Path, shape: &[u64], values: impl IntoIterator<Item = f64>) 
         .with_context(|| format!("writing {}", path.display()))?;
     writer.finish().with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn npy_bytes(shape: &[u64], values: &[f64]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut w = npyz::WriteOptions::<f64>::new()
+            .default_dtype()
+            .shape(shape)
+            .writer(&mut out)
+            .begin_nd()
+            .unwrap();
+        w.extend(values.iter().copied()).unwrap();
+        w.finish().unwrap();
+        out
+    }
+
+    #[test]
+    fn npy_round_trips_and_a_lying_header_is_a_typed_error() {
+        let values: Vec<f64> = (0..18).map(|i| i as f64 * 0.5).collect();
+        let bytes = npy_bytes(&[2, 3, 3], &values);
+        assert_eq!(parse_npy(&bytes).unwrap(), (vec![2, 3, 3], values));
+        // Regression: the header's shape was trusted, so a file claiming 10^15 values
+        // allocated for them before reading.
+        let (old, lying): (&[u8], &[u8]) = (b"(2, 3, 3, )", b"(999999999999999, 3, 3, )");
+        let at = bytes.windows(old.len()).position(|w| w == old).unwrap();
+        let mut lied = bytes.clone();
+        lied.splice(at..at + old.len(), lying.iter().copied());
+        // Keep the header's length: take the extra characters out of its space padding.
+        let newline = lied.iter().position(|&b| b == b'\n').unwrap();
+        lied.drain(newline - (lying.len() - old.len())..newline);
+        assert_eq!(lied.len(), bytes.len());
+        let err = format!("{:#}", parse_npy(&lied).unwrap_err());
+        assert!(err.contains("claims"), "{err}");
+    }
+
+    proptest! {
+            #[test]
+        fn npy_and_safetensors_readers_never_panic(
+            random in prop::collection::vec(any::<u8>(), 0..300),
+            flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..8),
+            cut in any::<prop::sample::Index>(),
+        ) {
+            let _ = parse_npy(&random);
+            let _ = parse_safetensors_frames(&random, 2);
+            let mut npy = npy_bytes(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+            let arrays = [crate::output::Array::f64("positions", vec![1, 2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])];
+            let mut st = crate::output::safetensors_bytes(&arrays, Default::default()).unwrap();
+            for (i, b) in &flips {
+                let k = i.index(npy.len());
+                npy[k] ^= b;
+                let k = i.index(st.len());
+                st[k] ^= b;
+            }
+            let _ = parse_npy(&npy);
+            let _ = parse_safetensors_frames(&st, 2);
+            let _ = parse_npy(&npy[..cut.index(npy.len())]);
+            let _ = parse_safetensors_frames(&st[..cut.index(st.len())], 2);
+        }
+    }
 }

@@ -13,6 +13,7 @@ mod project;
 mod record;
 mod report;
 mod simulate;
+mod stability;
 
 use clap::{Parser, Subcommand};
 
@@ -46,6 +47,8 @@ enum Command {
     Evaluate(evaluate::EvaluateArgs),
     /// Check that an evaluation's outputs exist and parse, including every record's fields (CI runs this).
     CheckReport(report::CheckArgs),
+    /// Sweep every simulator over extreme parameters and publish the outcome of each cell (docs/STABILITY.md).
+    Stability(stability::StabilityArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -58,5 +61,6 @@ fn main() -> anyhow::Result<()> {
         Command::Dataset(args) => dataset::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::CheckReport(args) => report::check(args),
+        Command::Stability(args) => stability::run(args),
     }
 }

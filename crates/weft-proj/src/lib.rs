@@ -39,6 +39,7 @@
 //! ```
 
 pub mod axial;
+mod batch;
 pub mod error;
 mod ipm;
 mod kkt;

@@ -417,6 +417,6 @@ impl QuasistaticLayer {
         solutions: &[QuasistaticSolution],
         grads: &[G],
     ) -> Result<Vec<QuasistaticGradient>> {
-        crate::error::backward_batch(solutions, grads, |s, g| self.backward(s, g))
+        crate::batch::backward_batch(solutions, grads, |s, g| self.backward(s, g))
     }
 }

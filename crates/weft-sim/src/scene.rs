@@ -170,6 +170,13 @@ pub struct Scene {
     pub relative_tolerance: f64,
     #[serde(default = "default_max_iter")]
     pub max_newton_iterations: usize,
+    /// Amplitude of the seeded displacement along the vertex normals that breaks the
+    /// rest state's symmetry, as a fraction of the mean edge length (0 turns it off).
+    /// A flat sheet driven in its own plane is at an unstable equilibrium: without a
+    /// deliberate perturbation, round-off (which differs between SIMD paths and
+    /// factorisation orders) decides how it buckles, and frames differ between machines.
+    #[serde(default = "default_symmetry_breaking")]
+    pub symmetry_breaking: f64,
 }
 
 fn one() -> f64 {
@@ -183,6 +190,10 @@ fn default_rel_tol() -> f64 {
 /// slowly: the full-size mass-spring ball (`ball-ms`) needs 117 in its second frame, when
 /// the grasped pole first carries the ball's weight. The cap bounds a failing step's cost,
 /// it does not slow converging ones.
+fn default_symmetry_breaking() -> f64 {
+    1e-6
+}
+
 fn default_max_iter() -> usize {
     300
 }
@@ -285,6 +296,7 @@ impl Scene {
             program,
             obstacle: None,
             relative_tolerance: default_rel_tol(),
+            symmetry_breaking: default_symmetry_breaking(),
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -356,6 +368,13 @@ impl Scene {
         check_positive("stretch_scale", self.stretch_scale)?;
         check_positive("bend_scale", self.bend_scale)?;
         check_positive("relative_tolerance", self.relative_tolerance)?;
+        if !(self.symmetry_breaking.is_finite() && (0.0..=1e-2).contains(&self.symmetry_breaking)) {
+            return Err(Error::InvalidParameter {
+                name: "symmetry_breaking",
+                value: self.symmetry_breaking,
+                reason: "must be in [0, 0.01] (a fraction of the mean edge length)",
+            });
+        }
         if self.frames == 0 {
             return Err(Error::Scene("frames must be at least 1".into()));
         }
@@ -530,7 +549,27 @@ impl ClothSimulation {
             fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
         }
         let grasp_rest = grasp.iter().map(|&v| mesh.positions()[v]).collect();
-        let mut integrator = ImplicitEuler::new(masses, scene.dt, mesh.flat_positions(), terms, fixed)?;
+        // The seeded symmetry-breaking displacement (see `Scene::symmetry_breaking`):
+        // uniform in ±amplitude along each free vertex's normal, from its own SplitMix64
+        // stream so it does not depend on the motion jitter drawn below.
+        let mut x0 = mesh.flat_positions();
+        if scene.symmetry_breaking > 0.0 {
+            let p = mesh.positions();
+            let mean_edge =
+                topo.edges.iter().map(|&[a, b]| (p[a] - p[b]).norm()).sum::<f64>() / topo.edges.len().max(1) as f64;
+            let amplitude = scene.symmetry_breaking * mean_edge;
+            let normals = weft_mesh::geometry::vertex_normals(p, mesh.faces());
+            let mut rng = SplitMix(scene.seed ^ 0x0005_EED0_F5E7);
+            for (v, n) in normals.iter().enumerate() {
+                let d = amplitude * (2.0 * rng.unit() - 1.0);
+                if !fixed[3 * v] {
+                    for k in 0..3 {
+                        x0[3 * v + k] += d * n[k];
+                    }
+                }
+            }
+        }
+        let mut integrator = ImplicitEuler::new(masses, scene.dt, x0, terms, fixed)?;
         let max_weight = integrator.masses().iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
         integrator.settings.tolerance = scene.relative_tolerance * max_weight.max(1e-12);
         integrator.settings.max_iterations = scene.max_newton_iterations;

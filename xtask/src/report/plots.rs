@@ -271,6 +271,100 @@ pub fn energy(stem: &Path, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<(
     both(stem, |r| energy_on(r, title, bars), |r| energy_on(r, title, bars))
 }
 
+fn heat_map_on<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    cells: &[&crate::stability::Cell],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    use crate::stability::Outcome;
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
+    root.fill(&WHITE).map_err(e)?;
+    let root = root.titled(title, ("sans-serif", 20)).map_err(e)?;
+    let mut panels: Vec<&str> = Vec::new();
+    for c in cells {
+        if !panels.contains(&c.panel.as_str()) {
+            panels.push(&c.panel);
+        }
+    }
+    let per_row = panels.len().min(3);
+    let grid_rows = panels.len().div_ceil(per_row);
+    let areas = root.split_evenly((grid_rows, per_row));
+    for (panel, area) in panels.iter().zip(areas) {
+        let pc: Vec<&&crate::stability::Cell> = cells.iter().filter(|c| c.panel == *panel).collect();
+        let mut rows: Vec<&str> = Vec::new();
+        let mut cols: Vec<&str> = Vec::new();
+        for c in &pc {
+            if !rows.contains(&c.row.as_str()) {
+                rows.push(&c.row);
+            }
+            if !cols.contains(&c.col.as_str()) {
+                cols.push(&c.col);
+            }
+        }
+        let (w, h) = area.dim_in_pixel();
+        let (left, top) = (110i32, 44i32);
+        let cw = ((w as i32 - left - 8) / cols.len().max(1) as i32).max(10);
+        let ch = ((h as i32 - top - 8) / rows.len().max(1) as i32).clamp(10, 40);
+        area.draw(&Text::new(panel.to_string(), (4, 4), ("sans-serif", 14).into_font()))
+            .map_err(e)?;
+        for (j, col) in cols.iter().enumerate() {
+            area.draw(&Text::new(
+                col.to_string(),
+                (left + j as i32 * cw + 2, 24),
+                ("sans-serif", 11).into_font(),
+            ))
+            .map_err(e)?;
+        }
+        for (i, row) in rows.iter().enumerate() {
+            let y = top + i as i32 * ch;
+            area.draw(&Text::new(
+                row.to_string(),
+                (4, y + ch / 2 - 6),
+                ("sans-serif", 11).into_font(),
+            ))
+            .map_err(e)?;
+            for (j, col) in cols.iter().enumerate() {
+                let Some(c) = pc.iter().find(|c| c.row == *row && c.col == *col) else {
+                    continue;
+                };
+                let colour = match c.outcome {
+                    Outcome::Converged => RGBColor(110, 180, 110),
+                    Outcome::Clamped => RGBColor(235, 200, 80),
+                    Outcome::TypedError => RGBColor(170, 170, 190),
+                    Outcome::Failure => RGBColor(210, 40, 40),
+                };
+                let x = left + j as i32 * cw;
+                area.draw(&Rectangle::new([(x, y), (x + cw - 2, y + ch - 2)], colour.filled()))
+                    .map_err(e)?;
+                let label = match (c.outcome, c.iterations) {
+                    (Outcome::TypedError, _) => "error".to_string(),
+                    (Outcome::Failure, _) => "FAIL".to_string(),
+                    (_, Some(it)) => format!("{it:.1}"),
+                    _ => String::new(),
+                };
+                area.draw(&Text::new(
+                    label,
+                    (x + 4, y + ch / 2 - 6),
+                    ("sans-serif", 11).into_font(),
+                ))
+                .map_err(e)?;
+            }
+        }
+    }
+    root.present().map_err(e)?;
+    Ok(())
+}
+
+/// A stability heat map: one panel per held value, cells coloured by outcome (green
+/// converged, yellow clamped, grey typed error, red failure) and labelled with the mean
+/// iterations per step.
+pub fn heat_map(stem: &Path, title: &str, cells: &[&crate::stability::Cell]) -> anyhow::Result<()> {
+    both(stem, |r| heat_map_on(r, title, cells), |r| heat_map_on(r, title, cells))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

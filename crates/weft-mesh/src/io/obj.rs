@@ -45,7 +45,7 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<TriMesh> {
                     let v = if idx > 0 {
                         idx - 1
                     } else if idx < 0 {
-                        n + idx
+                        n.saturating_add(idx)
                     } else {
                         -1
                     };

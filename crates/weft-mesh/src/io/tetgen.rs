@@ -31,15 +31,22 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh> {
     let (node, ele) = pair(path);
     let ntext = std::fs::read_to_string(&node).map_err(io_err(&node))?;
     let etext = std::fs::read_to_string(&ele).map_err(io_err(&ele))?;
+    parse_tetgen(&ntext, &etext, &node, &ele)
+}
 
-    let mut lines = data_lines(&ntext);
+/// Parses the text of a TetGen `.node` and `.ele` pair; `node` and `ele` name the files in
+/// errors. Counts in the headers are checked against the lines that follow before
+/// anything is allocated for them, so a lying header costs nothing.
+pub fn parse_tetgen(ntext: &str, etext: &str, node: &Path, ele: &Path) -> Result<TetMesh> {
+    let (node, ele) = (node.to_path_buf(), ele.to_path_buf());
+    let mut lines = data_lines(ntext);
     let (hl, header) = lines.next().ok_or_else(|| parse_err(&node, 1, "empty .node file"))?;
     let count: usize = num(&node, hl, header.first(), "point count")?;
     let dim: usize = num(&node, hl, header.get(1), "dimension")?;
     if dim != 3 {
         return Err(parse_err(&node, hl, format!("dimension is {dim}, expected 3")));
     }
-    let mut positions = Vec::with_capacity(count);
+    let mut positions = Vec::with_capacity(count.min(ntext.lines().count()));
     let mut base = None;
     for _ in 0..count {
         let (l, t) = lines.next().ok_or_else(|| {
@@ -67,7 +74,7 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh> {
     }
     let base = base.unwrap_or(0);
 
-    let mut lines = data_lines(&etext);
+    let mut lines = data_lines(etext);
     let (hl, header) = lines.next().ok_or_else(|| parse_err(&ele, 1, "empty .ele file"))?;
     let count: usize = num(&ele, hl, header.first(), "tetrahedron count")?;
     let per: usize = num(&ele, hl, header.get(1), "nodes per tetrahedron")?;
@@ -78,7 +85,7 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh> {
             format!("{per} nodes per tetrahedron; only linear (4-node) tets are supported"),
         ));
     }
-    let mut tets = Vec::with_capacity(count);
+    let mut tets = Vec::with_capacity(count.min(etext.lines().count()));
     for _ in 0..count {
         let (l, t) = lines.next().ok_or_else(|| {
             parse_err(

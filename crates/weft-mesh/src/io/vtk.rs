@@ -86,6 +86,13 @@ pub fn write_vtk_triangles(
 /// tetrahedra is an error.
 pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    parse_vtk_tets(&text, path)
+}
+
+/// Parses the text of a legacy VTK unstructured grid (see [`read_vtk_tets`]); `path` names
+/// the file in errors. Header counts are checked against the tokens that follow before
+/// anything is allocated for them.
+pub fn parse_vtk_tets(text: &str, path: &Path) -> Result<TetMesh> {
     // Tokens with their line numbers: legacy VTK lets numbers wrap across lines.
     let tokens: Vec<(usize, &str)> = text
         .lines()
@@ -114,7 +121,7 @@ pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
     }
     let p = find("POINTS").ok_or_else(|| parse_err(path, 1, "no POINTS section"))?;
     let np = count(p + 1, "point count")?;
-    let mut positions = Vec::with_capacity(np);
+    let mut positions = Vec::with_capacity(np.min(tokens.len() / 3));
     for i in 0..np {
         let base = p + 3 + 3 * i;
         positions.push(nalgebra::Vector3::new(
@@ -125,7 +132,7 @@ pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
     }
     let c = find("CELLS").ok_or_else(|| parse_err(path, 1, "no CELLS section"))?;
     let nc = count(c + 1, "cell count")?;
-    let mut cells = Vec::with_capacity(nc);
+    let mut cells = Vec::with_capacity(nc.min(tokens.len()));
     let mut k = c + 3;
     for _ in 0..nc {
         let n = count(k, "cell size")?;
@@ -133,7 +140,10 @@ pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
             .map(|j| count(k + j, "cell index"))
             .collect::<Result<Vec<_>>>()?;
         cells.push((tokens[k].0, ids));
-        k += n + 1;
+        k = n
+            .checked_add(1)
+            .and_then(|m| k.checked_add(m))
+            .ok_or_else(|| parse_err(path, tokens[k].0, format!("bad cell size {n}")))?;
     }
     let t = find("CELL_TYPES").ok_or_else(|| parse_err(path, 1, "no CELL_TYPES section"))?;
     let mut tets = Vec::new();

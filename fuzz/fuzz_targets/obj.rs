@@ -1,0 +1,6 @@
+//! The OBJ reader must return a mesh or a typed error for any bytes.
+#![no_main]
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    let text = String::from_utf8_lossy(data);
+    let _ = weft_mesh::io::parse_obj(&text, std::path::Path::new("fuzz.obj"));
+});
