@@ -240,10 +240,7 @@ impl DatasetSpec {
 /// `seed + (i + 1)·φ` (φ = 0x9E3779B97F4A7C15), so neighbouring indices and seeds give
 /// unrelated streams.
 pub fn sequence_seed(seed: u64, i: usize) -> u64 {
-    let mut z = seed.wrapping_add((i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    weft_sim::rng::SplitMix64::new(seed.wrapping_add((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))).next_u64()
 }
 
 /// A file of the dataset with its checksum.

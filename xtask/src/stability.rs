@@ -22,6 +22,7 @@ use weft_sim::{ClothSimulation, Energy, ImplicitEuler, Scene};
 
 use crate::evaluate::results::{Record, validate};
 use crate::output::{progress_bar, write_json, write_text};
+use crate::report::distinct;
 
 #[derive(Args)]
 pub struct StabilityArgs {
@@ -398,7 +399,10 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
                             iterations: report.iterations as f64,
                             residual: report.kkt_residual,
                             seconds: t.elapsed().as_secs_f64(),
-                            clamped: report.polish_iterations.is_none(),
+                            // The interior-point point returned because the polish was
+                            // rejected while edges are at their bound (with none active there
+                            // is nothing to polish).
+                            clamped: report.polish_iterations.is_none() && report.active_constraints > 0,
                         })
                     },
                 )
@@ -507,16 +511,11 @@ fn write_outputs(out: &std::path::Path, cells: &[Cell], quick: bool, seconds: f6
     write_json(&out.join("results.json"), &records)?;
     write_json(&out.join("cells.json"), &cells)?;
     // Heat maps: one per family, one panel per value of the held axis.
-    let mut families: Vec<&str> = Vec::new();
-    for c in cells {
-        if !families.contains(&c.family.as_str()) {
-            families.push(&c.family);
-        }
-    }
+    let families = distinct(cells.iter().map(|c| c.family.as_str()));
     let mut md = format!(
         "# Stability map ({} grid)\n\nProduced by `cargo xtask stability{}` in {seconds:.0} s. Outcome per cell: \
          **C** converged, **K** converged with a clamp (a diagonal shift, the residual's round-off floor, or an \
-         unpolished SOCP point), **E** a typed error, **F** a failure (a panic or a NaN passed on). The number is the \
+         SOCP point left unpolished with edges at their bound), **E** a typed error, **F** a failure (a panic or a NaN passed on). The number is the \
          mean Newton (or interior-point) iterations per step.\n\n",
         if quick { "quick" } else { "full" },
         if quick { " --quick" } else { "" }
@@ -531,24 +530,11 @@ fn write_outputs(out: &std::path::Path, cells: &[Cell], quick: bool, seconds: f6
         summary.push((f.to_string(), n));
         crate::report::plots::heat_map(&out.join("plots").join(format!("stability-{f}")), f, &fc)?;
         md.push_str(&format!("## {f}\n\n![{f}](plots/stability-{f}.svg)\n\n"));
-        let mut panels: Vec<&str> = Vec::new();
-        for c in &fc {
-            if !panels.contains(&c.panel.as_str()) {
-                panels.push(&c.panel);
-            }
-        }
+        let panels = distinct(fc.iter().map(|c| c.panel.as_str()));
         for p in panels {
             let pc: Vec<&&Cell> = fc.iter().filter(|c| c.panel == p).collect();
-            let mut rows: Vec<&str> = Vec::new();
-            let mut cols: Vec<&str> = Vec::new();
-            for c in &pc {
-                if !rows.contains(&c.row.as_str()) {
-                    rows.push(&c.row);
-                }
-                if !cols.contains(&c.col.as_str()) {
-                    cols.push(&c.col);
-                }
-            }
+            let rows = distinct(pc.iter().map(|c| c.row.as_str()));
+            let cols = distinct(pc.iter().map(|c| c.col.as_str()));
             md.push_str(&format!(
                 "**{p}**\n\n| | {} |\n|{}\n",
                 cols.join(" | "),

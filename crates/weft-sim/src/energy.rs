@@ -81,6 +81,12 @@ pub fn checked_pairs(num_dofs: usize, terms: &[&dyn Energy]) -> crate::Result<Ve
     Ok(pairs)
 }
 
+/// The terms of a step's objective: a scene's potential `terms` followed by the
+/// integrator's own (inertia, damping) — as the trait objects the solvers take.
+pub fn with_extra<'a>(terms: &'a [Box<dyn Energy>], extra: &[&'a dyn Energy]) -> Vec<&'a dyn Energy> {
+    terms.iter().map(|t| t.as_ref()).chain(extra.iter().copied()).collect()
+}
+
 /// Sum of the values of several terms.
 pub fn total_value(terms: &[&dyn Energy], x: &[f64]) -> f64 {
     terms.iter().map(|t| t.value(x)).sum()

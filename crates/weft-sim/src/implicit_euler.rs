@@ -61,8 +61,7 @@ impl ImplicitEuler {
         }
         let inertia = Inertia::new(masses, dt, &x0)?;
         let solver = {
-            let mut all: Vec<&dyn Energy> = terms.iter().map(|t| t.as_ref()).collect();
-            all.push(&inertia);
+            let all = crate::energy::with_extra(&terms, &[&inertia]);
             NewtonSolver::new(x0.len(), &all, fixed.clone())?
         };
         // Default tolerance: 1e-5 of the heaviest vertex's weight — scale-aware across
@@ -138,8 +137,7 @@ impl ImplicitEuler {
             x[dof] = value;
         }
         let newton = {
-            let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
-            all.push(&self.inertia);
+            let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
             self.solver.minimize(&all, &mut x, &self.settings)?
         };
         let potential_energy = self.terms.iter().map(|t| t.value(&x)).sum();
@@ -181,8 +179,7 @@ impl ImplicitEuler {
                 got: grad.len(),
             });
         }
-        let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
-        all.push(&inertia);
+        let all = crate::energy::with_extra(&self.terms, &[&inertia]);
         total_gradient(&all, p, grad);
         Ok(())
     }

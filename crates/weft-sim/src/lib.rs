@@ -40,6 +40,7 @@ pub mod newmark;
 pub mod newton;
 pub mod prefactorized;
 pub mod quasistatic;
+pub mod rng;
 pub mod scene;
 pub mod soft_tissue;
 pub mod volume_scene;

@@ -294,8 +294,7 @@ impl Newmark {
             x[dof] = value;
         }
         let newton = {
-            let mut all: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
-            all.push(&self.inertia);
+            let mut all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
             if let Some(q) = &self.stiffness_damping {
                 all.push(q);
             }

@@ -20,6 +20,7 @@ use crate::energy::Energy;
 use crate::error::{Error, Result, check_nonnegative, check_positive};
 use crate::implicit_euler::{ImplicitEuler, StepReport};
 use crate::newton::{NewtonSettings, NewtonSolver};
+use crate::rng::SplitMix64;
 
 /// Material, timing and motion settings of a soft-tissue sequence.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -120,7 +121,7 @@ pub struct SkeletalMotion {
 
 impl SkeletalMotion {
     pub fn random(seed: u64, amplitude: f64) -> Self {
-        let mut rng = SplitMix64(seed ^ SEED_SALT);
+        let mut rng = SplitMix64::new(seed ^ SEED_SALT);
         Self {
             shoulder_flexion: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
             shoulder_abduction: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
@@ -151,24 +152,6 @@ impl SkeletalMotion {
 
 /// Mixed into the user's seed so that seed 0 is not SplitMix64's all-zero state.
 const SEED_SALT: u64 = 0x5EED_0F71_55E0_0001;
-
-/// A small deterministic generator (SplitMix64) so sequences are reproducible from a
-/// seed on every machine.
-#[derive(Debug, Clone)]
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
 
 /// Frame-by-frame simulator of a limb's soft tissue.
 #[derive(Debug)]

@@ -242,33 +242,47 @@ fn stable_at_the_extremes_or_a_clear_error() {
     }
     let mut converged = 0;
     for &(k, dt, speed) in &cases {
-        let mut s = Scene::builtin("sheet-ms", true).unwrap();
-        s.model = ClothModel::MassSpring {
-            stretch_stiffness: k,
-            bend_stiffness: k / 50.0,
-        };
-        s.dt = dt;
-        for seg in &mut s.program {
-            seg.period /= speed;
-        }
-        let mut sim = ClothSimulation::new(s, None).unwrap();
-        let mut ok = true;
-        for _ in 0..8 {
-            match sim.step() {
-                Ok(f) => assert!(
-                    f.positions.iter().all(|v| v.is_finite()),
-                    "NaN at k={k} dt={dt} speed={speed}"
-                ),
-                Err(e) => {
-                    // A typed, descriptive error, and the state is untouched and finite.
-                    assert!(!e.to_string().is_empty());
-                    assert!(sim.integrator().positions().iter().all(|v| v.is_finite()));
-                    ok = false;
-                    break;
+        // Eight frames at the given Newton tolerance (a fraction of the heaviest weight).
+        let run = |relative_tolerance: f64| -> Option<(Vec<f64>, Vec<f64>)> {
+            let mut s = Scene::builtin("sheet-ms", true).unwrap();
+            s.model = ClothModel::MassSpring {
+                stretch_stiffness: k,
+                bend_stiffness: k / 50.0,
+            };
+            s.dt = dt;
+            s.relative_tolerance = relative_tolerance;
+            for seg in &mut s.program {
+                seg.period /= speed;
+            }
+            let mut sim = ClothSimulation::new(s, None).unwrap();
+            let start = sim.integrator().positions().to_vec();
+            for _ in 0..8 {
+                match sim.step() {
+                    Ok(f) => assert!(
+                        f.positions.iter().all(|v| v.is_finite()),
+                        "NaN at k={k} dt={dt} speed={speed}"
+                    ),
+                    Err(e) => {
+                        // A typed, descriptive error, and the state is untouched and finite.
+                        assert!(!e.to_string().is_empty());
+                        assert!(sim.integrator().positions().iter().all(|v| v.is_finite()));
+                        return None;
+                    }
                 }
             }
-        }
-        converged += ok as usize;
+            Some((start, sim.integrator().positions().to_vec()))
+        };
+        let Some((start, x)) = run(1e-3) else { continue };
+        converged += 1;
+        // Accurate, not just finite: a 1000× tighter Newton tolerance moves the result by
+        // under 1 % of how far the cloth moved.
+        let (_, tight) = run(1e-6).expect("the tighter run converges too");
+        let moved = start.iter().zip(&x).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        let diff = x.iter().zip(&tight).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            diff <= 1e-2 * moved,
+            "k={k} dt={dt} speed={speed}: {diff} m from the tight run, moved {moved} m"
+        );
     }
     assert_eq!(
         converged,

@@ -64,7 +64,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             energy: Vec::new(),
         };
         let (metric, label) = pareto_metric(&o.experiment);
-        for scene in scenes(
+        for scene in distinct(
             o.records
                 .iter()
                 .filter(|r| r.metric == metric)
@@ -87,14 +87,14 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             plots::pareto(&out.join(&stem), &title, label, &points)?;
             c.pareto.push((title, stem));
         }
-        for scene in scenes(o.curves.iter().map(|c| c.scene.as_str())) {
+        for scene in distinct(o.curves.iter().map(|c| c.scene.as_str())) {
             let curves: Vec<_> = o.curves.iter().filter(|c| c.scene == scene).collect();
             let stem = format!("plots/rollout-{}-{}", o.experiment, slug(scene));
             let title = format!("{} / {scene}: roll-out error against frame", o.experiment);
             plots::rollout(&out.join(&stem), &title, &curves)?;
             c.rollout.push((title, stem));
         }
-        for scene in scenes(o.energies.iter().map(|e| e.scene.as_str())) {
+        for scene in distinct(o.energies.iter().map(|e| e.scene.as_str())) {
             let bars: Vec<_> = o.energies.iter().filter(|e| e.scene == scene).collect();
             let stem = format!("plots/energy-{}-{}", o.experiment, slug(scene));
             let title = format!("{} / {scene}: mean energies", o.experiment);
@@ -114,7 +114,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
 }
 
 /// Distinct names in first-seen order.
-fn scenes<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
     let mut v: Vec<&str> = Vec::new();
     for n in names {
         if !v.contains(&n) {

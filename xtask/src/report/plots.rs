@@ -283,27 +283,14 @@ where
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
     root.fill(&WHITE).map_err(e)?;
     let root = root.titled(title, ("sans-serif", 20)).map_err(e)?;
-    let mut panels: Vec<&str> = Vec::new();
-    for c in cells {
-        if !panels.contains(&c.panel.as_str()) {
-            panels.push(&c.panel);
-        }
-    }
+    let panels = super::distinct(cells.iter().map(|c| c.panel.as_str()));
     let per_row = panels.len().min(3);
     let grid_rows = panels.len().div_ceil(per_row);
     let areas = root.split_evenly((grid_rows, per_row));
     for (panel, area) in panels.iter().zip(areas) {
         let pc: Vec<&&crate::stability::Cell> = cells.iter().filter(|c| c.panel == *panel).collect();
-        let mut rows: Vec<&str> = Vec::new();
-        let mut cols: Vec<&str> = Vec::new();
-        for c in &pc {
-            if !rows.contains(&c.row.as_str()) {
-                rows.push(&c.row);
-            }
-            if !cols.contains(&c.col.as_str()) {
-                cols.push(&c.col);
-            }
-        }
+        let rows = super::distinct(pc.iter().map(|c| c.row.as_str()));
+        let cols = super::distinct(pc.iter().map(|c| c.col.as_str()));
         let (w, h) = area.dim_in_pixel();
         let (left, top) = (110i32, 44i32);
         let cw = ((w as i32 - left - 8) / cols.len().max(1) as i32).max(10);
