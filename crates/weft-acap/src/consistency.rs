@@ -1,10 +1,10 @@
-//! Consistent log-rotations across neighbours without an integer solver (acap.md §3).
+//! Consistent log-rotations across neighbours without an integer solver (docs/ACAP.md §A3).
 //!
 //! A rotation with principal log (ω, θ), θ ∈ [0, π], has the logs r = φ a with either
 //! a = ω, φ = θ + 2πk or a = −ω, φ = 2π − θ + 2πk, k ∈ ℤ. Gao et al. choose the sign
 //! s_i and the integer k_i per vertex by mixed-integer programs (Tan et al. §III-A:
 //! "as-consistent-as-possible manner using mixed-integer programming"); weft replaces
-//! them with the solver-free algorithm of acap.md §3:
+//! them with the solver-free algorithm of docs/ACAP.md §A3:
 //!
 //! 1. breadth-first propagation from a root per connected component;
 //! 2. axis sweeps: flip s_i whenever Σ_j sign(a_i·a_j) < 0 over its 1-ring (edges at
@@ -17,7 +17,7 @@ use nalgebra::Vector3;
 use crate::features::Rings;
 
 /// A rotation closer than this to the identity has no meaningful axis: it takes its
-/// parent's axis and φ = 2πk (acap.md §3, BFS rule).
+/// parent's axis and φ = 2πk (docs/ACAP.md §A3, BFS rule).
 const IDENTITY_ANGLE: f64 = 1e-6;
 /// Edges at a rotation within this angle of the identity are ignored by the axis sweeps.
 const AXIS_IGNORE_ANGLE: f64 = 0.02;
@@ -28,7 +28,7 @@ const MAX_SWEEPS: usize = 10_000;
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
 /// What the consistency pass did to one frame, with the energies before and after the
-/// refinement sweeps (acap.md §3).
+/// refinement sweeps (docs/ACAP.md §A3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ConsistencyReport {
     /// Σ over 1-ring edges of sign(a_i·a_j) after the breadth-first pass (higher is better).
@@ -99,7 +99,7 @@ fn closest_to(omega: Vector3<f64>, theta: f64, target: &Vector3<f64>) -> State {
 ///
 /// `roots` holds one vertex per connected component; `reference` (a previous frame's
 /// log-rotations) seeds each root's sign and k so a sequence does not jump when the
-/// root's rotation passes π (acap.md §3, step 4).
+/// root's rotation passes π (docs/ACAP.md §A3, step 4).
 pub(crate) fn consistent_logs(
     principal: &[(Vector3<f64>, f64)],
     rings: &Rings,
@@ -114,7 +114,7 @@ pub(crate) fn consistent_logs(
         .collect();
     let mut is_root = vec![false; n];
 
-    // 1. Propagation from the root (acap.md §3 step 1, with k by rounding). The release
+    // 1. Propagation from the root (docs/ACAP.md §A3 step 1, with k by rounding). The release
     //    visits vertices breadth-first; weft visits them most-reliable-edge first (Prim's
     //    order on min(θ_i, θ_j)), so a region of large rotations is traversed through its
     //    own edges rather than through near-identity vertices whose axes are noise. Without

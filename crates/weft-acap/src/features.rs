@@ -1,4 +1,4 @@
-//! The ACAP feature extractor (Tan et al. §III-A, Eq. 1; acap.md §1–§4).
+//! The ACAP feature extractor (Tan et al. §III-A, Eq. 1; docs/ACAP.md §A1–§A4).
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -10,7 +10,7 @@ use crate::rotation::{polar_decomposition, principal_log};
 
 /// One vertex's ACAP feature: the log-rotation as the upper triangle of `K = [r]_×`,
 /// `(K₁₂, K₁₃, K₂₃) = (−r_z, r_y, −r_x)`, then the upper triangle of the symmetric
-/// stretch, `(S₁₁, S₁₂, S₁₃, S₂₂, S₂₃, S₃₃)` (acap.md §4, the release's `FeatureMap.m`).
+/// stretch, `(S₁₁, S₁₂, S₁₃, S₂₂, S₂₃, S₃₃)` (docs/ACAP.md §A4, the release's `FeatureMap.m`).
 pub type Feature = [f64; 9];
 
 /// Indices of the log-rotation block in a [`Feature`].
@@ -45,12 +45,12 @@ pub fn feature_stretch(f: &Feature) -> Matrix3<f64> {
 }
 
 /// How the 1-ring edges are weighted, in Eq. 1 and in the Poisson system alike (the same
-/// weights on both sides keep the round trip tight, acap.md §5).
+/// weights on both sides keep the round trip tight, docs/ACAP.md §A5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[non_exhaustive]
 pub enum EdgeWeights {
     /// The release's positive cotangent weights `w = sqrt(sexp(c))`, `c = ½(cot α + cot β)`,
-    /// `sexp(x) = eˣ (x ≤ 0), 1 + x (x > 0)`; NaN or > 1e5 → 1 (acap.md §1).
+    /// `sexp(x) = eˣ (x ≤ 0), 1 + x (x > 0)`; NaN or > 1e5 → 1 (docs/ACAP.md §A1).
     ReleaseCotangent,
     /// `w = sexp(c)` without the square root: the closest positive stand-in for the
     /// cotangent weights, and the smallest round-trip error of the three (docs/ACAP.md).
@@ -129,7 +129,7 @@ impl Rings {
 /// covariances and 1-ring lists, computed once; [`AcapFeatures::encode`] per frame.
 ///
 /// Per vertex i, with rest edges e_ij = q_j − q_i and deformed edges d_ij = p_j − p_i
-/// (Tan et al. Eq. 1, acap.md §1):
+/// (Tan et al. Eq. 1, docs/ACAP.md §A1):
 ///
 /// `T_i = (Σ_j w_ij d_ij e_ijᵀ + h_p h_q n_p n_qᵀ) (Σ_j w_ij e_ij e_ijᵀ + h_q² n_q n_qᵀ)⁻¹`
 ///
@@ -280,7 +280,7 @@ impl AcapFeatures {
     }
 
     /// The per-vertex deformation gradients T_i of a deformed frame (Tan et al. Eq. 1 with
-    /// the normal pair of acap.md §1).
+    /// the normal pair of docs/ACAP.md §A1).
     pub fn deformation_gradients(&self, p: &[Vector3<f64>]) -> Result<Vec<Matrix3<f64>>> {
         self.check_frame(p)?;
         let normals = geometry::vertex_normals(p, &self.faces);
@@ -311,7 +311,7 @@ impl AcapFeatures {
 
     /// [`AcapFeatures::encode`] with the consistency pass's report. `reference` (the
     /// previous frame's features) seeds each component root's log-rotation so that a
-    /// sequence does not jump when the root's rotation angle passes π (acap.md §3 step 4).
+    /// sequence does not jump when the root's rotation angle passes π (docs/ACAP.md §A3 step 4).
     pub fn encode_with_report(
         &self,
         p: &[Vector3<f64>],
@@ -350,7 +350,7 @@ impl AcapFeatures {
     }
 
     /// Encodes a time sequence in order, seeding each frame's roots from the previous
-    /// frame so the features stay continuous in time (acap.md §3 step 4).
+    /// frame so the features stay continuous in time (docs/ACAP.md §A3 step 4).
     pub fn encode_sequence<P: AsRef<[Vector3<f64>]>>(&self, frames: &[P]) -> Result<Vec<Vec<Feature>>> {
         let mut out: Vec<Vec<Feature>> = Vec::with_capacity(frames.len());
         for p in frames {
@@ -365,7 +365,7 @@ fn mean_edge_length(p: &[Vector3<f64>], i: usize, nb: &[usize]) -> f64 {
     nb.iter().map(|&j| (p[j] - p[i]).norm()).sum::<f64>() / nb.len() as f64
 }
 
-/// Positive edge weight from the cotangent weight `c` (acap.md §1).
+/// Positive edge weight from the cotangent weight `c` (docs/ACAP.md §A1).
 fn edge_weight(kind: EdgeWeights, c: f64) -> f64 {
     let sexp = |x: f64| if x <= 0.0 { x.exp() } else { 1.0 + x };
     let w = match kind {

@@ -1,5 +1,5 @@
 //! ACAP⁻¹: features back to positions through the pinned Poisson system, and its
-//! vector–Jacobian product (Tan et al. §IV-A, Eq. 6; acap.md §5).
+//! vector–Jacobian product (Tan et al. §IV-A, Eq. 6; docs/ACAP.md §A5).
 
 use std::sync::Arc;
 
@@ -19,7 +19,7 @@ const NOT_FREE: usize = usize::MAX;
 /// Positions minimise `Σ_i Σ_{j∈N(i)} c_ij ‖(p_i − p_j) − T_i (q_i − q_j)‖²` with the
 /// pinned vertices P held at given positions. The normal equations are `L p = b`,
 /// `L_ii = Σ_j c_ij`, `L_ij = −c_ij`, `b_i = ½ Σ_j c_ij (T_i + T_j)(q_i − q_j)`
-/// (acap.md §5). Instead of the saddle-point system `[[L, Aᵀ], [A, 0]]` of Eq. 6 this
+/// (docs/ACAP.md §A5). Instead of the saddle-point system `[[L, Aᵀ], [A, 0]]` of Eq. 6 this
 /// eliminates the pins — the same solution — leaving the SPD system
 /// `L_FF p_F = b_F − L_FP x_P`, factorised once by sparse Cholesky and solved for
 /// x, y and z together. The weights c_ij are the extractor's edge weights, so that the
@@ -185,7 +185,7 @@ impl PoissonPseudoInverse {
     }
 
     /// The least-squares positions for given per-vertex deformation gradients: solves
-    /// `L_FF p_F = b_F − L_FP x_P` (acap.md §5).
+    /// `L_FF p_F = b_F − L_FP x_P` (docs/ACAP.md §A5).
     pub fn positions_from_gradients(
         &self,
         t: &[Matrix3<f64>],
@@ -213,7 +213,7 @@ impl PoissonPseudoInverse {
         for (a, &i) in self.free.iter().enumerate() {
             let mut b = Vector3::zeros();
             for (&j, &c) in self.rings.neighbors(i).iter().zip(self.rings.weights(i)) {
-                // b_i = ½ Σ_j c_ij (T_i + T_j)(q_i − q_j)   (acap.md §5)
+                // b_i = ½ Σ_j c_ij (T_i + T_j)(q_i − q_j)   (docs/ACAP.md §A5)
                 b += (t[i] + t[j]) * (q[i] - q[j]) * (0.5 * c);
                 if self.free_index[j] == NOT_FREE {
                     // − L_FP x_P

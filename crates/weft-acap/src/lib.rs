@@ -13,7 +13,7 @@
 //!
 //! It is deliberately not a neural-network crate (weft-nn wraps the inverse as a candle
 //! custom op), does no file I/O (xtask does), and has no mixed-integer solver: the
-//! consistency of log R uses the propagation-and-sweep algorithm of `acap.md` §3 (see
+//! consistency of log R uses the propagation-and-sweep algorithm of `docs/ACAP.md` §A3 (see
 //! [`ConsistencyReport`]). Flat rest meshes, where the rest edge covariance is rank 2,
 //! are kept well posed by an extra normal pair in Eq. 1 (see [`AcapFeatures`]).
 //!

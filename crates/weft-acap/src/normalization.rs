@@ -1,4 +1,4 @@
-//! Linear feature scaling into [−0.95, 0.95] for tanh network outputs (acap.md §4).
+//! Linear feature scaling into [−0.95, 0.95] for tanh network outputs (docs/ACAP.md §A4).
 
 use serde::{Deserialize, Serialize};
 

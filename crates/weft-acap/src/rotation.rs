@@ -1,5 +1,5 @@
 //! Small 3 × 3 rotation math: polar decomposition, the principal logarithm, Rodrigues'
-//! exponential and its derivative (acap.md §2 and §5).
+//! exponential and its derivative (docs/ACAP.md §A2 and §A5).
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -8,7 +8,7 @@ pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
-/// Polar decomposition `T = R S` with `det R = +1` and `S` symmetric (acap.md §2).
+/// Polar decomposition `T = R S` with `det R = +1` and `S` symmetric (docs/ACAP.md §A2).
 ///
 /// From the SVD `T = U Σ Vᵀ`: `R = U Vᵀ`, `S = V Σ Vᵀ`. If `det(U Vᵀ) < 0` (an inverted
 /// 1-ring) the column of `U` belonging to the smallest singular value and that value are
@@ -32,7 +32,7 @@ pub fn polar_decomposition(t: &Matrix3<f64>) -> Option<(Matrix3<f64>, Matrix3<f6
     Some((r, 0.5 * (s + s.transpose())))
 }
 
-/// The principal logarithm of a rotation as (unit axis ω, angle θ ∈ [0, π]) (acap.md §2).
+/// The principal logarithm of a rotation as (unit axis ω, angle θ ∈ [0, π]) (docs/ACAP.md §A2).
 ///
 /// θ comes from `atan2(‖vee(R − Rᵀ)‖/2, (tr R − 1)/2)`, accurate over the whole range.
 /// For θ ≤ π/2 the axis is `vee(R − Rᵀ)` normalised; beyond, where `sin θ` loses
@@ -88,7 +88,7 @@ fn rodrigues_coefficients(theta2: f64) -> (f64, f64, f64, f64) {
     }
 }
 
-/// Rodrigues' formula `exp([r]_×) = I + A K + B K²`, `K = [r]_×` (acap.md §5; Tan et
+/// Rodrigues' formula `exp([r]_×) = I + A K + B K²`, `K = [r]_×` (docs/ACAP.md §A5; Tan et
 /// al. §IV-A, first step of ACAP⁻¹).
 pub fn rotation_exp(r: &Vector3<f64>) -> Matrix3<f64> {
     let (a, b, _, _) = rodrigues_coefficients(r.norm_squared());
