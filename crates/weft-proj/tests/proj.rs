@@ -542,8 +542,8 @@ fn quasistatic_recovers_from_stretched_and_inverted_predictions() {
     let before = strain_summary(layer.rest(), &inverted, 1.0).unwrap();
     for mu in [1.0, 0.1, 0.01] {
         let (sol, report) = layer.forward(&inverted, &ZeroLengthScaling::Global(mu)).unwrap();
-        assert!(sol.positions().iter().all(|x| x.is_finite()));
-        assert!(report.newton.residual <= report.newton.initial_residual);
+        // (Finiteness is part of `Ok`; what matters is that the equilibrium was reached.)
+        assert!(report.newton.residual < 1e-6 * report.newton.initial_residual);
         let after = strain_summary(layer.rest(), sol.positions(), 1.0).unwrap();
         // Stiff anchors (μ = 1) keep r* near the bad prediction; weak ones relax it.
         let factor = if mu < 0.05 { 0.1 } else { 0.6 };
