@@ -236,6 +236,94 @@ impl NewtonSolver {
         }
     }
 
+    /// The Newton direction `d = −H⁻¹ g` on free DOFs into `self.dir`, or steepest descent
+    /// if round-off makes `d` ascend (impossible for a PD matrix otherwise); returns the
+    /// slope `dᵀg`.
+    fn direction(&mut self, factor: &weft_linalg::CholeskyFactor, grad: &[f64]) -> f64 {
+        for (i, d) in self.dir.iter_mut().enumerate() {
+            *d = if self.fixed[i] { 0.0 } else { -grad[i] };
+        }
+        factor.solve_in_place(&mut self.dir);
+        let slope: f64 = self.dir.iter().zip(grad).map(|(d, g)| d * g).sum();
+        if slope < 0.0 {
+            return slope;
+        }
+        for (i, d) in self.dir.iter_mut().enumerate() {
+            *d = if self.fixed[i] { 0.0 } else { -grad[i] };
+        }
+        self.dir.iter().zip(grad).map(|(d, g)| d * g).sum()
+    }
+
+    /// Chooses the step along `self.dir` and leaves the new point in `self.trial`;
+    /// returns its energy and whether it is the full Newton step, or `None` if no
+    /// decrease is possible. `grad` is scratch (it holds the gradient at `x` again when
+    /// `None` is returned).
+    ///
+    /// First, backtracking Armijo on the energy, whose changes are summed term by term
+    /// (affine terms exactly) so that a body far from the origin does not drown them in
+    /// the round-off of `−f·x`. An Armijo step that is vanishingly short, or whose
+    /// decrease is below the energy's round-off, "passes" by noise and Newton stalls: near
+    /// the minimiser of a stiff problem energy comparisons carry no information. Then the
+    /// step is judged by the residual force instead (backtracking from the full step),
+    /// keeping the tiny Armijo step only if that fails too.
+    fn line_search(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &[f64],
+        grad: &mut [f64],
+        energy: f64,
+        residual: f64,
+        slope: f64,
+        settings: &NewtonSettings,
+        report: &mut NewtonReport,
+    ) -> Option<(f64, bool)> {
+        let n = x.len();
+        let mut alpha = 1.0;
+        let mut armijo = None;
+        for _ in 0..=settings.max_line_search {
+            for i in 0..n {
+                self.trial[i] = x[i] + alpha * self.dir[i];
+            }
+            let de = total_value_change(terms, x, &self.trial);
+            if de.is_finite() && de <= settings.armijo * alpha * slope {
+                armijo = Some(energy + de);
+                break;
+            }
+            alpha *= 0.5;
+            report.line_search_halvings += 1;
+        }
+        let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy_roundoff_scale(terms, x);
+        if let Some(e) = armijo {
+            if alpha >= MIN_TRUSTED_STEP && measurable {
+                return Some((e, alpha == 1.0));
+            }
+        }
+        let tiny = armijo.map(|e| (self.trial.clone(), e));
+        let mut beta = 1.0;
+        for _ in 0..12 {
+            for i in 0..n {
+                self.trial[i] = x[i] + beta * self.dir[i];
+            }
+            total_gradient(terms, &self.trial, grad);
+            let e = energy + total_value_change(terms, x, &self.trial);
+            let r = self.free_residual(grad);
+            if e.is_finite() && r.is_finite() && r < residual {
+                return Some((e, beta == 1.0));
+            }
+            beta *= 0.5;
+        }
+        match tiny {
+            Some((t, e)) => {
+                self.trial.copy_from_slice(&t);
+                Some((e, false))
+            }
+            None => {
+                total_gradient(terms, x, grad);
+                None
+            }
+        }
+    }
+
     /// Minimises `Σ terms` from `x` (updated in place). Fixed DOFs keep their values.
     pub fn minimize(
         &mut self,
@@ -305,74 +393,10 @@ impl NewtonSolver {
                         (f, true)
                     }
                 };
-                for i in 0..n {
-                    self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
-                }
-                factor.solve_in_place(&mut self.dir);
-                let slope: f64 = self.dir.iter().zip(&grad).map(|(d, g)| d * g).sum();
-                if !(slope < 0.0) {
-                    // Cannot happen for a PD matrix unless round-off dominates: fall back
-                    // to steepest descent on free DOFs.
-                    for i in 0..n {
-                        self.dir[i] = if self.fixed[i] { 0.0 } else { -grad[i] };
-                    }
-                }
-                let slope: f64 = self.dir.iter().zip(&grad).map(|(d, g)| d * g).sum();
-                let mut alpha = 1.0;
-                let mut accepted = false;
-                let mut trial_energy = energy;
-                // Energy changes are summed term by term (affine terms exactly), so a body
-                // far from the origin does not drown them in the round-off of `−f·x`.
-                for _ in 0..=settings.max_line_search {
-                    for i in 0..n {
-                        self.trial[i] = x[i] + alpha * self.dir[i];
-                    }
-                    let de = total_value_change(terms, x, &self.trial);
-                    if de.is_finite() && de <= settings.armijo * alpha * slope {
-                        trial_energy = energy + de;
-                        accepted = true;
-                        break;
-                    }
-                    alpha *= 0.5;
-                    report.line_search_halvings += 1;
-                }
-                // An Armijo step that is vanishingly short, or whose predicted decrease is
-                // below the round-off of E, "passes" by noise and Newton stalls: near the
-                // minimiser of a stiff problem energy comparisons carry no information.
-                // Then judge steps by the residual force instead (backtracking from the
-                // full Newton step), keeping the tiny Armijo step only if that fails too.
-                let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy_roundoff_scale(terms, x);
-                let mut full_step = accepted && alpha == 1.0;
-                if !accepted || alpha < MIN_TRUSTED_STEP || !measurable {
-                    let tiny = accepted.then(|| (self.trial.clone(), trial_energy));
-                    accepted = false;
-                    full_step = false;
-                    let mut beta = 1.0;
-                    for _ in 0..12 {
-                        for i in 0..n {
-                            self.trial[i] = x[i] + beta * self.dir[i];
-                        }
-                        total_gradient(terms, &self.trial, &mut grad);
-                        let e = energy + total_value_change(terms, x, &self.trial);
-                        let r = self.free_residual(&grad);
-                        if e.is_finite() && r.is_finite() && r < residual {
-                            trial_energy = e;
-                            accepted = true;
-                            full_step = beta == 1.0;
-                            break;
-                        }
-                        beta *= 0.5;
-                    }
-                    if !accepted {
-                        if let Some((t, e)) = tiny {
-                            self.trial.copy_from_slice(&t);
-                            trial_energy = e;
-                            accepted = true;
-                        } else {
-                            total_gradient(terms, x, &mut grad);
-                        }
-                    }
-                }
+                let slope = self.direction(&factor, &grad);
+                let choice = self.line_search(terms, x, &mut grad, energy, residual, slope, settings, &mut report);
+                let accepted = choice.is_some();
+                let (trial_energy, full_step) = choice.unwrap_or((energy, false));
                 if !accepted {
                     // No decrease is possible along a descent direction: the problem is
                     // broken or badly scaled. Stop with a clear error rather than loop.
