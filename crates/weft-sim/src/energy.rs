@@ -43,17 +43,6 @@ pub trait Energy: Send + Sync + std::fmt::Debug {
     }
 }
 
-/// `Σ_k E_k(to) − E_k(from)`, each term by its [`Energy::value_change`].
-pub fn total_value_change(terms: &[&dyn Energy], from: &[f64], to: &[f64]) -> f64 {
-    terms.iter().map(|t| t.value_change(from, to)).sum()
-}
-
-/// The magnitude below which energy differences are round-off: `Σ |E_k(x)|` over the
-/// terms that are not affine.
-pub fn energy_roundoff_scale(terms: &[&dyn Energy], x: &[f64]) -> f64 {
-    terms.iter().filter(|t| !t.is_affine()).map(|t| t.value(x).abs()).sum()
-}
-
 /// Checks every term against `num_dofs` (see [`Energy::num_dofs`]) and returns the vertex
 /// pairs of their Hessians.
 pub fn checked_pairs(num_dofs: usize, terms: &[&dyn Energy]) -> crate::Result<Vec<(usize, usize)>> {

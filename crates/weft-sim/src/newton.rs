@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
-use crate::energy::{Energy, energy_roundoff_scale, total_gradient, total_value, total_value_change};
+use crate::energy::{Energy, total_gradient, total_value};
 use crate::error::{Error, Result};
 
 /// Armijo steps shorter than this fraction of the Newton step are not trusted: steps are
@@ -278,13 +278,27 @@ impl NewtonSolver {
         report: &mut NewtonReport,
     ) -> Option<(f64, bool)> {
         let n = x.len();
+        // Each non-affine term's value at `x`, once: trial changes are then one evaluation
+        // per term, and their sum of magnitudes is the energy's round-off scale.
+        let at_x: Vec<Option<f64>> = terms.iter().map(|t| (!t.is_affine()).then(|| t.value(x))).collect();
+        let roundoff_scale: f64 = at_x.iter().flatten().map(|v| v.abs()).sum();
+        let change = |trial: &[f64]| -> f64 {
+            terms
+                .iter()
+                .zip(&at_x)
+                .map(|(t, v)| match v {
+                    Some(v) => t.value(trial) - v,
+                    None => t.value_change(x, trial),
+                })
+                .sum()
+        };
         let mut alpha = 1.0;
         let mut armijo = None;
         for _ in 0..=settings.max_line_search {
             for i in 0..n {
                 self.trial[i] = x[i] + alpha * self.dir[i];
             }
-            let de = total_value_change(terms, x, &self.trial);
+            let de = change(&self.trial);
             if de.is_finite() && de <= settings.armijo * alpha * slope {
                 armijo = Some(energy + de);
                 break;
@@ -292,7 +306,7 @@ impl NewtonSolver {
             alpha *= 0.5;
             report.line_search_halvings += 1;
         }
-        let measurable = -alpha * slope > 64.0 * f64::EPSILON * energy_roundoff_scale(terms, x);
+        let measurable = -alpha * slope > 64.0 * f64::EPSILON * roundoff_scale;
         if let Some(e) = armijo {
             if alpha >= MIN_TRUSTED_STEP && measurable {
                 return Some((e, alpha == 1.0));
@@ -305,7 +319,7 @@ impl NewtonSolver {
                 self.trial[i] = x[i] + beta * self.dir[i];
             }
             total_gradient(terms, &self.trial, grad);
-            let e = energy + total_value_change(terms, x, &self.trial);
+            let e = energy + change(&self.trial);
             let r = self.free_residual(grad);
             if e.is_finite() && r.is_finite() && r < residual {
                 return Some((e, beta == 1.0));
