@@ -426,7 +426,11 @@ pub fn generate_with(
         base_dir: None,
     };
     let scene_toml = base.scene.to_toml()?;
-    let rest_obj = rest_surface_obj(&Recorder::new(&base)?)?;
+    // weft-mesh's OBJ writer (atomic, full precision) writes the rest surface; it is
+    // deterministic, so rewriting it on a resume leaves the same bytes.
+    let recorder = Recorder::new(&base)?;
+    let surface = recorder.rest_surface().context("datasets record cloth and soft tissue only")?;
+    weft_mesh::io::write_obj(&out.join("rest.obj"), surface.positions(), surface.faces())?;
     let files = vec![
         FileEntry {
             path: "scene.toml".into(),
@@ -434,7 +438,7 @@ pub fn generate_with(
         },
         FileEntry {
             path: "rest.obj".into(),
-            sha256: sha256_hex(rest_obj.as_bytes()),
+            sha256: sha256_file(&out.join("rest.obj"))?,
         },
     ];
     let mut manifest = Manifest {
@@ -476,7 +480,6 @@ pub fn generate_with(
         }
     }
     write_text(&out.join("scene.toml"), &scene_toml)?;
-    write_text(&out.join("rest.obj"), &rest_obj)?;
     let todo: Vec<usize> = manifest
         .expected()
         .filter(|i| !manifest.sequences.iter().any(|s| s.index == *i))
@@ -557,26 +560,6 @@ pub fn generate_with(
         );
     }
     Ok(manifest)
-}
-
-/// The rest surface as OBJ text (the surface that `positions` index).
-fn rest_surface_obj(recorder: &Recorder) -> anyhow::Result<String> {
-    let (p, f) = match recorder {
-        Recorder::Cloth(s) => (s.mesh().positions().to_vec(), s.mesh().faces().to_vec()),
-        Recorder::Volume(s) => (
-            s.mesh().positions().to_vec(),
-            s.mesh().boundary_surface()?.mesh.faces().to_vec(),
-        ),
-        Recorder::SoftTissue(s) => (s.surface().mesh.positions().to_vec(), s.surface().mesh.faces().to_vec()),
-    };
-    let mut text = String::new();
-    for v in &p {
-        text.push_str(&format!("v {:?} {:?} {:?}\n", v.x, v.y, v.z));
-    }
-    for t in &f {
-        text.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
-    }
-    Ok(text)
 }
 
 pub fn read_manifest(path: &Path) -> anyhow::Result<Manifest> {

@@ -59,6 +59,17 @@ impl Recorder {
         })
     }
 
+    /// The surface that recorded positions index, at rest: all vertices of a cloth mesh,
+    /// the boundary surface of a soft-tissue body. Volumes record every node, which no
+    /// triangle surface indexes; they have none.
+    pub fn rest_surface(&self) -> Option<&weft_mesh::TriMesh> {
+        match self {
+            Self::Cloth(s) => Some(s.mesh()),
+            Self::Volume(_) => None,
+            Self::SoftTissue(s) => Some(&s.surface().mesh),
+        }
+    }
+
     /// Positions recorded per frame (flat, m): all vertices for cloth and volumes, the
     /// boundary surface `Y_t` for soft tissue.
     pub fn positions(&self) -> Vec<f64> {
@@ -175,11 +186,14 @@ impl Recorder {
             }
             Self::Volume(s) => {
                 let f = s.step()?;
-                let rest = s.mesh().flat_positions();
                 rec.arrays[0].2.extend_from_slice(&f.positions);
-                rec.arrays[1]
-                    .2
-                    .extend(f.positions.iter().zip(&rest).map(|(p, r)| p - r));
+                let rest = s.mesh().positions();
+                rec.arrays[1].2.extend(
+                    f.positions
+                        .chunks_exact(3)
+                        .zip(rest)
+                        .flat_map(|(p, r)| [p[0] - r.x, p[1] - r.y, p[2] - r.z]),
+                );
                 FrameStats {
                     frame,
                     label: None,
