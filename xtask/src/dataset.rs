@@ -429,7 +429,9 @@ pub fn generate_with(
     // weft-mesh's OBJ writer (atomic, full precision) writes the rest surface; it is
     // deterministic, so rewriting it on a resume leaves the same bytes.
     let recorder = Recorder::new(&base)?;
-    let surface = recorder.rest_surface().context("datasets record cloth and soft tissue only")?;
+    let surface = recorder
+        .rest_surface()
+        .context("datasets record cloth and soft tissue only")?;
     weft_mesh::io::write_obj(&out.join("rest.obj"), surface.positions(), surface.faces())?;
     let files = vec![
         FileEntry {

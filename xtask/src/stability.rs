@@ -374,17 +374,18 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
     let n = if quick { 7 } else { 13 };
     let stretches = [-1.0, 0.0, 0.1, 0.5, 1.0, 2.0];
     for &s in &stretches {
+        let row = if s < 0.0 {
+            "collapsed".to_string()
+        } else {
+            format!("stretch {} %", 100.0 * s)
+        };
         for &eps in &[0.0, 0.01, 0.1, 1.0] {
+            let row = row.clone();
             jobs.push(Box::new(move || {
-                let row = if s < 0.0 {
-                    "collapsed".to_string()
-                } else {
-                    format!("stretch {} %", 100.0 * s)
-                };
                 cell(
                     "socp",
                     format!("stretch-{}-eps-{}", tag(s), tag(eps)),
-                    (format!("{n}×{n} sheet"), row, format!("ε = {}", tag(eps))),
+                    (format!("{n}×{n} sheet"), row.clone(), format!("ε = {}", tag(eps))),
                     |f| {
                         let rest = weft_mesh::generators::sheet(n, 1.0)?;
                         let settings = SocpSettings {
@@ -409,16 +410,12 @@ pub fn run(args: StabilityArgs) -> anyhow::Result<()> {
             }));
         }
         for &mu in &[1e-4, 1e-2, 1.0, 1e2] {
+            let row = row.clone();
             jobs.push(Box::new(move || {
-                let row = if s < 0.0 {
-                    "collapsed".to_string()
-                } else {
-                    format!("stretch {} %", 100.0 * s)
-                };
                 cell(
                     "quasistatic",
                     format!("stretch-{}-mu-{}", tag(s), tag(mu)),
-                    (format!("{n}×{n} sheet"), row, format!("μ = {}", tag(mu))),
+                    (format!("{n}×{n} sheet"), row.clone(), format!("μ = {}", tag(mu))),
                     |f| {
                         let rest = weft_mesh::generators::sheet(n, 1.0)?;
                         let params = QuasistaticParams {

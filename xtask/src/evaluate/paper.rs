@@ -167,62 +167,59 @@ fn geng_timings(records: &[Record]) -> Table {
 
 /// Ours only (no paper measures it): every method's time and error per scene.
 fn speed_accuracy(o: &ExperimentOutput, metric: &str, label: &str) -> Vec<Table> {
-    let mut scenes: Vec<&str> = Vec::new();
-    for r in o.records.iter().filter(|r| r.metric == metric) {
-        if !scenes.contains(&r.scene.as_str()) {
-            scenes.push(&r.scene);
-        }
-    }
-    scenes
-        .into_iter()
-        .map(|scene| {
-            let rows = o
-                .records
-                .iter()
-                .filter(|r| r.scene == scene && r.metric == metric)
-                .map(|r| {
-                    let t = r.seconds_per_frame.unwrap_or(f64::NAN);
-                    let gt = r.ground_truth_seconds_per_frame.unwrap_or(f64::NAN);
-                    let max = o
-                        .records
-                        .iter()
-                        .find(|q| {
-                            q.scene == scene
-                                && q.method == r.method
-                                && (q.metric == "max-error" || q.metric == "max-dist")
-                        })
-                        .map_or("—".into(), |q| format!("{:.3e}", q.value));
-                    vec![
-                        r.method.clone(),
-                        format_ms(t),
-                        format!("{:.3}", t / gt),
-                        format!("{:.3e}", r.value),
-                        max,
-                    ]
-                })
-                .collect();
-            Table {
-                title: format!(
-                    "Speed–accuracy, {} / {scene} (ours; no paper measures this)",
-                    o.experiment
-                ),
-                caption: format!(
-                    "Time per frame (per example for projections) and its ratio to the ground truth's, timed in the \
-                     same run; {label} and the largest vertex error against the tight reference, in mm."
-                ),
-                header: [
-                    "Method",
-                    "Time",
-                    "Ratio to ground truth",
-                    &format!("{label} (mm)"),
-                    "Max error (mm)",
+    crate::report::distinct(
+        o.records
+            .iter()
+            .filter(|r| r.metric == metric)
+            .map(|r| r.scene.as_str()),
+    )
+    .into_iter()
+    .map(|scene| {
+        let rows = o
+            .records
+            .iter()
+            .filter(|r| r.scene == scene && r.metric == metric)
+            .map(|r| {
+                let t = r.seconds_per_frame.unwrap_or(f64::NAN);
+                let gt = r.ground_truth_seconds_per_frame.unwrap_or(f64::NAN);
+                let max = o
+                    .records
+                    .iter()
+                    .find(|q| {
+                        q.scene == scene && q.method == r.method && (q.metric == "max-error" || q.metric == "max-dist")
+                    })
+                    .map_or("—".into(), |q| format!("{:.3e}", q.value));
+                vec![
+                    r.method.clone(),
+                    format_ms(t),
+                    format!("{:.3}", t / gt),
+                    format!("{:.3e}", r.value),
+                    max,
                 ]
-                .map(String::from)
-                .to_vec(),
-                rows,
-            }
-        })
-        .collect()
+            })
+            .collect();
+        Table {
+            title: format!(
+                "Speed–accuracy, {} / {scene} (ours; no paper measures this)",
+                o.experiment
+            ),
+            caption: format!(
+                "Time per frame (per example for projections) and its ratio to the ground truth's, timed in the \
+                     same run; {label} and the largest vertex error against the tight reference, in mm."
+            ),
+            header: [
+                "Method",
+                "Time",
+                "Ratio to ground truth",
+                &format!("{label} (mm)"),
+                "Max error (mm)",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows,
+        }
+    })
+    .collect()
 }
 
 /// The papers' tables that later experiments fill, with the experiment that will.

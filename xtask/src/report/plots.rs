@@ -204,16 +204,8 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let mut methods: Vec<&str> = Vec::new();
-    let mut kinds: Vec<&str> = Vec::new();
-    for b in bars {
-        if !methods.contains(&b.method.as_str()) {
-            methods.push(&b.method);
-        }
-        if !kinds.contains(&b.kind.as_str()) {
-            kinds.push(&b.kind);
-        }
-    }
+    let methods = super::distinct(bars.iter().map(|b| b.method.as_str()));
+    let kinds = super::distinct(bars.iter().map(|b| b.kind.as_str()));
     let unit = bars.first().map_or("J", |b| b.unit.as_str());
     let xmax = bars.iter().map(|b| b.value.abs()).fold(0.0f64, f64::max).max(1e-30) * 1.4;
     let n = methods.len() as f64;
