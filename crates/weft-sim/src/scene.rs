@@ -176,8 +176,8 @@ pub struct Scene {
     /// turns it off). A flat sheet driven in its own plane is at an unstable equilibrium:
     /// without a deliberate perturbation, round-off (which differs between SIMD paths and
     /// factorisation orders) decides how it buckles, and frames differ between machines.
-    /// It is off by default because leaving the flat state makes Newton's first frame
-    /// on the 65 × 65 sheets take over 300 iterations (see `docs/CLOTH.md`).
+    /// It is off by default because, with it, Newton's first frame on the 65 × 65
+    /// `sheet-ms` does not converge within 300 iterations (see `docs/CLOTH.md`).
     #[serde(default = "default_symmetry_breaking")]
     pub symmetry_breaking: f64,
 }
