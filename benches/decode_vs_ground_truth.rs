@@ -8,10 +8,10 @@ use std::cell::RefCell;
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_acap::{AcapFeatures, AcapSettings, PoissonPseudoInverse};
 use weft_mesh::unflatten;
-use weft_sim::{ClothSimulation, Scene};
+use weft_sim::{ClothScene, ClothSimulation};
 
 fn decode_vs_ground_truth(c: &mut Criterion) {
-    let sim = RefCell::new(ClothSimulation::new(Scene::builtin("sheet-ms", false).unwrap(), None).unwrap());
+    let sim = RefCell::new(ClothSimulation::new(ClothScene::builtin("sheet-ms", false).unwrap(), None).unwrap());
     for _ in 0..5 {
         sim.borrow_mut().step().unwrap();
     }

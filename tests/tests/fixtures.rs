@@ -5,8 +5,8 @@
 
 use std::path::PathBuf;
 
-use weft_sim::scene::MeshSpec;
-use weft_sim::volume_scene::VolumeSolve;
+use weft_sim::scenes::cloth::MeshSpec;
+use weft_sim::scenes::volume::VolumeSolve;
 use weft_sim::{AnyScene, ClothSimulation, VolumeSimulation, load};
 
 fn fixture(rel: &str) -> PathBuf {

@@ -5,12 +5,12 @@
 
 use weft_acap::{AcapFeatures, AcapSettings, PoissonPseudoInverse, ReconstructionError};
 use weft_mesh::unflatten;
-use weft_sim::{ClothSimulation, Scene};
+use weft_sim::{ClothScene, ClothSimulation};
 
 fn round_trip(scene: &str, frames: usize, n: Option<usize>) -> (f64, f64) {
-    let mut s = Scene::builtin(scene, true).unwrap();
+    let mut s = ClothScene::builtin(scene, true).unwrap();
     if let Some(n) = n {
-        s.mesh = weft_sim::scene::MeshSpec::Sheet { n, size: 1.0 };
+        s.mesh = weft_sim::scenes::cloth::MeshSpec::Sheet { n, size: 1.0 };
     }
     let mut sim = ClothSimulation::new(s, None).unwrap();
     let features = AcapFeatures::new(sim.mesh(), AcapSettings::default()).unwrap();

@@ -26,7 +26,7 @@ pub fn dataset_names() -> Vec<&'static str> {
     weft_sim::BUILTIN_SCENES
         .iter()
         .copied()
-        .chain(std::iter::once(weft_sim::load::SOFT_TISSUE_SCENE))
+        .chain(std::iter::once(weft_sim::scenes::load::SOFT_TISSUE_SCENE))
         .collect()
 }
 
@@ -194,7 +194,7 @@ impl DatasetSpec {
             dataset_names().join(", ")
         );
         let quick = size == Size::Quick;
-        let scene = weft_sim::load::builtin(name, quick)?.context("built-in scene missing")?;
+        let scene = weft_sim::scenes::load::builtin(name, quick)?.context("built-in scene missing")?;
         let ball = name.starts_with("ball");
         let (sequences, frames, split) = match (name, size) {
             ("limb", Size::Quick) => (4, 8, Split::Sequences),

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 use serde::Serialize;
-use weft_sim::soft_tissue::SoftTissue;
+use weft_sim::scenes::soft_tissue::SoftTissue;
 use weft_sim::{AnyScene, ClothSimulation, LoadedScene, MotionLabel, VolumeSimulation};
 
 use crate::output::Array;

@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 use weft_sim::AnyScene;
-use weft_sim::volume_scene::LimbResolution;
+use weft_sim::scenes::volume::LimbResolution;
 
 use crate::output::{progress_bar, write_json, write_safetensors, write_text};
 use crate::record::{FrameStats, Recorder, Recording};

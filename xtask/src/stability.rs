@@ -17,8 +17,8 @@ use serde::Serialize;
 use weft_mesh::generators::{BeamParams, beam};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling};
 use weft_sim::energies::{ConstantForce, LameParameters, Material, TetElasticity};
-use weft_sim::scene::{ClothModel, MeshSpec, Motion, MotionSegment};
-use weft_sim::{ClothSimulation, Energy, ImplicitEuler, Scene};
+use weft_sim::scenes::cloth::{ClothModel, MeshSpec, Motion, MotionSegment};
+use weft_sim::{ClothScene, ClothSimulation, Energy, ImplicitEuler};
 
 use crate::evaluate::results::{Record, validate};
 use crate::output::{progress_bar, write_json, write_text};
@@ -164,7 +164,7 @@ fn cell(
 
 /// Cloth of either model: `steps` implicit-Euler steps of a violently grasped sheet.
 fn cloth_run(model: &str, n: usize, k: f64, dt: f64, steps: usize, tol_factor: f64) -> anyhow::Result<Run> {
-    let mut s = Scene::builtin(if model == "fem" { "sheet-fem" } else { "sheet-ms" }, false)?;
+    let mut s = ClothScene::builtin(if model == "fem" { "sheet-fem" } else { "sheet-ms" }, false)?;
     s.mesh = MeshSpec::Sheet { n, size: 1.0 };
     s.model = match model {
         "fem" => ClothModel::Fem {

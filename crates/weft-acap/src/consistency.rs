@@ -6,11 +6,13 @@
 //! "as-consistent-as-possible manner using mixed-integer programming"); weft replaces
 //! them with the solver-free algorithm of docs/ACAP.md §A3:
 //!
-//! 1. breadth-first propagation from a root per connected component;
+//! 1. propagation from a root per connected component, most reliable edge first;
 //! 2. axis sweeps: flip s_i whenever Σ_j sign(a_i·a_j) < 0 over its 1-ring (edges at
 //!    rotations within 0.02 rad of identity ignored) — each flip raises the objective;
 //! 3. angle sweeps: k_i ← the exact integer minimiser of Σ_j (φ_i − φ_j)² — the energy
-//!    never rises.
+//!    never rises;
+//! 4. a polish on the vector continuity energy Σ‖r_i − r_j‖² from three starts, keeping
+//!    the lowest.
 
 use nalgebra::Vector3;
 
@@ -108,22 +110,78 @@ pub(crate) fn consistent_logs(
 ) -> (Vec<Vector3<f64>>, ConsistencyReport) {
     let n = principal.len();
     let near_identity: Vec<bool> = principal.iter().map(|&(_, t)| t < IDENTITY_ANGLE).collect();
+    let mut is_root = vec![false; n];
+    roots.iter().for_each(|&r| is_root[r] = true);
+
+    let mut state = propagate(principal, rings, roots, reference, &near_identity);
+    let bfs_state = state.clone();
+    let ignored: Vec<bool> = principal.iter().map(|&(_, t)| t < AXIS_IGNORE_ANGLE).collect();
+    let bfs_axis_agreement = axis_agreement(&state, &ignored, rings);
+    let bfs_angle_energy = angle_energy(&state, rings);
+
+    let axis_flips = axis_sweeps(&mut state, rings, &ignored, &is_root);
+    let axis_agreement = axis_agreement(&state, &ignored, rings);
+    let pre_angle_sweep_energy = angle_energy(&state, rings);
+
+    let angle_changes = angle_sweeps(&mut state, rings, &is_root);
+    let angle_energy = angle_energy(&state, rings);
+
+    let bfs_logs = state_logs(&bfs_state, principal, &near_identity);
+    let bfs_log_jump_energy = jump_energy(&bfs_logs, rings);
+    let logs = best_polished(
+        [state_logs(&state, principal, &near_identity), bfs_logs],
+        principal,
+        &near_identity,
+        rings,
+        roots,
+        &is_root,
+    );
+    let (mut log_jump_energy, mut max_log_jump) = (0.0, 0.0f64);
+    for i in 0..n {
+        for &j in rings.neighbors(i) {
+            if j > i {
+                let d = (logs[i] - logs[j]).norm();
+                log_jump_energy += d * d;
+                max_log_jump = max_log_jump.max(d);
+            }
+        }
+    }
+    let report = ConsistencyReport {
+        bfs_axis_agreement,
+        axis_agreement,
+        bfs_angle_energy,
+        bfs_log_jump_energy,
+        pre_angle_sweep_energy,
+        angle_energy,
+        log_jump_energy,
+        max_log_jump,
+        axis_flips,
+        angle_changes,
+    };
+    (logs, report)
+}
+
+/// Step 1: propagation from each root (docs/ACAP.md §A3 step 1, with k by rounding). The
+/// release visits vertices breadth-first; weft visits them most-reliable-edge first
+/// (Prim's order on min(θ_i, θ_j)), so a region of large rotations is traversed through
+/// its own edges rather than through near-identity vertices whose axes are noise. Without
+/// this, a sheet folded by π split into two domains with r = ±π a (a 2π seam) that no
+/// local sweep can merge.
+fn propagate(
+    principal: &[(Vector3<f64>, f64)],
+    rings: &Rings,
+    roots: &[usize],
+    reference: Option<&[Vector3<f64>]>,
+    near_identity: &[bool],
+) -> Vec<State> {
+    let n = principal.len();
     let mut state: Vec<State> = principal
         .iter()
         .map(|&(a, t)| State { axis: a, base: t, k: 0 })
         .collect();
-    let mut is_root = vec![false; n];
-
-    // 1. Propagation from the root (docs/ACAP.md §A3 step 1, with k by rounding). The release
-    //    visits vertices breadth-first; weft visits them most-reliable-edge first (Prim's
-    //    order on min(θ_i, θ_j)), so a region of large rotations is traversed through its
-    //    own edges rather than through near-identity vertices whose axes are noise. Without
-    //    this, a sheet folded by π split into two domains with r = ±π a (a 2π seam) that
-    //    no local sweep can merge.
     let mut visited = vec![false; n];
     let mut heap = std::collections::BinaryHeap::new();
     for &root in roots {
-        is_root[root] = true;
         let (omega, theta) = principal[root];
         state[root] = match reference {
             Some(r) => closest_to(omega, theta, &r[root]),
@@ -157,29 +215,23 @@ pub(crate) fn consistent_logs(
             push_edges(&mut heap, j, principal, rings, &visited);
         }
     }
-    let bfs_state = state.clone();
+    state
+}
 
-    let ignored: Vec<bool> = principal.iter().map(|&(_, t)| t < AXIS_IGNORE_ANGLE).collect();
-    let bfs_axis_agreement = axis_agreement(&state, &ignored, rings);
-    let bfs_angle_energy = angle_energy(&state, rings);
+/// The exact integer minimiser k of Σ_j (base + 2πk − φ_j)² over vertex `i`'s neighbours.
+fn best_k(state: &[State], rings: &Rings, i: usize, base: f64) -> i64 {
+    let nb = rings.neighbors(i);
+    let mean = nb.iter().map(|&j| state[j].phi()).sum::<f64>() / nb.len().max(1) as f64;
+    ((mean - base) / TWO_PI).round() as i64
+}
 
-    // Best k for vertex i given its neighbours' current φ: the exact integer minimiser of
-    // Σ_j (base_i + 2πk − φ_j)².
-    let local_energy = |state: &[State], i: usize, base: f64, k: i64| -> f64 {
-        let phi = base + TWO_PI * k as f64;
-        rings.neighbors(i).iter().map(|&j| (phi - state[j].phi()).powi(2)).sum()
-    };
-    let best_k = |state: &[State], i: usize, base: f64| -> i64 {
-        let nb = rings.neighbors(i);
-        let mean = nb.iter().map(|&j| state[j].phi()).sum::<f64>() / nb.len().max(1) as f64;
-        ((mean - base) / TWO_PI).round() as i64
-    };
-
-    // 2. Axis sweeps.
-    let mut axis_flips = 0;
+/// Step 2: axis sweeps — flip a vertex's axis whenever most of its (non-ignored) 1-ring
+/// disagrees with it, taking the best k for the flipped base. Returns the flips made.
+fn axis_sweeps(state: &mut [State], rings: &Rings, ignored: &[bool], is_root: &[bool]) -> usize {
+    let mut flips = 0;
     for _ in 0..MAX_SWEEPS {
         let mut flipped = false;
-        for i in 0..n {
+        for i in 0..state.len() {
             if is_root[i] || ignored[i] {
                 continue;
             }
@@ -191,13 +243,13 @@ pub(crate) fn consistent_logs(
                 .sum();
             if local < 0 {
                 let base = TWO_PI - state[i].base;
-                let k = best_k(&state, i, base);
+                let k = best_k(state, rings, i, base);
                 state[i] = State {
                     axis: -state[i].axis,
                     base,
                     k,
                 };
-                axis_flips += 1;
+                flips += 1;
                 flipped = true;
             }
         }
@@ -205,25 +257,30 @@ pub(crate) fn consistent_logs(
             break;
         }
     }
-    let axis_agreement = axis_agreement(&state, &ignored, rings);
-    let pre_angle_sweep_energy = angle_energy(&state, rings);
+    flips
+}
 
-    // 3. Angle sweeps: coordinate descent on k, roots fixed.
-    let mut angle_changes = 0;
+/// Step 3: angle sweeps — coordinate descent on k with the roots fixed, accepting strict
+/// decreases of Σ_j (φ_i − φ_j)² only so ties cannot cycle. Returns the changes made.
+fn angle_sweeps(state: &mut [State], rings: &Rings, is_root: &[bool]) -> usize {
+    let local_energy = |state: &[State], i: usize, base: f64, k: i64| -> f64 {
+        let phi = base + TWO_PI * k as f64;
+        rings.neighbors(i).iter().map(|&j| (phi - state[j].phi()).powi(2)).sum()
+    };
+    let mut changes = 0;
     for _ in 0..MAX_SWEEPS {
         let mut changed = false;
-        for i in 0..n {
+        for i in 0..state.len() {
             if is_root[i] {
                 continue;
             }
             let s = state[i];
-            let k = best_k(&state, i, s.base);
+            let k = best_k(state, rings, i, s.base);
             if k != s.k {
-                let (old, new) = (local_energy(&state, i, s.base, s.k), local_energy(&state, i, s.base, k));
-                // Strict decrease only, so ties cannot cycle.
+                let (old, new) = (local_energy(state, i, s.base, s.k), local_energy(state, i, s.base, k));
                 if new < old * (1.0 - 1e-12) {
                     state[i].k = k;
-                    angle_changes += 1;
+                    changes += 1;
                     changed = true;
                 }
             }
@@ -232,56 +289,35 @@ pub(crate) fn consistent_logs(
             break;
         }
     }
-    let angle_energy = angle_energy(&state, rings);
+    changes
+}
 
-    // 4. Final vectors, polished on the true continuity energy Σ‖r_i − r_j‖² (each vertex
-    //    takes its best representative given its neighbours; strict decreases only). The
-    //    scalar energy of step 3 cannot see two neighbours with r = +π a and −π a, which
-    //    are the same rotation. The propagation's own result, polished the same way, is
-    //    kept instead if it is better, so the refinement never loses to step 1.
-    let polish_refined = polish(
-        state_logs(&state, principal, &near_identity),
-        principal,
-        &near_identity,
-        rings,
-        &is_root,
-    );
-    let polish_bfs = polish(
-        state_logs(&bfs_state, principal, &near_identity),
-        principal,
-        &near_identity,
-        rings,
-        &is_root,
-    );
-    let bfs_log_jump_energy = jump_energy(&state_logs(&bfs_state, principal, &near_identity), rings);
-    let logs = if jump_energy(&polish_refined, rings) <= jump_energy(&polish_bfs, rings) {
-        polish_refined
-    } else {
-        polish_bfs
-    };
-    let (mut log_jump_energy, mut max_log_jump) = (0.0, 0.0f64);
-    for i in 0..n {
-        for &j in rings.neighbors(i) {
-            if j > i {
-                let d = (logs[i] - logs[j]).norm();
-                log_jump_energy += d * d;
-                max_log_jump = max_log_jump.max(d);
-            }
-        }
+/// Step 4: the final vectors, polished on the true continuity energy Σ‖r_i − r_j‖² (each
+/// vertex takes its best representative given its neighbours). The scalar energy of
+/// step 3 cannot see two neighbours with r = +π a and −π a, which are the same rotation.
+/// Three starts are polished and the lowest energy kept: the given ones (the refined and
+/// the propagated state) and the principal logs (θ ≤ π everywhere) with the roots as
+/// seeded. On rough fields with neighbours over 2π/3 apart the propagation can commit a
+/// whole region to the wrong turn, which single-vertex moves cannot undo, while the
+/// principal logs are already close to the optimum there (docs/ACAP.md §A3).
+fn best_polished(
+    starts: [Vec<Vector3<f64>>; 2],
+    principal: &[(Vector3<f64>, f64)],
+    near_identity: &[bool],
+    rings: &Rings,
+    roots: &[usize],
+    is_root: &[bool],
+) -> Vec<Vector3<f64>> {
+    let mut principal_logs: Vec<Vector3<f64>> = principal.iter().map(|&(o, t)| o * t).collect();
+    for &root in roots {
+        principal_logs[root] = starts[0][root];
     }
-    let report = ConsistencyReport {
-        bfs_axis_agreement,
-        axis_agreement,
-        bfs_angle_energy,
-        bfs_log_jump_energy,
-        pre_angle_sweep_energy,
-        angle_energy,
-        log_jump_energy,
-        max_log_jump,
-        axis_flips,
-        angle_changes,
-    };
-    (logs, report)
+    let [refined, propagated] = starts;
+    [refined, propagated, principal_logs]
+        .into_iter()
+        .map(|start| polish(start, principal, near_identity, rings, is_root))
+        .min_by(|a, b| jump_energy(a, rings).total_cmp(&jump_energy(b, rings)))
+        .expect("three candidates")
 }
 
 fn sign(x: f64) -> i64 {

@@ -55,4 +55,6 @@ pub use quasistatic::{
     QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution, ZeroLengthScaling,
 };
 pub use rest::RestShape;
-pub use socp::{BackwardReport, ConicSolver, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution};
+pub use socp::{
+    BackwardReport, ConicSolver, HANDOVER_TOLERANCE, InextensibilityLayer, SocpReport, SocpSettings, SocpSolution,
+};

@@ -802,3 +802,84 @@ fn quasistatic_backward_matches_finite_differences_on_compressed_predictions() {
         assert!(err < 1e-4, "sx = {sx}, mu = {mu}: ∂E/∂r̂ vs FD relative error {err:e}");
     }
 }
+
+/// The stability grid's stretched prediction of a flat `sheet(n)`: scaled in-plane by
+/// `1 + sx`, `1 + sy`, with noise of a tenth of the edge length in every coordinate.
+fn stretched_flat(rest: &TriMesh, sx: f64, sy: f64, rng: &mut TestRng) -> Vec<f64> {
+    let h = 1.0 / ((rest.num_vertices() as f64).sqrt() - 1.0);
+    rest.positions()
+        .iter()
+        .flat_map(|p| {
+            [
+                (1.0 + sx) * p.x + rng.uniform(-0.05, 0.05) * h,
+                (1.0 + sy) * p.y + rng.uniform(-0.05, 0.05) * h,
+                rng.uniform(-0.05, 0.05) * h,
+            ]
+        })
+        .collect()
+}
+
+#[test]
+fn socp_heavy_stretch_is_polished_or_handed_over_tight() {
+    // Regression (hardening defect 7): under heavy stretch the active-set polish was
+    // rejected in every case below and the point returned at the IPM's default tolerance.
+    // Its active-set guess called every edge active (more rows than a nearly flat sheet
+    // has in-plane freedoms). Now the guess is scale-free, and the 30 %/10 % row is
+    // certified by the polish at every ε. From 60 % on, 92–100 % of the edges sit at their
+    // bound: the multipliers are not unique, no active-set Newton step is defined, and the
+    // point is handed over after the IPM has been run to HANDOVER_TOLERANCE — with a KKT
+    // residual at least 10× below the default-tolerance point's. Both are checked against
+    // Clarabel at 1e-11, an independent IPM; on these degenerate problems IPMs agree only
+    // to about 3e-5 (relative), which bounds what the comparison can show.
+    let rest = generators::sheet(13, 1.0).unwrap();
+    let mut rng = TestRng::new(31);
+    for (sx, sy) in [(0.3, 0.1), (0.6, 0.6), (1.0, 1.0), (2.0, 2.0)] {
+        let pred = stretched_flat(&rest, sx, sy, &mut rng);
+        for eps in [0.0, 0.01, 0.1] {
+            let case = format!("stretch {sx}/{sy}, ε = {eps}");
+            let with = |settings: SocpSettings| {
+                let layer = InextensibilityLayer::new(&rest, eps, settings).unwrap();
+                layer.forward(&pred).unwrap()
+            };
+            let (sol, report) = with(SocpSettings::default());
+            let (_, raw) = with(SocpSettings {
+                polish: false,
+                ..SocpSettings::default()
+            });
+            let (reference, _) = with(SocpSettings {
+                solver: ConicSolver::Clarabel,
+                tolerance: 1e-11,
+                polish: false,
+                ..SocpSettings::default()
+            });
+            assert!(report.max_violation <= 1e-9, "{case}: {report:?}");
+            let err = max_norm_rel_error(sol.positions(), reference.positions());
+            assert!(err < 5e-5, "{case}: {err:e} from Clarabel");
+            match report.polish_iterations {
+                Some(_) => assert!(report.kkt_residual < 1e-13, "{case}: polished {report:?}"),
+                None => {
+                    assert_eq!(report.handover_tolerance, Some(weft_proj::HANDOVER_TOLERANCE), "{case}");
+                    assert!(
+                        report.kkt_residual < 0.1 * raw.kkt_residual,
+                        "{case}: handed over at KKT {:e}, default-tolerance point {:e}",
+                        report.kkt_residual,
+                        raw.kkt_residual
+                    );
+                }
+            }
+            if sx < 0.5 {
+                assert!(
+                    report.polish_iterations.is_some(),
+                    "{case}: polish rejected ({report:?})"
+                );
+            } else {
+                assert!(
+                    report.active_constraints * 100 >= report.num_constraints * 92,
+                    "{case}: nearly every edge should be active ({}/{})",
+                    report.active_constraints,
+                    report.num_constraints
+                );
+            }
+        }
+    }
+}

@@ -5,13 +5,13 @@
 use std::cell::RefCell;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use weft_sim::{ClothSimulation, Scene};
+use weft_sim::{ClothScene, ClothSimulation};
 
 fn frames(c: &mut Criterion) {
     let mut group = c.benchmark_group("cloth-frame");
     group.sample_size(10);
     for name in ["sheet-ms", "sheet-fem", "ball-fem"] {
-        let sim = RefCell::new(ClothSimulation::new(Scene::builtin(name, false).unwrap(), None).unwrap());
+        let sim = RefCell::new(ClothSimulation::new(ClothScene::builtin(name, false).unwrap(), None).unwrap());
         // Leave the rest state first: the first frames start the motion.
         for _ in 0..3 {
             sim.borrow_mut().step().unwrap();

@@ -34,24 +34,19 @@ pub mod anchors;
 pub mod energies;
 pub mod energy;
 pub mod error;
-pub mod implicit_euler;
-pub mod load;
-pub mod newmark;
+pub mod integrators;
 pub mod newton;
-pub mod prefactorized;
-pub mod quasistatic;
 pub mod rng;
-pub mod scene;
-pub mod soft_tissue;
-pub mod volume_scene;
+pub mod scenes;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
-pub use implicit_euler::{ImplicitEuler, StepReport};
-pub use load::{AnyScene, LoadedScene, builtin_names, load};
-pub use newmark::{Newmark, NewmarkReport};
+pub use integrators::{
+    ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear, Quasistatic,
+    QuasistaticReport, RayleighDamping, StepReport,
+};
 pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
-pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};
-pub use quasistatic::{Quasistatic, QuasistaticReport};
-pub use scene::{BUILTIN_SCENES, ClothSimulation, Frame, MotionLabel, Scene};
-pub use volume_scene::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene, VolumeSimulation};
+pub use scenes::{
+    AnyScene, BUILTIN_SCENES, BUILTIN_VOLUME_SCENES, ClothScene, ClothSimulation, Frame, LoadedScene, MotionLabel,
+    SoftTissueScene, VolumeScene, VolumeSimulation, builtin_names, load,
+};

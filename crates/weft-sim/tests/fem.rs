@@ -753,7 +753,7 @@ fn quasistatic_load_stepping_reaches_large_deformation() {
 #[test]
 fn limb_sequences_pair_skinned_and_simulated_surfaces_deterministically() {
     use weft_mesh::limb::LimbParams;
-    use weft_sim::soft_tissue::{SoftTissueParams, simulate_soft_tissue};
+    use weft_sim::scenes::soft_tissue::{SoftTissueParams, simulate_soft_tissue};
     let params = SoftTissueParams {
         seed: 7,
         ..SoftTissueParams::default()

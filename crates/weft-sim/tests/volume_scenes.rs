@@ -1,7 +1,7 @@
 //! Volumetric and soft-tissue scenes: built-ins, user files, solve choices agreeing.
 
 use weft_mesh::generators;
-use weft_sim::volume_scene::{AnchorSpec, VolumeMeshSpec, VolumeSolve};
+use weft_sim::scenes::volume::{AnchorSpec, VolumeMeshSpec, VolumeSolve};
 use weft_sim::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene, VolumeSimulation};
 
 #[test]

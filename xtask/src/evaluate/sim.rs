@@ -23,9 +23,9 @@ use std::time::Instant;
 use anyhow::Context;
 use weft_mesh::limb::limb;
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
-use weft_sim::scene::MeshSpec;
-use weft_sim::volume_scene::{LimbResolution, SoftTissueScene, VolumeSolve};
-use weft_sim::{ClothSimulation, Energy, LinearSolve, PrefactorizedLinear, Scene, VolumeScene, VolumeSimulation};
+use weft_sim::scenes::cloth::MeshSpec;
+use weft_sim::scenes::volume::{LimbResolution, SoftTissueScene, VolumeSolve};
+use weft_sim::{ClothScene, ClothSimulation, Energy, LinearSolve, PrefactorizedLinear, VolumeScene, VolumeSimulation};
 
 use super::EvalContext;
 use super::results::{Curve, ExperimentOutput, RmsAccumulator, Timing};
@@ -94,7 +94,7 @@ impl Reference {
 }
 
 fn simulate_cloth(
-    scene: &Scene,
+    scene: &ClothScene,
     duration: f64,
     bar: &indicatif::ProgressBar,
 ) -> anyhow::Result<(ClothSimulation, Run)> {
@@ -150,10 +150,10 @@ fn cloth(
     frames: usize,
     resolutions: bool,
 ) -> anyhow::Result<()> {
-    let base = Scene::builtin(name, ctx.size == Size::Quick)?;
+    let base = ClothScene::builtin(name, ctx.size == Size::Quick)?;
     let dt0 = base.dt;
     let duration = frames as f64 * dt0;
-    let mut variants: Vec<(String, Scene)> = vec![("implicit-euler".into(), base.clone())];
+    let mut variants: Vec<(String, ClothScene)> = vec![("implicit-euler".into(), base.clone())];
     for (tag, tol) in [("1e-1", 1e-1), ("1e-2", 1e-2), ("1e-5", 1e-5)] {
         let mut s = base.clone();
         s.relative_tolerance = tol;
@@ -501,7 +501,7 @@ fn linear_timings(ctx: &EvalContext, out: &mut ExperimentOutput) -> anyhow::Resu
     let mut scene = SoftTissueScene::builtin(quick);
     scene.resolution = resolution;
     let full = {
-        let mut sim = weft_sim::soft_tissue::SoftTissue::new(limb(&resolution.params())?, scene.params)?;
+        let mut sim = weft_sim::scenes::soft_tissue::SoftTissue::new(limb(&resolution.params())?, scene.params)?;
         sim.step_frame()?.seconds
     };
     let bones = body.all_bone_nodes();

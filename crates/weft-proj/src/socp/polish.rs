@@ -35,20 +35,17 @@ impl InextensibilityLayer {
         (stationarity, complementarity)
     }
 
-    /// Whether the conic pair `(s_e, z_e)` is kept as a constraint row: `2 z⁰ > γ`, i.e.
-    /// eliminating it would add a stiffness `2z⁰/γ` above the mean weight `k̄ = 1`.
+    /// Whether the backward pass keeps the conic pair `(s_e, z_e)` as a constraint row:
+    /// `2 z⁰ > γ` (`γ = (s⁰² − ‖s¹‖²)/s⁰`), i.e. eliminating it would add a stiffness
+    /// `2z⁰/γ` above the mean weight `k̄ = 1`. Either choice is exact; this one keeps the
+    /// system well conditioned.
     pub(super) fn is_active(s: &[f64], z: &[f64]) -> bool {
-        Self::is_loaded_above(s, z, 1.0)
-    }
-
-    /// Whether `2 z⁰ > threshold · γ` (`γ = (s⁰² − ‖s¹‖²)/s⁰`) with `z⁰, s⁰ > 0`.
-    pub(super) fn is_loaded_above(s: &[f64], z: &[f64], threshold: f64) -> bool {
         let (s0, z0) = (s[0], z[0]);
         if !(z0 > 0.0 && s0 > 0.0) {
             return false;
         }
         let s1n = (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]).sqrt();
-        2.0 * z0 > threshold * ((s0 - s1n) * (s0 + s1n) / s0).max(0.0)
+        2.0 * z0 > ((s0 - s1n) * (s0 + s1n) / s0).max(0.0)
     }
 
     /// Polishes the interior-point solution: Newton's method on the KKT conditions of
@@ -67,22 +64,33 @@ impl InextensibilityLayer {
                 b[4 * e + 3] + delta[3 * va + 2] - delta[3 * vb + 2],
             )
         };
-        let mut active: Vec<bool> = (0..m)
-            .map(|e| Self::is_active(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4]))
-            .collect();
+        // The initial active set: edges whose relative multiplier exceeds their relative
+        // slack, `z⁰/max z⁰ > threshold · γ/s⁰`. Scale-free on purpose: the absolute test
+        // `2z⁰ > γ` of the backward pass compares a multiplier with the mean weight, and
+        // under heavy stretch (multipliers far above it) it called every edge active —
+        // more rows than a nearly flat sheet has in-plane freedoms, a singular system.
+        let z0_max = (0..m).map(|e| z[4 * e]).fold(0.0f64, f64::max);
+        let guess = |e: usize, threshold: f64| {
+            let (s0, z0) = (s[4 * e], z[4 * e]);
+            if !(z0 > 0.0 && s0 > 0.0) {
+                return false;
+            }
+            let s1n = (s[4 * e + 1].powi(2) + s[4 * e + 2].powi(2) + s[4 * e + 3].powi(2)).sqrt();
+            let gamma = ((s0 - s1n) * (s0 + s1n) / s0).max(0.0);
+            z0 / z0_max > threshold * gamma / s0
+        };
+        let mut active: Vec<bool> = (0..m).map(|e| guess(e, 1.0)).collect();
         let mut start: (Vec<f64>, Vec<f64>) = (x.to_vec(), (0..m).map(|e| z[4 * e]).collect());
         let mut total = 0;
         // A primal active-set loop around Newton: the interior-point solution's active
         // set is nearly always right; an edge that needs a negative multiplier is
         // released, one that ends up over its bound is added. Each round starts from the
         // previous round's Newton solution, which differs only near the changed edges.
-        // The rounds share one system over the candidate edges `20 z⁰ > γ` — ten times
-        // below the activity threshold — so that a round that adds an edge rarely needs a
+        // The rounds share one system over the candidate edges — ten times below the
+        // activity threshold — so that a round that adds an edge rarely needs a
         // new symbolic analysis (on the paper-size sheet every added edge was a candidate
         // when the polish started from relative gaps of 1e-3 and 1e-4).
-        let candidates: Vec<bool> = (0..m)
-            .map(|e| Self::is_loaded_above(&s[4 * e..4 * e + 4], &z[4 * e..4 * e + 4], 0.1))
-            .collect();
+        let candidates: Vec<bool> = (0..m).map(|e| guess(e, 0.1)).collect();
         let mut system = self.system_over(&candidates).ok()?;
         for _ in 0..6 {
             if !covers(&system, &active) {

@@ -12,7 +12,8 @@ use weft_mesh::{Topology, TriMesh, generators};
 use crate::energies::{ConstantForce, DihedralBending, Membrane, ObstaclePenalty, ObstacleShape, Springs};
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_positive};
-use crate::implicit_euler::{ImplicitEuler, StepReport};
+use crate::integrators::implicit_euler::{ImplicitEuler, StepReport};
+use crate::newton::HessianProjection;
 use crate::rng::SplitMix64;
 
 /// Where the cloth mesh comes from.
@@ -140,7 +141,7 @@ impl MotionLabel {
 /// A complete cloth scene.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Scene {
+pub struct ClothScene {
     pub name: String,
     #[serde(default)]
     pub description: String,
@@ -172,14 +173,18 @@ pub struct Scene {
     #[serde(default = "default_max_iter")]
     pub max_newton_iterations: usize,
     /// Amplitude of the seeded displacement along the vertex normals that breaks the
-    /// rest state's symmetry, as a fraction of the mean edge length (0, the default,
+    /// rest state's symmetry, as a fraction of the mean edge length (default 1e-6; 0
     /// turns it off). A flat sheet driven in its own plane is at an unstable equilibrium:
     /// without a deliberate perturbation, round-off (which differs between SIMD paths and
     /// factorisation orders) decides how it buckles, and frames differ between machines.
-    /// It is off by default because, with it, Newton's first frame on the 65 × 65
-    /// `sheet-ms` does not converge within 300 iterations (see `docs/CLOTH.md`).
     #[serde(default = "default_symmetry_breaking")]
     pub symmetry_breaking: f64,
+    /// How Newton makes an indefinite Hessian positive definite; omitted, the model's
+    /// default: `never` (exact Hessian, smallest diagonal shift) for mass-spring, whose
+    /// compressed springs wrinkle the sheet out of its symmetric state, and
+    /// `when-indefinite` (exact, else per-element projection) for FEM (docs/CLOTH.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hessian: Option<HessianProjection>,
 }
 
 fn one() -> f64 {
@@ -188,15 +193,14 @@ fn one() -> f64 {
 fn default_rel_tol() -> f64 {
     1e-3
 }
-/// Newton's iteration cap per step. Most frames take 3–10 iterations, but a frame in
-/// which cloth buckles passes near a symmetric saddle that Newton's projected steps leave
-/// slowly: the full-size mass-spring ball (`ball-ms`) needs 117 in its second frame, when
-/// the grasped pole first carries the ball's weight. The cap bounds a failing step's cost,
-/// it does not slow converging ones.
 fn default_symmetry_breaking() -> f64 {
-    0.0
+    1e-6
 }
 
+/// Newton's iteration cap per step. Most frames take 3–40 iterations, but the first
+/// frame of a flat mass-spring sheet leaves its symmetric saddle to wrinkle (180 on the
+/// 65 × 65 `sheet-ms`). The cap bounds a failing step's cost, it does not slow
+/// converging ones.
 fn default_max_iter() -> usize {
     300
 }
@@ -258,9 +262,9 @@ const FEM: ClothModel = ClothModel::Fem {
     bend_stiffness: 1e-4,
 };
 
-impl Scene {
+impl ClothScene {
     /// A built-in scene by name; `quick` shrinks the mesh and frame count for tests.
-    pub fn builtin(name: &str, quick: bool) -> Result<Scene> {
+    pub fn builtin(name: &str, quick: bool) -> Result<ClothScene> {
         let sheet = |n| {
             if quick {
                 MeshSpec::Sheet { n: 9, size: 1.0 }
@@ -283,7 +287,7 @@ impl Scene {
                 }
             }
         };
-        let base = |mesh, model: ClothModel, frames, grasp, program| Scene {
+        let base = |mesh, model: ClothModel, frames, grasp, program| ClothScene {
             name: name.to_string(),
             description: String::new(),
             mesh,
@@ -300,6 +304,7 @@ impl Scene {
             obstacle: None,
             relative_tolerance: default_rel_tol(),
             symmetry_breaking: default_symmetry_breaking(),
+            hessian: None,
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -353,8 +358,8 @@ impl Scene {
     }
 
     /// Parses a scene from TOML text.
-    pub fn from_toml(text: &str) -> Result<Scene> {
-        let s: Scene = toml::from_str(text).map_err(|e| Error::Scene(format!("invalid scene TOML: {e}")))?;
+    pub fn from_toml(text: &str) -> Result<ClothScene> {
+        let s: ClothScene = toml::from_str(text).map_err(|e| Error::Scene(format!("invalid scene TOML: {e}")))?;
         s.validate()?;
         Ok(s)
     }
@@ -456,7 +461,7 @@ pub struct Frame {
 /// A scene made runnable: mesh, energy terms, integrator and grasp program.
 #[derive(Debug)]
 pub struct ClothSimulation {
-    scene: Scene,
+    scene: ClothScene,
     mesh: TriMesh,
     grasp: Vec<usize>,
     grasp_rest: Vec<Vector3<f64>>,
@@ -467,7 +472,7 @@ pub struct ClothSimulation {
 }
 
 impl ClothSimulation {
-    pub fn new(scene: Scene, base_dir: Option<&std::path::Path>) -> Result<Self> {
+    pub fn new(scene: ClothScene, base_dir: Option<&std::path::Path>) -> Result<Self> {
         scene.validate()?;
         let mesh = scene.build_mesh(base_dir)?;
         let topo = Topology::new(&mesh);
@@ -552,7 +557,7 @@ impl ClothSimulation {
             fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
         }
         let grasp_rest = grasp.iter().map(|&v| mesh.positions()[v]).collect();
-        // The seeded symmetry-breaking displacement (see `Scene::symmetry_breaking`):
+        // The seeded symmetry-breaking displacement (see `ClothScene::symmetry_breaking`):
         // uniform in ±amplitude along each free vertex's normal, from its own SplitMix64
         // stream so it does not depend on the motion jitter drawn below.
         let mut x0 = mesh.flat_positions();
@@ -576,6 +581,10 @@ impl ClothSimulation {
         let max_weight = integrator.masses().iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
         integrator.settings.tolerance = scene.relative_tolerance * max_weight.max(1e-12);
         integrator.settings.max_iterations = scene.max_newton_iterations;
+        integrator.settings.projection = scene.hessian.unwrap_or(match scene.model {
+            ClothModel::MassSpring { .. } => HessianProjection::Never,
+            ClothModel::Fem { .. } => HessianProjection::WhenIndefinite,
+        });
         let mut rng = SplitMix64::new(scene.seed);
         let jitter = scene
             .program
@@ -593,7 +602,7 @@ impl ClothSimulation {
         })
     }
 
-    pub fn scene(&self) -> &Scene {
+    pub fn scene(&self) -> &ClothScene {
         &self.scene
     }
     pub fn mesh(&self) -> &TriMesh {

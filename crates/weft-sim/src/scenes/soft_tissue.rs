@@ -18,7 +18,7 @@ use weft_mesh::limb::{Limb, LimbParams, limb};
 use crate::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_nonnegative, check_positive};
-use crate::implicit_euler::{ImplicitEuler, StepReport};
+use crate::integrators::implicit_euler::{ImplicitEuler, StepReport};
 use crate::newton::{NewtonSettings, NewtonSolver};
 use crate::rng::SplitMix64;
 

@@ -6,8 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::scene::{BUILTIN_SCENES, Scene};
-use crate::volume_scene::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene};
+use crate::scenes::cloth::{BUILTIN_SCENES, ClothScene};
+use crate::scenes::volume::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene};
 
 /// Name of the built-in soft-tissue scene.
 pub const SOFT_TISSUE_SCENE: &str = "limb";
@@ -15,7 +15,7 @@ pub const SOFT_TISSUE_SCENE: &str = "limb";
 /// A scene of any kind.
 #[derive(Debug, Clone, PartialEq)]
 pub enum AnyScene {
-    Cloth(Scene),
+    Cloth(ClothScene),
     Volume(VolumeScene),
     SoftTissue(SoftTissueScene),
 }
@@ -65,7 +65,7 @@ impl AnyScene {
             .parse()
             .map_err(|e| Error::Scene(format!("invalid scene TOML: {e}")))?;
         match value.get("type").map(|t| t.as_str()) {
-            None => Ok(Self::Cloth(Scene::from_toml(text)?)),
+            None => Ok(Self::Cloth(ClothScene::from_toml(text)?)),
             Some(Some("volume")) => Ok(Self::Volume(VolumeScene::from_toml(text)?)),
             Some(Some("soft-tissue")) => Ok(Self::SoftTissue(SoftTissueScene::from_toml(text)?)),
             Some(other) => Err(Error::Scene(format!(
@@ -108,7 +108,7 @@ pub fn load(name_or_path: &str, quick: bool) -> Result<LoadedScene> {
 /// The built-in scene of that name, if there is one.
 pub fn builtin(name: &str, quick: bool) -> Result<Option<AnyScene>> {
     Ok(if BUILTIN_SCENES.contains(&name) {
-        Some(AnyScene::Cloth(Scene::builtin(name, quick)?))
+        Some(AnyScene::Cloth(ClothScene::builtin(name, quick)?))
     } else if BUILTIN_VOLUME_SCENES.contains(&name) {
         Some(AnyScene::Volume(VolumeScene::builtin(name, quick)?))
     } else if name == SOFT_TISSUE_SCENE {

@@ -11,11 +11,11 @@ use crate::anchors;
 use crate::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_positive};
-use crate::implicit_euler::ImplicitEuler;
-use crate::newmark::Newmark;
-use crate::prefactorized::{LinearSolve, PrefactorizedLinear, RayleighDamping};
-use crate::quasistatic::Quasistatic;
-use crate::soft_tissue::{SoftTissue, SoftTissueParams};
+use crate::integrators::implicit_euler::ImplicitEuler;
+use crate::integrators::newmark::Newmark;
+use crate::integrators::prefactorized::{LinearSolve, PrefactorizedLinear, RayleighDamping};
+use crate::integrators::quasistatic::Quasistatic;
+use crate::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
 
 /// The `type` key of a volumetric scene file (`type = "volume"`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -23,8 +23,8 @@ use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use crate::energies::ZeroLengthSprings;
 use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result, check_nonnegative, check_positive};
+use crate::integrators::prefactorized::{RayleighDamping, assemble_hessian, pattern_of};
 use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
-use crate::prefactorized::{RayleighDamping, assemble_hessian, pattern_of};
 
 /// What one Newmark step did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
