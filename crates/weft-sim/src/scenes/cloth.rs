@@ -617,6 +617,11 @@ impl ClothSimulation {
     pub fn integrator_mut(&mut self) -> &mut ImplicitEuler {
         &mut self.integrator
     }
+    /// The integrator alone, e.g. to evaluate `L_phys` of other frames (weft-nn's
+    /// physics-based loss) after the scene is no longer stepped.
+    pub fn into_integrator(self) -> ImplicitEuler {
+        self.integrator
+    }
     /// Frames simulated so far.
     pub fn frame_index(&self) -> usize {
         self.frame

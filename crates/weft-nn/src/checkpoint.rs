@@ -1,0 +1,106 @@
+//! Checkpoints: a model's parameters, its optimiser state and a JSON record of where
+//! training stands, in one directory, written atomically.
+//!
+//! Layout of a checkpoint directory:
+//! - `params.safetensors`: every parameter under its name (f32);
+//! - `optimizer.safetensors`: Adam's moments, `adam.m/<name>` and `adam.v/<name>`;
+//! - `state.json`: `{ "adam_steps": n, "extra": … }`, where `extra` is the caller's own
+//!   record (stage, epoch, configuration, data fingerprint).
+//!
+//! Each file is written under a temporary name and renamed into place, `state.json`
+//! last, so an interrupted save leaves the previous checkpoint readable.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use candle_core::Tensor;
+
+use crate::adam::Adam;
+use crate::error::{Error, Result};
+use crate::params::Params;
+
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct State {
+    adam_steps: u64,
+    extra: serde_json::Value,
+}
+
+fn io_error(path: &Path, source: std::io::Error) -> Error {
+    Error::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+fn write_safetensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<()> {
+    let tmp = path.with_extension("safetensors.partial");
+    let map: HashMap<String, Tensor> = tensors.into_iter().collect();
+    candle_core::safetensors::save(&map, &tmp)?;
+    std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
+}
+
+fn read_safetensors(path: &Path, params: &Params) -> Result<BTreeMap<String, Tensor>> {
+    if !path.exists() {
+        return Err(Error::Checkpoint {
+            path: path.display().to_string(),
+            reason: "file missing".into(),
+        });
+    }
+    Ok(candle_core::safetensors::load(path, params.device())
+        .map_err(|e| Error::Checkpoint {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?
+        .into_iter()
+        .collect())
+}
+
+/// Saves `params`, `adam` and the caller's `extra` record into `dir` (created if needed).
+pub fn save(dir: &Path, params: &Params, adam: &Adam, extra: &serde_json::Value) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
+    write_safetensors(&dir.join("params.safetensors"), params.tensors())?;
+    let (moments, adam_steps) = adam.state();
+    write_safetensors(&dir.join("optimizer.safetensors"), moments)?;
+    let state = State {
+        adam_steps,
+        extra: extra.clone(),
+    };
+    let path = dir.join("state.json");
+    let tmp = dir.join("state.json.partial");
+    let text = serde_json::to_string_pretty(&state).expect("plain data serialises");
+    std::fs::write(&tmp, text).map_err(|e| io_error(&tmp, e))?;
+    std::fs::rename(&tmp, &path).map_err(|e| io_error(&path, e))
+}
+
+/// Whether `dir` holds a complete checkpoint.
+pub fn exists(dir: &Path) -> bool {
+    ["params.safetensors", "optimizer.safetensors", "state.json"]
+        .iter()
+        .all(|f| dir.join(f).is_file())
+}
+
+/// Restores `params` and `adam` from `dir` and returns the caller's `extra` record. The
+/// checkpoint must hold exactly this model's parameters with the same shapes.
+pub fn load(dir: &Path, params: &Params, adam: &mut Adam) -> Result<serde_json::Value> {
+    let path = dir.join("state.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| io_error(&path, e))?;
+    let state: State = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    let p = dir.join("params.safetensors");
+    params.assign(&read_safetensors(&p, params)?, &p.display().to_string())?;
+    let o = dir.join("optimizer.safetensors");
+    adam.restore(
+        &read_safetensors(&o, params)?,
+        state.adam_steps,
+        &o.display().to_string(),
+    )?;
+    Ok(state.extra)
+}
+
+/// Restores only the parameters (inference).
+pub fn load_params(dir: &Path, params: &Params) -> Result<()> {
+    let p = dir.join("params.safetensors");
+    params.assign(&read_safetensors(&p, params)?, &p.display().to_string())
+}

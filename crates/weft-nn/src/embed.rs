@@ -1,0 +1,202 @@
+//! Tan et al.'s mesh embedding (§III-B) and latent simulator (§IV-B, Eq. 7).
+//!
+//! - Encoder `E = F ∘ C₁ ∘ … ∘ C_L` on normalised ACAP features `[B, V, 9]`: graph
+//!   convolutions that keep the 9 channels (as in the reference autoencoder), each
+//!   followed by a leaky ReLU, then a fully connected layer `F` to the latent code.
+//! - Decoder `D = C_Lᵀ ∘ … ∘ C₁ᵀ ∘ Fᵀ`, the mirror: a fully connected layer back to
+//!   `V × 9`, then graph convolutions; the last one ends in `tanh`, because the targets
+//!   are features normalised into [−0.95, 0.95] (docs/ACAP.md §A4).
+//! - Latent simulator: `MLP(z_{m−2}, z_{m−1}, q_m) = z_m` with leaky-ReLU hidden layers.
+//!
+//! The latent code itself has no activation: a leaky ReLU there would fold half of every
+//! axis onto a slope of 0.02, which the latent simulator would then have to invert.
+
+use std::sync::Arc;
+
+use candle_core::Tensor;
+
+use crate::error::{Error, Result};
+use crate::graph::MeshGraph;
+use crate::layers::{Dense, GraphConv, leaky_relu};
+use crate::params::Params;
+
+/// Channels of an ACAP feature.
+pub const FEATURE_CHANNELS: usize = 9;
+
+/// Shape of the autoencoder.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AutoencoderConfig {
+    /// Graph convolutions on each side, `L`.
+    pub conv_layers: usize,
+    /// Latent dimension (Tan et al.: 128).
+    pub latent: usize,
+}
+
+impl Default for AutoencoderConfig {
+    fn default() -> Self {
+        Self {
+            conv_layers: 2,
+            latent: 128,
+        }
+    }
+}
+
+/// The graph-CNN mesh autoencoder.
+#[derive(Debug, Clone)]
+pub struct MeshAutoencoder {
+    config: AutoencoderConfig,
+    num_vertices: usize,
+    encoder_convs: Vec<GraphConv>,
+    encoder_fc: Dense,
+    decoder_fc: Dense,
+    decoder_convs: Vec<GraphConv>,
+}
+
+impl MeshAutoencoder {
+    pub fn new(params: &mut Params, graph: Arc<MeshGraph>, config: AutoencoderConfig) -> Result<Self> {
+        if config.conv_layers == 0 || config.latent == 0 {
+            return Err(Error::InvalidParameter {
+                name: "autoencoder config",
+                value: format!("{config:?}"),
+                reason: "needs at least one graph convolution and a non-empty latent code",
+            });
+        }
+        let v = graph.num_vertices();
+        let c = FEATURE_CHANNELS;
+        let mut encoder_convs = Vec::new();
+        let mut decoder_convs = Vec::new();
+        for l in 0..config.conv_layers {
+            encoder_convs.push(GraphConv::new(
+                params,
+                &format!("encoder.conv{l}"),
+                graph.clone(),
+                c,
+                c,
+            )?);
+        }
+        let encoder_fc = Dense::new(params, "encoder.fc", v * c, config.latent)?;
+        let decoder_fc = Dense::new(params, "decoder.fc", config.latent, v * c)?;
+        for l in 0..config.conv_layers {
+            decoder_convs.push(GraphConv::new(
+                params,
+                &format!("decoder.conv{l}"),
+                graph.clone(),
+                c,
+                c,
+            )?);
+        }
+        Ok(Self {
+            config,
+            num_vertices: v,
+            encoder_convs,
+            encoder_fc,
+            decoder_fc,
+            decoder_convs,
+        })
+    }
+
+    pub fn config(&self) -> &AutoencoderConfig {
+        &self.config
+    }
+
+    /// `E`: `[B, V, 9]` normalised features → `[B, latent]`.
+    pub fn encode(&self, features: &Tensor) -> Result<Tensor> {
+        let (b, v, c) = features.dims3()?;
+        if v != self.num_vertices || c != FEATURE_CHANNELS {
+            return Err(Error::Shape {
+                what: "encoder input",
+                expected: format!("[B, {}, {FEATURE_CHANNELS}]", self.num_vertices),
+                got: format!("{:?}", features.dims()),
+            });
+        }
+        let mut h = features.clone();
+        for conv in &self.encoder_convs {
+            h = leaky_relu(&conv.forward(&h)?)?;
+        }
+        self.encoder_fc.forward(&h.reshape((b, v * c))?)
+    }
+
+    /// `D`: `[B, latent]` → `[B, V, 9]` normalised features in (−1, 1).
+    pub fn decode(&self, z: &Tensor) -> Result<Tensor> {
+        let (b, latent) = z.dims2()?;
+        if latent != self.config.latent {
+            return Err(Error::Shape {
+                what: "decoder input",
+                expected: format!("[B, {}]", self.config.latent),
+                got: format!("{:?}", z.dims()),
+            });
+        }
+        let mut h = leaky_relu(&self.decoder_fc.forward(z)?)?.reshape((b, self.num_vertices, FEATURE_CHANNELS))?;
+        let last = self.decoder_convs.len() - 1;
+        for (l, conv) in self.decoder_convs.iter().enumerate() {
+            let y = conv.forward(&h)?;
+            h = if l == last { y.tanh()? } else { leaky_relu(&y)? };
+        }
+        Ok(h)
+    }
+}
+
+/// Shape of the latent simulator.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LatentSimulatorConfig {
+    pub latent: usize,
+    /// Scalars of the control `q_m` (3 per grasped vertex).
+    pub controls: usize,
+    pub hidden: Vec<usize>,
+}
+
+/// `MLP(z_{m−2}, z_{m−1}, q_m) = z_m` (Tan et al. Eq. 7).
+#[derive(Debug, Clone)]
+pub struct LatentSimulator {
+    config: LatentSimulatorConfig,
+    layers: Vec<Dense>,
+}
+
+impl LatentSimulator {
+    pub fn new(params: &mut Params, config: LatentSimulatorConfig) -> Result<Self> {
+        if config.latent == 0 || config.hidden.contains(&0) {
+            return Err(Error::InvalidParameter {
+                name: "latent simulator config",
+                value: format!("{config:?}"),
+                reason: "every layer needs at least one unit",
+            });
+        }
+        let mut widths = vec![2 * config.latent + config.controls];
+        widths.extend(&config.hidden);
+        widths.push(config.latent);
+        let layers = widths
+            .windows(2)
+            .enumerate()
+            .map(|(l, w)| Dense::new(params, &format!("latent_sim.fc{l}"), w[0], w[1]))
+            .collect::<Result<_>>()?;
+        Ok(Self { config, layers })
+    }
+
+    pub fn config(&self) -> &LatentSimulatorConfig {
+        &self.config
+    }
+
+    /// `z_m` from `z_{m−2}`, `z_{m−1}` (`[B, latent]`) and `q_m` (`[B, controls]`).
+    pub fn step(&self, z2: &Tensor, z1: &Tensor, q: &Tensor) -> Result<Tensor> {
+        let mut h = Tensor::cat(&[z2, z1, q], 1)?;
+        let last = self.layers.len() - 1;
+        for (l, layer) in self.layers.iter().enumerate() {
+            let y = layer.forward(&h)?;
+            h = if l == last { y } else { leaky_relu(&y)? };
+        }
+        Ok(h)
+    }
+
+    /// A roll-out of `controls.len()` frames from `z1`, `z2`: each predicted code feeds
+    /// the next step (Tan et al. §V-B). Returns `[B, N, latent]`.
+    pub fn rollout(&self, z1: &Tensor, z2: &Tensor, controls: &[Tensor]) -> Result<Tensor> {
+        let (mut a, mut b) = (z1.clone(), z2.clone());
+        let mut out = Vec::with_capacity(controls.len());
+        for q in controls {
+            let z = self.step(&a, &b, q)?;
+            out.push(z.clone());
+            (a, b) = (b, z);
+        }
+        Ok(Tensor::stack(&out, 1)?)
+    }
+}

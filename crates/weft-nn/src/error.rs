@@ -1,0 +1,44 @@
+//! The error type of weft-nn.
+
+/// Everything that can go wrong in weft-nn, by cause.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A tensor operation failed (shape mismatch inside candle, unsupported dtype, …).
+    #[error("tensor operation failed: {0}")]
+    Candle(#[from] candle_core::Error),
+    /// ACAP⁻¹ or its vector–Jacobian product failed.
+    #[error(transparent)]
+    Acap(#[from] weft_acap::Error),
+    /// The physics (L_phys and its gradient) failed.
+    #[error(transparent)]
+    Sim(#[from] weft_sim::Error),
+    /// An input has the wrong shape for what it feeds.
+    #[error("{what}: expected shape {expected}, got {got}")]
+    Shape {
+        what: &'static str,
+        expected: String,
+        got: String,
+    },
+    /// A value crossing from the network into the physics (or back) is NaN or infinite.
+    #[error("{what} has a non-finite entry at flat index {index}")]
+    NonFinite { what: &'static str, index: usize },
+    /// A configuration value is out of its range.
+    #[error("invalid {name} = {value}: {reason}")]
+    InvalidParameter {
+        name: &'static str,
+        value: String,
+        reason: &'static str,
+    },
+    /// A checkpoint is missing a tensor, has one of the wrong shape, or does not belong to
+    /// this model.
+    #[error("checkpoint {path}: {reason}")]
+    Checkpoint { path: String, reason: String },
+    #[error("I/O error on {path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

@@ -1,0 +1,49 @@
+//! Neural models of weft, on candle — the only crate of the workspace that touches it.
+//!
+//! What is here:
+//! - [`graph`], [`layers`]: a mesh's 1-ring graph as tensors and Tan et al.'s graph
+//!   convolution `M x_i + M_N · mean_{j∈N¹(i)} x_j + b`, a few large tensor operations per
+//!   layer, with weights independent of the vertex count;
+//! - [`embed`]: Tan et al.'s graph-CNN mesh autoencoder and latent simulator (Eq. 7);
+//! - [`ops`]: the physics as custom ops with hand-written backward passes — ACAP⁻¹ through
+//!   weft-acap's pre-factorised Poisson solve and its vector–Jacobian product, and
+//!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
+//!   frames stopped (Eq. 9–10);
+//! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
+//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), and the one
+//!   f32 ↔ f64 boundary ([`convert`]).
+//!
+//! What is not here: no physics or geometry of its own (every formula of the simulation
+//! lives in weft-sim, weft-acap or weft-proj and is called, never re-derived in
+//! tensors), no file formats beyond checkpoints, no command line (that is xtask's).
+//!
+//! Precision: networks run in f32; everything that crosses into the physics is converted
+//! to f64 and checked for NaN at that boundary.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use candle_core::{Device, Tensor};
+//! use weft_nn::{embed::{AutoencoderConfig, MeshAutoencoder}, graph::MeshGraph, params::Params};
+//! let sheet = weft_mesh::generators::sheet(5, 1.0)?;
+//! let graph = Arc::new(MeshGraph::new(&sheet, &Device::Cpu)?);
+//! let mut params = Params::new(&Device::Cpu, 42);
+//! let config = AutoencoderConfig { conv_layers: 1, latent: 8 };
+//! let model = MeshAutoencoder::new(&mut params, graph, config)?;
+//! let features = Tensor::zeros((2, 25, 9), candle_core::DType::F32, &Device::Cpu)?;
+//! let z = model.encode(&features)?;
+//! assert_eq!(z.dims(), &[2, 8]);
+//! assert_eq!(model.decode(&z)?.dims(), &[2, 25, 9]);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod adam;
+pub mod checkpoint;
+pub mod convert;
+pub mod embed;
+pub mod error;
+pub mod graph;
+pub mod layers;
+pub mod ops;
+pub mod params;
+
+pub use error::{Error, Result};

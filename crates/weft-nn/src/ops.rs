@@ -1,0 +1,221 @@
+//! The physics as candle custom ops: ACAP⁻¹ (Tan et al. §IV-A, Eq. 6) and L_phys (Eq. 4)
+//! with hand-written backward passes that call weft-acap's vector–Jacobian product and
+//! weft-sim's gradient. Nothing of either is reimplemented in tensors; each op converts
+//! f32 ↔ f64 at its boundary (through [`crate::convert`]) and runs the f64 code, in
+//! parallel over the batch.
+
+use std::sync::Arc;
+
+use candle_core::{CpuStorage, CustomOp1, CustomOp3, Layout, Shape, Tensor};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use weft_acap::{Feature, FeatureNormalization, PoissonPseudoInverse};
+use weft_sim::ImplicitEuler;
+
+use crate::convert;
+
+fn op_error(e: impl std::fmt::Display) -> candle_core::Error {
+    candle_core::Error::Msg(e.to_string())
+}
+
+/// The contiguous f32 slice of a storage, or an error naming the op.
+fn f32_slice<'a>(op: &str, s: &'a CpuStorage, l: &Layout) -> candle_core::Result<&'a [f32]> {
+    let all = s
+        .as_slice::<f32>()
+        .map_err(|_| op_error(format!("{op}: expects f32 input")))?;
+    match l.contiguous_offsets() {
+        Some((a, b)) => Ok(&all[a..b]),
+        None => Err(op_error(format!("{op}: expects a contiguous input"))),
+    }
+}
+
+/// ACAP⁻¹ ∘ denormalisation on a batch: `[B, V, 9]` normalised features → `[B, V, 3]`
+/// positions (metres), each frame with its own pinned (grasped) vertex positions.
+#[derive(Debug, Clone)]
+pub struct AcapInverse {
+    inverse: Arc<PoissonPseudoInverse>,
+    normalization: FeatureNormalization,
+    pins: Arc<Vec<Vec<Vector3<f64>>>>,
+}
+
+impl AcapInverse {
+    /// `pins[b]` are frame `b`'s positions of `inverse`'s pinned vertices.
+    pub fn new(
+        inverse: Arc<PoissonPseudoInverse>,
+        normalization: FeatureNormalization,
+        pins: Vec<Vec<Vector3<f64>>>,
+    ) -> Self {
+        Self {
+            inverse,
+            normalization,
+            pins: Arc::new(pins),
+        }
+    }
+
+    /// Applies the op to `features` (`[B, V, 9]`, f32, normalised).
+    pub fn apply(&self, features: &Tensor) -> crate::Result<Tensor> {
+        let (b, v, c) = features.dims3()?;
+        if c != 9 || v != self.inverse.num_vertices() || b != self.pins.len() {
+            return Err(crate::Error::Shape {
+                what: "ACAP⁻¹ input",
+                expected: format!("[{}, {}, 9]", self.pins.len(), self.inverse.num_vertices()),
+                got: format!("{:?}", features.dims()),
+            });
+        }
+        Ok(features.contiguous()?.apply_op1(self.clone())?)
+    }
+
+    fn frames(&self, x: &[f32], v: usize) -> candle_core::Result<Vec<Vec<Feature>>> {
+        let x = convert::f32_to_f64("ACAP⁻¹ input features", x).map_err(op_error)?;
+        Ok(x.chunks_exact(9 * v)
+            .map(|frame| {
+                frame
+                    .chunks_exact(9)
+                    .map(|f| self.normalization.denormalize(&std::array::from_fn(|d| f[d])))
+                    .collect()
+            })
+            .collect())
+    }
+}
+
+impl CustomOp1 for AcapInverse {
+    fn name(&self) -> &'static str {
+        "acap-inverse"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+        let (b, v, _) = l.shape().dims3()?;
+        let frames = self.frames(f32_slice(self.name(), s, l)?, v)?;
+        let decoded: Vec<Vec<Vector3<f64>>> = frames
+            .par_iter()
+            .zip(self.pins.par_iter())
+            .map(|(f, pins)| self.inverse.decode(f, pins))
+            .collect::<Result<_, _>>()
+            .map_err(op_error)?;
+        let flat: Vec<f64> = decoded.iter().flatten().flat_map(|p| [p.x, p.y, p.z]).collect();
+        let out = convert::f64_to_f32("ACAP⁻¹ positions", &flat).map_err(op_error)?;
+        Ok((CpuStorage::F32(out), Shape::from((b, v, 3))))
+    }
+
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let (b, v, _) = arg.dims3()?;
+        let x: Vec<f32> = arg.flatten_all()?.to_vec1()?;
+        let frames = self.frames(&x, v)?;
+        let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
+        let g = convert::f32_to_points("ACAP⁻¹ output gradient", &g).map_err(op_error)?;
+        let scale = self.normalization.scale();
+        let grads: Vec<Vec<Feature>> = frames
+            .par_iter()
+            .zip(g.par_chunks(v))
+            .map(|(f, gp)| self.inverse.vjp(f, gp).map(|d| d.features))
+            .collect::<Result<_, _>>()
+            .map_err(op_error)?;
+        // Chain through the denormalisation: ∂f/∂n = scale, per dimension.
+        let flat: Vec<f64> = grads
+            .iter()
+            .flatten()
+            .flat_map(|gf| (0..9).map(move |d| gf[d] * scale[d]))
+            .collect();
+        let out = convert::f64_to_f32("ACAP⁻¹ feature gradient", &flat).map_err(op_error)?;
+        Ok(Some(Tensor::from_vec(out, (b, v, 9), arg.device())?))
+    }
+}
+
+/// Tan et al.'s `L_phys(p_{m−2}, p_{m−1}, p_m, q_m)` (Eq. 4) per frame of a batch, from
+/// three `[B, V, 3]` position tensors (metres) to `[B]` (joules). The grasped DOFs of
+/// `p_m` carry `q_m`.
+///
+/// The backward pass returns ∂L_phys/∂p_m and **no gradient for p_{m−2} and p_{m−1}**:
+/// Tan et al. stop them (Eq. 9–10), so that training drives each frame to its own
+/// minimiser instead of the minimiser of the summed losses.
+#[derive(Debug, Clone)]
+pub struct LPhys {
+    integrator: Arc<ImplicitEuler>,
+}
+
+impl LPhys {
+    /// `integrator` supplies the masses, Δt, the potential terms and the grasp mask.
+    pub fn new(integrator: Arc<ImplicitEuler>) -> Self {
+        Self { integrator }
+    }
+
+    pub fn apply(&self, prev2: &Tensor, prev1: &Tensor, p: &Tensor) -> crate::Result<Tensor> {
+        let n = self.integrator.positions().len();
+        for (what, t) in [("p_{m-2}", prev2), ("p_{m-1}", prev1), ("p_m", p)] {
+            let (_, v, c) = t.dims3()?;
+            if 3 * v != n || c != 3 || t.dims() != p.dims() {
+                return Err(crate::Error::Shape {
+                    what,
+                    expected: format!("[B, {}, 3], the same for all three", n / 3),
+                    got: format!("{:?}", t.dims()),
+                });
+            }
+        }
+        Ok(prev2
+            .contiguous()?
+            .apply_op3(&prev1.contiguous()?, &p.contiguous()?, self.clone())?)
+    }
+
+    fn split(&self, what: &'static str, x: &[f32]) -> candle_core::Result<Vec<Vec<f64>>> {
+        let n = self.integrator.positions().len();
+        let x = convert::f32_to_f64(what, x).map_err(op_error)?;
+        Ok(x.chunks_exact(n).map(<[f64]>::to_vec).collect())
+    }
+}
+
+impl CustomOp3 for LPhys {
+    fn name(&self) -> &'static str {
+        "l-phys"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let b = l3.shape().dims3()?.0;
+        let prev2 = self.split("p_{m-2}", f32_slice(self.name(), s1, l1)?)?;
+        let prev1 = self.split("p_{m-1}", f32_slice(self.name(), s2, l2)?)?;
+        let p = self.split("p_m", f32_slice(self.name(), s3, l3)?)?;
+        let values: Vec<f64> = (0..b)
+            .into_par_iter()
+            .map(|k| self.integrator.l_phys(&prev2[k], &prev1[k], &p[k]))
+            .collect::<Result<_, _>>()
+            .map_err(op_error)?;
+        let out = convert::f64_to_f32("L_phys", &values).map_err(op_error)?;
+        Ok((CpuStorage::F32(out), Shape::from(b)))
+    }
+
+    fn bwd(
+        &self,
+        arg1: &Tensor,
+        arg2: &Tensor,
+        arg3: &Tensor,
+        _res: &Tensor,
+        grad_res: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let prev2 = self.split("p_{m-2}", &arg1.flatten_all()?.to_vec1()?)?;
+        let prev1 = self.split("p_{m-1}", &arg2.flatten_all()?.to_vec1()?)?;
+        let p = self.split("p_m", &arg3.flatten_all()?.to_vec1()?)?;
+        let scale: Vec<f32> = grad_res.to_vec1()?;
+        let n = self.integrator.positions().len();
+        let grads: Vec<Vec<f64>> = (0..p.len())
+            .into_par_iter()
+            .map(|k| {
+                let mut g = vec![0.0; n];
+                self.integrator
+                    .l_phys_gradient(&prev2[k], &prev1[k], &p[k], &mut g)
+                    .map(|_| g.iter().map(|x| x * scale[k] as f64).collect())
+            })
+            .collect::<Result<_, _>>()
+            .map_err(op_error)?;
+        let flat: Vec<f64> = grads.into_iter().flatten().collect();
+        let out = convert::f64_to_f32("∂L_phys/∂p_m", &flat).map_err(op_error)?;
+        // Eq. 9–10: no gradient flows into p_{m−2} or p_{m−1}.
+        Ok((None, None, Some(Tensor::from_vec(out, arg3.dims(), arg3.device())?)))
+    }
+}

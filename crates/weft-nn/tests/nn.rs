@@ -1,0 +1,374 @@
+//! Integration tests of weft-nn: layers against per-vertex loops, custom ops against
+//! finite differences of the f64 physics, the stop-gradient of Eq. 9–10, checkpoint round
+//! trips, and a training smoke test on the quick sheet.
+
+use std::sync::Arc;
+
+use candle_core::{DType, Device, Tensor, Var};
+use nalgebra::Vector3;
+use weft_acap::{AcapFeatures, AcapSettings, FeatureNormalization, PoissonPseudoInverse};
+use weft_nn::adam::{Adam, AdamSettings};
+use weft_nn::embed::{AutoencoderConfig, MeshAutoencoder};
+use weft_nn::graph::MeshGraph;
+use weft_nn::layers::GraphConv;
+use weft_nn::ops::{AcapInverse, LPhys};
+use weft_nn::params::Params;
+use weft_nn::{Error, checkpoint};
+use weft_sim::{ClothScene, ClothSimulation};
+use weft_testkit::{TestRng, max_norm_rel_error};
+
+fn cpu() -> Device {
+    Device::Cpu
+}
+
+fn to_vec3(t: &Tensor) -> Vec<f32> {
+    t.flatten_all().unwrap().to_vec1().unwrap()
+}
+
+#[test]
+fn graph_conv_matches_a_per_vertex_loop_and_its_weights_do_not_depend_on_the_mesh() {
+    let small = weft_mesh::generators::sheet(4, 1.0).unwrap();
+    let big = weft_mesh::generators::sheet(7, 1.0).unwrap();
+    let mut counts = Vec::new();
+    for mesh in [&small, &big] {
+        let graph = Arc::new(MeshGraph::new(mesh, &cpu()).unwrap());
+        let mut params = Params::new(&cpu(), 5);
+        let conv = GraphConv::new(&mut params, "c", graph, 3, 2).unwrap();
+        counts.push(params.num_parameters());
+        let v = mesh.num_vertices();
+        let mut rng = TestRng::new(1);
+        let x: Vec<f32> = (0..2 * v * 3).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+        let xt = Tensor::from_vec(x.clone(), (2, v, 3), &cpu()).unwrap();
+        let y = to_vec3(&conv.forward(&xt).unwrap());
+        let m = to_vec3(params.vars()["c.m"].as_tensor());
+        let mn = to_vec3(params.vars()["c.m_n"].as_tensor());
+        let topo = weft_mesh::Topology::new(mesh);
+        for b in 0..2 {
+            for i in 0..v {
+                let nb = topo.one_ring.neighbors(i);
+                for o in 0..2 {
+                    let mut expect = 0.0f64;
+                    for c in 0..3 {
+                        let mean = nb.iter().map(|&j| x[(b * v + j) * 3 + c] as f64).sum::<f64>() / nb.len() as f64;
+                        expect += m[c * 2 + o] as f64 * x[(b * v + i) * 3 + c] as f64 + mn[c * 2 + o] as f64 * mean;
+                    }
+                    let got = y[(b * v + i) * 2 + o] as f64;
+                    assert!(
+                        (got - expect).abs() < 1e-5,
+                        "b {b} vertex {i} out {o}: {got} vs {expect}"
+                    );
+                }
+            }
+        }
+    }
+    assert_eq!(
+        counts[0], counts[1],
+        "parameter count must not depend on the vertex count"
+    );
+    assert_eq!(counts[0], 3 * 2 + 3 * 2 + 2);
+}
+
+/// A 5 × 5 sheet, its extractor, the pseudo-inverse pinned at two corners, a per-block
+/// normalisation, and normalised features of three deformed frames.
+struct AcapCase {
+    inverse: Arc<PoissonPseudoInverse>,
+    normalization: FeatureNormalization,
+    features: Vec<f32>,
+    pins: Vec<Vec<Vector3<f64>>>,
+    v: usize,
+}
+
+fn acap_case() -> AcapCase {
+    let n = 5;
+    let sheet = weft_mesh::generators::sheet(n, 1.0).unwrap();
+    let acap = AcapFeatures::new(&sheet, AcapSettings::default()).unwrap();
+    let pin_ids = vec![0, n - 1];
+    let inverse = Arc::new(PoissonPseudoInverse::new(&acap, &pin_ids).unwrap());
+    let frames: Vec<Vec<Vector3<f64>>> = [0.4, 0.9, 1.4]
+        .iter()
+        .map(|&a: &f64| {
+            sheet
+                .positions()
+                .iter()
+                .map(|q| {
+                    let t = a * (q.x + 0.5);
+                    Vector3::new(q.x, q.y * t.cos(), q.y * t.sin() + 0.1 * q.x * q.x)
+                })
+                .collect()
+        })
+        .collect();
+    let feats = acap.encode_batch(&frames).unwrap();
+    let normalization = FeatureNormalization::fit_per_block(feats.iter().flatten()).unwrap();
+    let features: Vec<f32> = feats
+        .iter()
+        .flat_map(|f| normalization.normalize_all(f))
+        .flat_map(|f| f.map(|x| x as f32))
+        .collect();
+    let pins = frames.iter().map(|p| pin_ids.iter().map(|&i| p[i]).collect()).collect();
+    AcapCase {
+        inverse,
+        normalization,
+        features,
+        pins,
+        v: n * n,
+    }
+}
+
+#[test]
+fn acap_inverse_op_decodes_like_weft_acap_and_its_gradient_matches_finite_differences() {
+    let c = acap_case();
+    let op = AcapInverse::new(c.inverse.clone(), c.normalization.clone(), c.pins.clone());
+    let x = Var::from_vec(c.features.clone(), (3, c.v, 9), &cpu()).unwrap();
+    let p = op.apply(x.as_tensor()).unwrap();
+    // Forward: the f64 decode of the same (f32-rounded) features.
+    let f64_loss = |flat: &[f64]| -> (Vec<f64>, f64) {
+        let mut all = Vec::new();
+        for b in 0..3 {
+            let frame: Vec<[f64; 9]> = flat[b * c.v * 9..(b + 1) * c.v * 9]
+                .chunks_exact(9)
+                .map(|f| c.normalization.denormalize(&std::array::from_fn(|d| f[d])))
+                .collect();
+            let dec = c.inverse.decode(&frame, &c.pins[b]).unwrap();
+            all.extend(dec.iter().flat_map(|q| [q.x, q.y, q.z]));
+        }
+        let loss = all
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (0.3 + (i as f64 * 0.7).sin()) * v)
+            .sum();
+        (all, loss)
+    };
+    let x64: Vec<f64> = c.features.iter().map(|&v| v as f64).collect();
+    let (reference, _) = f64_loss(&x64);
+    let got: Vec<f64> = to_vec3(&p).iter().map(|&v| v as f64).collect();
+    assert!(max_norm_rel_error(&got, &reference) < 1e-6);
+    // Backward of Σ w ⊙ p against central differences of the f64 path.
+    let w: Vec<f32> = (0..3 * c.v * 3).map(|i| 0.3 + (i as f32 * 0.7).sin()).collect();
+    let wt = Tensor::from_vec(w, (3, c.v, 3), &cpu()).unwrap();
+    let grads = (p * wt).unwrap().sum_all().unwrap().backward().unwrap();
+    let analytic: Vec<f64> = to_vec3(grads.get(x.as_tensor()).unwrap())
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    let fd = weft_testkit::fd_gradient(|y| f64_loss(y).1, &x64, 1e-6);
+    let err = max_norm_rel_error(&analytic, &fd);
+    assert!(err < 1e-4, "ACAP⁻¹ op gradient vs FD: {err:e}");
+}
+
+#[test]
+fn acap_inverse_op_rejects_wrong_shapes_and_nan_features() {
+    let c = acap_case();
+    let op = AcapInverse::new(c.inverse.clone(), c.normalization.clone(), c.pins.clone());
+    let wrong = Tensor::zeros((2, c.v, 9), DType::F32, &cpu()).unwrap();
+    assert!(matches!(op.apply(&wrong), Err(Error::Shape { .. })));
+    let mut bad = c.features.clone();
+    bad[17] = f32::NAN;
+    let t = Tensor::from_vec(bad, (3, c.v, 9), &cpu()).unwrap();
+    let e = op.apply(&t).unwrap_err().to_string();
+    assert!(e.contains("non-finite"), "{e}");
+}
+
+/// Three frames of the quick `sheet-ms` and its integrator.
+fn lphys_case() -> (Arc<weft_sim::ImplicitEuler>, Vec<Vec<f64>>) {
+    let mut sim = ClothSimulation::new(ClothScene::builtin("sheet-ms", true).unwrap(), None).unwrap();
+    let mut frames = vec![sim.integrator().positions().to_vec()];
+    for _ in 0..3 {
+        frames.push(sim.step().unwrap().positions);
+    }
+    (Arc::new(sim.into_integrator()), frames)
+}
+
+#[test]
+fn l_phys_op_matches_weft_sim_and_stops_the_gradient_into_previous_frames() {
+    let (ie, frames) = lphys_case();
+    let v = frames[0].len() / 3;
+    let mut rng = TestRng::new(9);
+    // Off the simulated frame, so the gradient is not zero.
+    let p: Vec<f64> = frames[3].iter().map(|x| x + rng.uniform(-1e-3, 1e-3)).collect();
+    let as_var = |x: &[f64]| Var::from_vec(x.iter().map(|&v| v as f32).collect::<Vec<_>>(), (1, v, 3), &cpu()).unwrap();
+    let (t2, t1, tp) = (as_var(&frames[1]), as_var(&frames[2]), as_var(&p));
+    let op = LPhys::new(ie.clone());
+    let value = op.apply(t2.as_tensor(), t1.as_tensor(), tp.as_tensor()).unwrap();
+    let round = |x: &[f64]| x.iter().map(|&v| v as f32 as f64).collect::<Vec<_>>();
+    let (r2, r1, rp) = (round(&frames[1]), round(&frames[2]), round(&p));
+    let expect = ie.l_phys(&r2, &r1, &rp).unwrap();
+    let got: Vec<f32> = value.to_vec1().unwrap();
+    assert!(
+        (got[0] as f64 - expect).abs() <= 1e-6 * expect.abs().max(1e-12),
+        "{} vs {expect}",
+        got[0]
+    );
+    let grads = value.sum_all().unwrap().backward().unwrap();
+    let analytic: Vec<f64> = to_vec3(grads.get(tp.as_tensor()).unwrap())
+        .iter()
+        .map(|&x| x as f64)
+        .collect();
+    let fd = weft_testkit::fd_gradient(|y| ie.l_phys(&r2, &r1, y).unwrap(), &rp, 1e-7);
+    let err = max_norm_rel_error(&analytic, &fd);
+    assert!(err < 1e-4, "∂L_phys/∂p_m vs FD: {err:e}");
+    // Eq. 9–10: nothing flows into p_{m−1} or p_{m−2}, although L_phys depends on them.
+    assert!(grads.get(t1.as_tensor()).is_none() && grads.get(t2.as_tensor()).is_none());
+    let fd_prev = weft_testkit::fd_gradient(|y| ie.l_phys(&r2, y, &rp).unwrap(), &r1, 1e-7);
+    assert!(
+        fd_prev.iter().any(|g| g.abs() > 1e-3),
+        "L_phys should depend on p_(m-1)"
+    );
+}
+
+#[test]
+fn checkpoint_round_trip_resumes_training_bit_for_bit() {
+    let sheet = weft_mesh::generators::sheet(4, 1.0).unwrap();
+    let config = AutoencoderConfig {
+        conv_layers: 1,
+        latent: 4,
+    };
+    let build = |seed| {
+        let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
+        let mut params = Params::new(&cpu(), seed);
+        let model = MeshAutoencoder::new(&mut params, graph, config).unwrap();
+        let adam = Adam::new(&params, AdamSettings::default()).unwrap();
+        (params, model, adam)
+    };
+    let mut rng = TestRng::new(4);
+    let x: Vec<f32> = (0..2 * 16 * 9).map(|_| rng.uniform(-0.9, 0.9) as f32).collect();
+    let x = Tensor::from_vec(x, (2, 16, 9), &cpu()).unwrap();
+    let train = |params: &Params, model: &MeshAutoencoder, adam: &mut Adam, steps: usize| {
+        for _ in 0..steps {
+            let loss = (model.decode(&model.encode(&x).unwrap()).unwrap() - &x)
+                .unwrap()
+                .sqr()
+                .unwrap()
+                .mean_all()
+                .unwrap();
+            adam.step(params, &loss.backward().unwrap()).unwrap();
+        }
+        to_vec3(&model.decode(&model.encode(&x).unwrap()).unwrap())
+    };
+    let dir = std::env::temp_dir().join(format!("weft-nn-ckpt-{}", std::process::id()));
+    let (p1, m1, mut a1) = build(3);
+    train(&p1, &m1, &mut a1, 3);
+    checkpoint::save(&dir, &p1, &a1, &serde_json::json!({"epoch": 3})).unwrap();
+    assert!(checkpoint::exists(&dir));
+    let straight = train(&p1, &m1, &mut a1, 2);
+    // A different seed, then the checkpoint: weights and moments both come from it.
+    let (p2, m2, mut a2) = build(99);
+    let extra = checkpoint::load(&dir, &p2, &mut a2).unwrap();
+    assert_eq!(extra["epoch"], 3);
+    assert_eq!(a2.steps(), 3);
+    let resumed = train(&p2, &m2, &mut a2, 2);
+    assert_eq!(
+        straight, resumed,
+        "resumed training must match the uninterrupted run bit for bit"
+    );
+    // A checkpoint of another model is a typed error naming the problem.
+    let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
+    let mut other = Params::new(&cpu(), 1);
+    MeshAutoencoder::new(
+        &mut other,
+        graph,
+        AutoencoderConfig {
+            conv_layers: 1,
+            latent: 5,
+        },
+    )
+    .unwrap();
+    let e = checkpoint::load_params(&dir, &other).unwrap_err().to_string();
+    assert!(e.contains("shape"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn training_the_autoencoder_on_the_quick_sheet_lowers_every_loss() {
+    // Smoke test: L_recon + L_vert + λ L_ephys on frames of the quick sheet-ms, through
+    // both custom ops; every term must fall.
+    let mut sim = ClothSimulation::new(ClothScene::builtin("sheet-ms", true).unwrap(), None).unwrap();
+    let mesh = sim.mesh().clone();
+    let grasp = sim.grasp_vertices().to_vec();
+    let mut frames = vec![sim.integrator().positions().to_vec()];
+    for _ in 0..8 {
+        frames.push(sim.step().unwrap().positions);
+    }
+    let ie = Arc::new(sim.into_integrator());
+    let points =
+        |x: &[f64]| -> Vec<Vector3<f64>> { x.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect() };
+    let acap = AcapFeatures::new(&mesh, AcapSettings::default()).unwrap();
+    let inverse = Arc::new(PoissonPseudoInverse::new(&acap, &grasp).unwrap());
+    let seq: Vec<Vec<Vector3<f64>>> = frames.iter().map(|f| points(f)).collect();
+    let feats = acap.encode_sequence(&seq).unwrap();
+    let norm = FeatureNormalization::fit_per_block(feats.iter().flatten()).unwrap();
+    let v = mesh.num_vertices();
+    // Frames 2..8 as targets, with their two predecessors for L_phys.
+    let targets: Vec<usize> = (2..frames.len()).collect();
+    let b = targets.len();
+    let x: Vec<f32> = targets
+        .iter()
+        .flat_map(|&m| norm.normalize_all(&feats[m]))
+        .flat_map(|f| f.map(|x| x as f32))
+        .collect();
+    let x = Tensor::from_vec(x, (b, v, 9), &cpu()).unwrap();
+    let stack = |offset: usize| {
+        let vals: Vec<f32> = targets
+            .iter()
+            .flat_map(|&m| frames[m - offset].iter().map(|&x| x as f32))
+            .collect();
+        Tensor::from_vec(vals, (b, v, 3), &cpu()).unwrap()
+    };
+    let (p_true, p1, p2) = (stack(0), stack(1), stack(2));
+    let pins = targets
+        .iter()
+        .map(|&m| grasp.iter().map(|&i| seq[m][i]).collect())
+        .collect();
+    let decode = AcapInverse::new(inverse, norm, pins);
+    let lphys = LPhys::new(ie.clone());
+    // L_phys at the ground truth: the floor L_ephys can approach.
+    let floor: f32 = lphys
+        .apply(&p2, &p1, &p_true)
+        .unwrap()
+        .mean_all()
+        .unwrap()
+        .to_scalar()
+        .unwrap();
+
+    let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
+    let mut params = Params::new(&cpu(), 11);
+    let model = MeshAutoencoder::new(
+        &mut params,
+        graph,
+        AutoencoderConfig {
+            conv_layers: 1,
+            latent: 16,
+        },
+    )
+    .unwrap();
+    let mut adam = Adam::new(
+        &params,
+        AdamSettings {
+            learning_rate: 2e-3,
+            ..AdamSettings::default()
+        },
+    )
+    .unwrap();
+    let losses = |model: &MeshAutoencoder| {
+        let y = model.decode(&model.encode(&x).unwrap()).unwrap();
+        let recon = (&y - &x).unwrap().sqr().unwrap().mean_all().unwrap();
+        let p = decode.apply(&y).unwrap();
+        let vert = (&p - &p_true).unwrap().sqr().unwrap().mean_all().unwrap();
+        let ephys = (lphys.apply(&p2, &p1, &p).unwrap().mean_all().unwrap() - floor as f64).unwrap();
+        (recon, vert, ephys)
+    };
+    let scalar = |t: &Tensor| -> f32 { t.to_scalar().unwrap() };
+    let (r0, v0, e0) = losses(&model);
+    let (r0, v0, e0) = (scalar(&r0), scalar(&v0), scalar(&e0));
+    for _ in 0..300 {
+        let (r, vt, e) = losses(&model);
+        let total = ((r + (vt * 10.0).unwrap()).unwrap() + (e * 1e-3).unwrap()).unwrap();
+        adam.step(&params, &total.backward().unwrap()).unwrap();
+    }
+    let (r1, v1, e1) = losses(&model);
+    let (r1, v1, e1) = (scalar(&r1), scalar(&v1), scalar(&e1));
+    eprintln!("recon {r0} → {r1}, vert {v0} → {v1}, ephys {e0} → {e1} (floor {floor})");
+    // Measured: L_recon 1.36 → 0.0053, L_vert 0.13 → 3.9e-5, L_ephys 601 → 0.33 J.
+    assert!(r1 < 0.05 * r0, "L_recon {r0} → {r1}");
+    assert!(v1 < 0.01 * v0, "L_vert {v0} → {v1}");
+    assert!(e1 < 0.01 * e0, "L_ephys {e0} → {e1}");
+}
