@@ -14,6 +14,7 @@ mod record;
 mod report;
 mod simulate;
 mod stability;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -50,6 +51,9 @@ enum Command {
     CheckReport(report::CheckArgs),
     /// Sweep every simulator over extreme parameters and publish the outcome of each cell (docs/STABILITY.md).
     Stability(stability::StabilityArgs),
+    /// Train a neural model on a dataset (resumable from checkpoints, progress bars with the losses).
+    #[command(subcommand)]
+    Train(train::TrainCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -61,6 +65,7 @@ fn main() -> anyhow::Result<()> {
         Command::Project(cmd) => project::run(cmd),
         Command::Dataset(args) => dataset::run(args),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::Train(cmd) => train::run(cmd),
         Command::CheckReport(args) => report::check(args),
         Command::Stability(args) => stability::run(args),
     }

@@ -137,7 +137,7 @@ pub fn progress_bar(quiet: bool, len: u64, prefix: &str, unit: &str) -> anyhow::
     };
     bar.set_style(
         ProgressStyle::with_template(&format!(
-            "{{prefix}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{per_sec}}, ETA {{eta}}"
+            "{{prefix}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{per_sec}}, ETA {{eta}} {{msg}}"
         ))?
         .progress_chars("=> "),
     );

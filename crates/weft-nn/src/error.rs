@@ -33,6 +33,10 @@ pub enum Error {
     /// this model.
     #[error("checkpoint {path}: {reason}")]
     Checkpoint { path: String, reason: String },
+    /// A dataset file is missing an array, has one of the wrong shape or a non-finite
+    /// value, or does not fit the rest of the dataset.
+    #[error("dataset file {path}: {reason}")]
+    Dataset { path: String, reason: String },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

@@ -10,12 +10,13 @@
 //!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
 //!   frames stopped (Eq. 9–10);
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
-//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), and the one
-//!   f32 ↔ f64 boundary ([`convert`]).
+//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
+//!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
 //!
 //! What is not here: no physics or geometry of its own (every formula of the simulation
 //! lives in weft-sim, weft-acap or weft-proj and is called, never re-derived in
-//! tensors), no file formats beyond checkpoints, no command line (that is xtask's).
+//! tensors), no file formats beyond checkpoints and reading the pipeline's datasets, no
+//! command line (that is xtask's).
 //!
 //! Precision: networks run in f32; everything that crosses into the physics is converted
 //! to f64 and checked for NaN at that boundary.
@@ -39,7 +40,9 @@
 pub mod adam;
 pub mod checkpoint;
 pub mod convert;
+pub mod data;
 pub mod embed;
+pub mod embed_training;
 pub mod error;
 pub mod graph;
 pub mod layers;

@@ -151,9 +151,13 @@ impl LPhys {
                 });
             }
         }
+        // Eq. 9–10: the previous frames enter as constants. Detaching them (rather than
+        // only returning no gradient for them) also keeps candle from expecting one for
+        // the network nodes that produced them.
         Ok(prev2
+            .detach()
             .contiguous()?
-            .apply_op3(&prev1.contiguous()?, &p.contiguous()?, self.clone())?)
+            .apply_op3(&prev1.detach().contiguous()?, &p.contiguous()?, self.clone())?)
     }
 
     fn split(&self, what: &'static str, x: &[f32]) -> candle_core::Result<Vec<Vec<f64>>> {

@@ -1,0 +1,183 @@
+//! Reading the pipeline's cloth datasets (`cargo xtask dataset`, layout in
+//! docs/DATASETS.md) into f64 frames, and Tan et al.'s frame split.
+//!
+//! A dataset directory holds `manifest.json`, `scene.toml`, `rest.obj` and one
+//! `seq-NNNNN.safetensors` per sequence with `positions` `[F, V, 3]`, `controls`
+//! `[F, G, 3]` (metres) and `labels` `[F]`. Everything read is checked: shapes against the
+//! rest mesh, finiteness, and that every sequence names the same grasped vertices.
+
+use std::path::{Path, PathBuf};
+
+use safetensors::{Dtype, SafeTensors};
+use weft_mesh::TriMesh;
+use weft_sim::ClothScene;
+
+use crate::error::{Error, Result};
+
+/// Tan et al. §VI-A: of every 17 consecutive frames the first 12 train and the other 5
+/// test. `m` counts from a sequence's first frame.
+pub fn is_train_frame(m: usize) -> bool {
+    m % 17 < 12
+}
+
+/// One simulated sequence.
+#[derive(Debug, Clone)]
+pub struct ClothSequence {
+    /// Its index in the dataset.
+    pub index: usize,
+    /// `[F, V, 3]` flat, metres; frame 0 is the initial state.
+    pub positions: Vec<f64>,
+    /// `[F, G, 3]` flat: the grasped vertices' prescribed positions `q_m`.
+    pub controls: Vec<f64>,
+    /// Motion label code per frame (`weft_sim::MotionLabel`).
+    pub labels: Vec<u8>,
+    num_vertices: usize,
+    num_grasped: usize,
+}
+
+impl ClothSequence {
+    pub fn num_frames(&self) -> usize {
+        self.labels.len()
+    }
+
+    /// Frame `m`'s positions, `3V` values.
+    pub fn frame(&self, m: usize) -> &[f64] {
+        let n = 3 * self.num_vertices;
+        &self.positions[m * n..(m + 1) * n]
+    }
+
+    /// Frame `m`'s controls, `3G` values.
+    pub fn control(&self, m: usize) -> &[f64] {
+        let n = 3 * self.num_grasped;
+        &self.controls[m * n..(m + 1) * n]
+    }
+}
+
+/// A cloth dataset in memory.
+#[derive(Debug, Clone)]
+pub struct ClothDataset {
+    pub dir: PathBuf,
+    /// The dataset's name (`manifest.json`).
+    pub name: String,
+    /// The scene before per-sequence seeding (`scene.toml`); its energies, masses and Δt
+    /// are those of every sequence.
+    pub scene: ClothScene,
+    pub rest: TriMesh,
+    pub grasp: Vec<usize>,
+    pub sequences: Vec<ClothSequence>,
+}
+
+fn io_error(path: &Path, source: std::io::Error) -> Error {
+    Error::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+fn data_error(path: &Path, reason: impl Into<String>) -> Error {
+    Error::Dataset {
+        path: path.display().to_string(),
+        reason: reason.into(),
+    }
+}
+
+fn f64_array(path: &Path, st: &SafeTensors, name: &str, shape_tail: &[usize]) -> Result<(usize, Vec<f64>)> {
+    let t = st
+        .tensor(name)
+        .map_err(|e| data_error(path, format!("array {name}: {e}")))?;
+    if t.dtype() != Dtype::F64 || t.shape().len() != 1 + shape_tail.len() || t.shape()[1..] != *shape_tail {
+        return Err(data_error(
+            path,
+            format!(
+                "array {name} is {:?} {:?}, expected F64 [F, {shape_tail:?}]",
+                t.dtype(),
+                t.shape()
+            ),
+        ));
+    }
+    let v: Vec<f64> = t
+        .data()
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
+        .collect();
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Err(data_error(path, format!("array {name} has a non-finite value at {i}")));
+    }
+    Ok((t.shape()[0], v))
+}
+
+impl ClothDataset {
+    /// Reads the dataset in `dir` (every sequence listed in its manifest).
+    pub fn load(dir: &Path) -> Result<Self> {
+        let manifest_path = dir.join("manifest.json");
+        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
+        let manifest: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        if manifest["format"] != "weft-dataset/1" {
+            return Err(data_error(&manifest_path, "not a weft-dataset/1 manifest"));
+        }
+        let name = manifest["dataset"].as_str().unwrap_or_default().to_string();
+        let scene_path = dir.join("scene.toml");
+        let scene_text = std::fs::read_to_string(&scene_path).map_err(|e| io_error(&scene_path, e))?;
+        let scene = ClothScene::from_toml(&scene_text).map_err(|e| data_error(&scene_path, e.to_string()))?;
+        let rest_path = dir.join("rest.obj");
+        let rest = weft_mesh::io::read_obj(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
+        let v = rest.num_vertices();
+        let listed = manifest["sequences"]
+            .as_array()
+            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
+        let mut grasp: Option<Vec<usize>> = None;
+        let mut sequences = Vec::with_capacity(listed.len());
+        for entry in listed {
+            let rel = entry["path"]
+                .as_str()
+                .ok_or_else(|| data_error(&manifest_path, "a sequence without a path"))?;
+            let path = dir.join(rel);
+            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let g: Vec<usize> = meta
+                .metadata()
+                .as_ref()
+                .and_then(|m| m.get("grasp_vertices"))
+                .and_then(|s| serde_json::from_str(s).ok())
+                .ok_or_else(|| data_error(&path, "metadata lacks grasp_vertices"))?;
+            if g.iter().any(|&i| i >= v) {
+                return Err(data_error(&path, "a grasped vertex is outside the rest mesh"));
+            }
+            match &grasp {
+                Some(prev) if *prev != g => return Err(data_error(&path, "grasped vertices differ between sequences")),
+                _ => grasp = Some(g.clone()),
+            }
+            let (frames, positions) = f64_array(&path, &st, "positions", &[v, 3])?;
+            let (cf, controls) = f64_array(&path, &st, "controls", &[g.len(), 3])?;
+            let labels = st
+                .tensor("labels")
+                .map_err(|e| data_error(&path, format!("array labels: {e}")))?
+                .data()
+                .to_vec();
+            if cf != frames || labels.len() != frames {
+                return Err(data_error(
+                    &path,
+                    "positions, controls and labels disagree on the frame count",
+                ));
+            }
+            sequences.push(ClothSequence {
+                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
+                positions,
+                controls,
+                labels,
+                num_vertices: v,
+                num_grasped: g.len(),
+            });
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            name,
+            scene,
+            rest,
+            grasp: grasp.ok_or_else(|| data_error(&manifest_path, "the dataset has no sequence"))?,
+            sequences,
+        })
+    }
+}

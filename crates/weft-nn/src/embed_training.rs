@@ -1,0 +1,424 @@
+//! Training Tan et al.'s embedding in three stages (§VI-A) on a pipeline dataset.
+//!
+//! - Stage 1 trains `E`, `D` with `L₁ = λ_recon L_recon + λ_vert L_vert + λ_ephys L_ephys`.
+//! - Stage 2 trains the latent simulator with `L₂ = λ_sim L_sim + λ_mphys L_mphys`, the
+//!   autoencoder frozen.
+//! - Stage 3 fine-tunes both with `L₃ = λ_recon L_recon + λ_vert L_vert + λ_ephys L_ephys
+//!   + λ_sim L_sim`, feeding `z' = ½ z_m + ½ MLP(z_{m−2}, z_{m−1}, q_m)` to `D`.
+//!
+//! Every physics term goes through the custom ops of [`crate::ops`]: positions are
+//! `ACAP⁻¹ ∘ D`, and `L_phys` stops the gradient into its two previous frames (Eq. 9–10).
+//! A training window is a frame `m` of the training split whose two predecessors are
+//! training frames of the same sequence. Batches are drawn in an order fixed by the seed.
+
+use std::sync::Arc;
+
+use candle_core::{Device, Tensor};
+use nalgebra::Vector3;
+use weft_acap::{AcapFeatures, AcapSettings, Feature, FeatureNormalization, PoissonPseudoInverse};
+use weft_sim::rng::SplitMix64;
+use weft_sim::{ClothSimulation, ImplicitEuler};
+
+use crate::adam::{Adam, AdamSettings};
+use crate::data::{ClothDataset, is_train_frame};
+use crate::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
+use crate::error::{Error, Result};
+use crate::graph::MeshGraph;
+use crate::ops::{AcapInverse, LPhys};
+use crate::params::Params;
+
+/// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "[46] +
+/// L_vert" baseline sets λ_ephys = 0).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LossWeights {
+    pub recon: f64,
+    pub vert: f64,
+    pub ephys: f64,
+    pub sim: f64,
+    pub mphys: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self {
+            recon: 1.0,
+            vert: 1.0,
+            ephys: 0.5,
+            sim: 1.0,
+            mphys: 0.5,
+        }
+    }
+}
+
+/// Everything that shapes a training run; stored with the model.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EmbedTrainingConfig {
+    pub autoencoder: AutoencoderConfig,
+    pub latent_hidden: Vec<usize>,
+    pub weights: LossWeights,
+    pub adam: AdamSettings,
+    /// Windows per batch.
+    pub batch: usize,
+    /// Epochs (passes over the training windows) of stages 1, 2 and 3.
+    pub epochs: [usize; 3],
+    pub seed: u64,
+}
+
+impl Default for EmbedTrainingConfig {
+    fn default() -> Self {
+        Self {
+            autoencoder: AutoencoderConfig::default(),
+            latent_hidden: vec![256, 256],
+            weights: LossWeights::default(),
+            adam: AdamSettings::default(),
+            batch: 8,
+            epochs: [30, 30, 10],
+            seed: 0,
+        }
+    }
+}
+
+/// A frame of the dataset: sequence and frame index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameRef {
+    pub sequence: usize,
+    pub frame: usize,
+}
+
+/// The loss terms of one evaluation (unweighted means over the batch).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct LossTerms {
+    pub recon: f64,
+    pub vert: f64,
+    pub ephys: f64,
+    pub sim: f64,
+    pub mphys: f64,
+    pub total: f64,
+}
+
+/// A dataset prepared for the embedding: normalised ACAP features of every frame, the
+/// pseudo-inverse pinned at the grasped vertices, and the integrator of `L_phys`.
+#[derive(Debug)]
+pub struct EmbedData {
+    pub dataset: ClothDataset,
+    pub normalization: FeatureNormalization,
+    /// `features[s][m]`: normalised features of frame `m` of sequence `s`.
+    features: Vec<Vec<Vec<Feature>>>,
+    pub inverse: Arc<PoissonPseudoInverse>,
+    pub integrator: Arc<ImplicitEuler>,
+    /// Training windows (frame `m` and both predecessors in the training split).
+    pub train_windows: Vec<FrameRef>,
+    /// Test frames with two predecessors in their sequence (for M_phys and roll-outs).
+    pub test_frames: Vec<FrameRef>,
+}
+
+fn points(x: &[f64]) -> Vec<Vector3<f64>> {
+    x.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect()
+}
+
+impl EmbedData {
+    /// Encodes every frame (as a sequence, so log-rotations stay continuous in time) and
+    /// fits the normalisation on the training frames only.
+    pub fn new(dataset: ClothDataset) -> Result<Self> {
+        let acap = AcapFeatures::new(&dataset.rest, AcapSettings::default())?;
+        let raw: Vec<Vec<Vec<Feature>>> = dataset
+            .sequences
+            .iter()
+            .map(|s| {
+                let frames: Vec<Vec<Vector3<f64>>> = (0..s.num_frames()).map(|m| points(s.frame(m))).collect();
+                acap.encode_sequence(&frames)
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        let normalization = FeatureNormalization::fit_per_block(raw.iter().flat_map(|seq| {
+            seq.iter()
+                .enumerate()
+                .filter(|(m, _)| is_train_frame(*m))
+                .flat_map(|(_, f)| f)
+        }))?;
+        let features = raw
+            .iter()
+            .map(|seq| seq.iter().map(|f| normalization.normalize_all(f)).collect())
+            .collect();
+        let inverse = Arc::new(PoissonPseudoInverse::new(&acap, &dataset.grasp)?);
+        let integrator = Arc::new(ClothSimulation::new(dataset.scene.clone(), Some(&dataset.dir))?.into_integrator());
+        let mut train_windows = Vec::new();
+        let mut test_frames = Vec::new();
+        for (s, seq) in dataset.sequences.iter().enumerate() {
+            for m in 2..seq.num_frames() {
+                if is_train_frame(m) && is_train_frame(m - 1) && is_train_frame(m - 2) {
+                    train_windows.push(FrameRef { sequence: s, frame: m });
+                } else if !is_train_frame(m) {
+                    test_frames.push(FrameRef { sequence: s, frame: m });
+                }
+            }
+        }
+        if train_windows.is_empty() {
+            return Err(Error::InvalidParameter {
+                name: "dataset",
+                value: dataset.name.clone(),
+                reason: "has no training window (needs sequences of at least 3 frames)",
+            });
+        }
+        Ok(Self {
+            dataset,
+            normalization,
+            features,
+            inverse,
+            integrator,
+            train_windows,
+            test_frames,
+        })
+    }
+
+    pub fn num_vertices(&self) -> usize {
+        self.dataset.rest.num_vertices()
+    }
+
+    /// `[B, V, 9]` normalised features of `frames`.
+    pub fn feature_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
+        let v = self.num_vertices();
+        let flat: Vec<f32> = frames
+            .iter()
+            .flat_map(|f| {
+                self.features[f.sequence][f.frame]
+                    .iter()
+                    .flat_map(|x| x.map(|c| c as f32))
+            })
+            .collect();
+        Ok(Tensor::from_vec(flat, (frames.len(), v, 9), device)?)
+    }
+
+    /// `[B, V, 3]` ground-truth positions of `frames`.
+    pub fn position_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
+        let v = self.num_vertices();
+        let flat: Vec<f32> = frames
+            .iter()
+            .flat_map(|f| {
+                self.dataset.sequences[f.sequence]
+                    .frame(f.frame)
+                    .iter()
+                    .map(|&x| x as f32)
+            })
+            .collect();
+        Ok(Tensor::from_vec(flat, (frames.len(), v, 3), device)?)
+    }
+
+    /// `[B, 3G]` controls `q_m` of `frames`.
+    pub fn control_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
+        let g = 3 * self.dataset.grasp.len();
+        let flat: Vec<f32> = frames
+            .iter()
+            .flat_map(|f| {
+                self.dataset.sequences[f.sequence]
+                    .control(f.frame)
+                    .iter()
+                    .map(|&x| x as f32)
+            })
+            .collect();
+        Ok(Tensor::from_vec(flat, (frames.len(), g), device)?)
+    }
+
+    /// ACAP⁻¹ for `frames`, pinned at their grasped positions.
+    pub fn decoder_op(&self, frames: &[FrameRef]) -> AcapInverse {
+        let pins = frames
+            .iter()
+            .map(|f| {
+                let q = self.dataset.sequences[f.sequence].control(f.frame);
+                points(q)
+            })
+            .collect();
+        AcapInverse::new(self.inverse.clone(), self.normalization.clone(), pins)
+    }
+
+    pub fn lphys_op(&self) -> LPhys {
+        LPhys::new(self.integrator.clone())
+    }
+}
+
+/// The embedding's two networks with their parameters and optimisers.
+#[derive(Debug)]
+pub struct EmbedModel {
+    pub config: EmbedTrainingConfig,
+    pub autoencoder_params: Params,
+    pub autoencoder: MeshAutoencoder,
+    pub simulator_params: Params,
+    pub simulator: LatentSimulator,
+}
+
+impl EmbedModel {
+    /// The two networks, initialised from `config.seed`, on the CPU.
+    pub fn new(config: EmbedTrainingConfig, data: &EmbedData) -> Result<Self> {
+        let device = &Device::Cpu;
+        let graph = Arc::new(MeshGraph::new(&data.dataset.rest, device)?);
+        let mut autoencoder_params = Params::new(device, config.seed);
+        let autoencoder = MeshAutoencoder::new(&mut autoencoder_params, graph, config.autoencoder)?;
+        let mut simulator_params = Params::new(device, config.seed ^ 0x5151_5151);
+        let simulator = LatentSimulator::new(
+            &mut simulator_params,
+            LatentSimulatorConfig {
+                latent: config.autoencoder.latent,
+                controls: 3 * data.dataset.grasp.len(),
+                hidden: config.latent_hidden.clone(),
+            },
+        )?;
+        Ok(Self {
+            config,
+            autoencoder_params,
+            autoencoder,
+            simulator_params,
+            simulator,
+        })
+    }
+
+    /// Decoded positions `[B, V, 3]` of codes `z` for `frames` (pinned at their controls).
+    pub fn positions(&self, data: &EmbedData, frames: &[FrameRef], z: &Tensor) -> Result<Tensor> {
+        data.decoder_op(frames).apply(&self.autoencoder.decode(z)?)
+    }
+
+    /// The losses of `stage` (1, 2 or 3) on the windows `batch` (frames `m`), as a graph
+    /// whose `total` can be differentiated, plus their values.
+    pub fn losses(&self, data: &EmbedData, batch: &[FrameRef], stage: u8) -> Result<(Tensor, LossTerms)> {
+        let device = self.autoencoder_params.device();
+        let w = self.config.weights;
+        let prev = |k: usize| -> Vec<FrameRef> {
+            batch
+                .iter()
+                .map(|f| FrameRef {
+                    sequence: f.sequence,
+                    frame: f.frame - k,
+                })
+                .collect()
+        };
+        let (b1, b2) = (prev(1), prev(2));
+        let x = data.feature_batch(batch, device)?;
+        let z = self.autoencoder.encode(&x)?;
+        let scalar = |t: &Tensor| -> Result<f64> { Ok(t.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?) };
+        let mut terms = LossTerms::default();
+        let mut total = Tensor::zeros((), candle_core::DType::F32, device)?;
+        let mut add = |t: Tensor, weight: f64, slot: &mut f64| -> Result<()> {
+            *slot = scalar(&t)?;
+            if weight != 0.0 {
+                total = (&total + (t * weight)?)?;
+            }
+            Ok(())
+        };
+        let lphys = data.lphys_op();
+        if stage == 1 || stage == 3 {
+            let (z1, z2) = (
+                self.autoencoder.encode(&data.feature_batch(&b1, device)?)?,
+                self.autoencoder.encode(&data.feature_batch(&b2, device)?)?,
+            );
+            let z_used = if stage == 3 {
+                let q = data.control_batch(batch, device)?;
+                let predicted = self.simulator.step(&z2, &z1, &q)?;
+                let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
+                add(sim, w.sim, &mut terms.sim)?;
+                ((&z * 0.5)? + (predicted * 0.5)?)?
+            } else {
+                z.clone()
+            };
+            let y = self.autoencoder.decode(&z_used)?;
+            let recon = (&y - &x)?.sqr()?.sum((1, 2))?.mean_all()?;
+            add(recon, w.recon, &mut terms.recon)?;
+            let p = data.decoder_op(batch).apply(&y)?;
+            let truth = data.position_batch(batch, device)?;
+            let vert = (&p - &truth)?.sqr()?.sum((1, 2))?.mean_all()?;
+            add(vert, w.vert, &mut terms.vert)?;
+            if w.ephys != 0.0 {
+                let p1 = self.positions(data, &b1, &z1)?;
+                let p2 = self.positions(data, &b2, &z2)?;
+                let ephys = lphys.apply(&p2, &p1, &p)?.mean_all()?;
+                add(ephys, w.ephys, &mut terms.ephys)?;
+            }
+        } else {
+            // Stage 2: the autoencoder is frozen (its codes are detached).
+            let z = z.detach();
+            let z1 = self.autoencoder.encode(&data.feature_batch(&b1, device)?)?.detach();
+            let z2 = self.autoencoder.encode(&data.feature_batch(&b2, device)?)?.detach();
+            let q = data.control_batch(batch, device)?;
+            let predicted = self.simulator.step(&z2, &z1, &q)?;
+            let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
+            add(sim, w.sim, &mut terms.sim)?;
+            if w.mphys != 0.0 {
+                let p = self.positions(data, batch, &predicted)?;
+                let p1 = self.positions(data, &b1, &z1)?;
+                let p2 = self.positions(data, &b2, &z2)?;
+                let mphys = lphys.apply(&p2, &p1, &p)?.mean_all()?;
+                add(mphys, w.mphys, &mut terms.mphys)?;
+            }
+        }
+        terms.total = scalar(&total)?;
+        Ok((total, terms))
+    }
+}
+
+/// Where a run stands; stored in every checkpoint's record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Progress {
+    /// 1, 2 or 3.
+    pub stage: u8,
+    /// Epochs completed in this stage.
+    pub epoch: usize,
+}
+
+/// The epoch's batches: the training windows in an order drawn from SplitMix64(seed,
+/// stage, epoch), so a resumed run sees the same batches as an uninterrupted one.
+pub fn epoch_batches(windows: &[FrameRef], batch: usize, seed: u64, progress: Progress) -> Vec<Vec<FrameRef>> {
+    let mut order: Vec<usize> = (0..windows.len()).collect();
+    let mut rng =
+        SplitMix64::new(seed ^ ((progress.stage as u64) << 56) ^ (progress.epoch as u64).wrapping_mul(0x9E37_79B9));
+    for i in (1..order.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        order.swap(i, j);
+    }
+    order
+        .chunks(batch.max(1))
+        .map(|c| c.iter().map(|&i| windows[i]).collect())
+        .collect()
+}
+
+/// Runs one epoch of `stage`, calling `on_batch` with each batch's losses; returns the
+/// mean losses over the epoch.
+pub fn train_epoch(
+    model: &EmbedModel,
+    data: &EmbedData,
+    optimizers: (&mut Adam, &mut Adam),
+    progress: Progress,
+    mut on_batch: impl FnMut(&LossTerms),
+) -> Result<LossTerms> {
+    let batches = epoch_batches(&data.train_windows, model.config.batch, model.config.seed, progress);
+    let (ae_adam, sim_adam) = optimizers;
+    let mut mean = LossTerms::default();
+    for batch in &batches {
+        let (total, terms) = model.losses(data, batch, progress.stage)?;
+        let grads = total.backward()?;
+        if progress.stage != 2 {
+            ae_adam.step(&model.autoencoder_params, &grads)?;
+        }
+        if progress.stage != 1 {
+            sim_adam.step(&model.simulator_params, &grads)?;
+        }
+        on_batch(&terms);
+        for (acc, v) in [
+            (&mut mean.recon, terms.recon),
+            (&mut mean.vert, terms.vert),
+            (&mut mean.ephys, terms.ephys),
+            (&mut mean.sim, terms.sim),
+            (&mut mean.mphys, terms.mphys),
+            (&mut mean.total, terms.total),
+        ] {
+            *acc += v / batches.len() as f64;
+        }
+    }
+    Ok(mean)
+}
+
+/// Adam for each network, with the run's settings.
+pub fn optimizers(model: &EmbedModel, settings: AdamSettings) -> Result<(Adam, Adam)> {
+    Ok((
+        Adam::new(&model.autoencoder_params, settings)?,
+        Adam::new(&model.simulator_params, settings)?,
+    ))
+}
