@@ -46,7 +46,9 @@ pub mod embed_training;
 pub mod error;
 pub mod graph;
 pub mod layers;
+pub mod metrics;
 pub mod ops;
 pub mod params;
+pub mod pca;
 
 pub use error::{Error, Result};

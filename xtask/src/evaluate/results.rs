@@ -166,64 +166,11 @@ pub fn validate(records: &[Record]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Sum of squared coordinate differences between `a` and `b` restricted to `map`
-/// (`a` vertex i ↔ `b` vertex `map[i]`), and the largest vertex distance (m).
-pub fn frame_error(a: &[f64], b: &[f64], map: &[usize]) -> (f64, f64) {
-    let mut sq = 0.0;
-    let mut max = 0.0f64;
-    for (i, &j) in map.iter().enumerate() {
-        let d2: f64 = (0..3).map(|k| (a[3 * i + k] - b[3 * j + k]).powi(2)).sum();
-        sq += d2;
-        max = max.max(d2.sqrt());
-    }
-    (sq, max)
-}
-
-/// Accumulates Kavan et al.'s E_RMS (`docs/RESULTS.md`): 1000 × the RMS over every
-/// coordinate of every vertex of every frame, raw coordinates in metres (so: mm).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct RmsAccumulator {
-    sum_sq: f64,
-    count: usize,
-    max_m: f64,
-}
-
-impl RmsAccumulator {
-    /// Adds one frame; returns that frame's own M_rms (mm).
-    pub fn add(&mut self, a: &[f64], b: &[f64], map: &[usize]) -> f64 {
-        let (sq, max) = frame_error(a, b, map);
-        self.sum_sq += sq;
-        self.count += 3 * map.len();
-        self.max_m = self.max_m.max(max);
-        1e3 * (sq / (3 * map.len()).max(1) as f64).sqrt()
-    }
-    pub fn m_rms_mm(&self) -> f64 {
-        1e3 * (self.sum_sq / self.count.max(1) as f64).sqrt()
-    }
-    pub fn max_error_mm(&self) -> f64 {
-        1e3 * self.max_m
-    }
-}
+pub use weft_nn::metrics::RmsAccumulator;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn m_rms_is_kavan_per_coordinate_and_max_error_is_per_vertex() {
-        // One vertex off by (3, 4, 0) mm, one exact: per-coordinate RMS = sqrt(25/6) mm.
-        let a = [0.003, 0.004, 0.0, 1.0, 1.0, 1.0];
-        let b = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
-        let mut acc = RmsAccumulator::default();
-        let frame = acc.add(&a, &b, &[0, 1]);
-        assert!((frame - (25.0f64 / 6.0).sqrt()).abs() < 1e-9);
-        assert!((acc.m_rms_mm() - frame).abs() < 1e-12);
-        assert!((acc.max_error_mm() - 5.0).abs() < 1e-9);
-        // A vertex map compares a coarse vertex with its fine counterpart.
-        let fine = [9.0, 9.0, 9.0, 0.0, 0.0, 0.0];
-        let (sq, _) = frame_error(&b[..3], &fine, &[1]);
-        assert_eq!(sq, 0.0);
-    }
 
     #[test]
     fn validation_rejects_non_kebab_names_and_nan() {
