@@ -272,6 +272,51 @@ impl EmbedModel {
         })
     }
 
+    /// A trained model from a model directory written by `cargo xtask train embed`
+    /// (`config.json` and the latest `checkpoint/`).
+    pub fn load(dir: &std::path::Path, data: &EmbedData) -> Result<Self> {
+        let path = dir.join("config.json");
+        let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let config: EmbedTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        let model = Self::new(config, data)?;
+        let ck = dir.join("checkpoint");
+        crate::checkpoint::load_params(&ck.join("autoencoder"), &model.autoencoder_params)?;
+        crate::checkpoint::load_params(&ck.join("simulator"), &model.simulator_params)?;
+        Ok(model)
+    }
+
+    /// `ACAP⁻¹ ∘ D ∘ E` of `frames`, in batches of `batch`: the reconstructed positions
+    /// (flat, metres), one per frame.
+    pub fn reconstruct(&self, data: &EmbedData, frames: &[FrameRef], batch: usize) -> Result<Vec<Vec<f64>>> {
+        let device = self.autoencoder_params.device();
+        let mut out = Vec::with_capacity(frames.len());
+        for chunk in frames.chunks(batch.max(1)) {
+            let z = self.autoencoder.encode(&data.feature_batch(chunk, device)?)?;
+            let p = self.positions(data, chunk, &z)?;
+            let flat = crate::convert::tensor_to_f64("reconstructed positions", &p)?;
+            out.extend(flat.chunks_exact(3 * data.num_vertices()).map(<[f64]>::to_vec));
+        }
+        Ok(out)
+    }
+
+    /// Latent codes `E(x)` of `frames` (flat `latent` values per frame).
+    pub fn codes(&self, data: &EmbedData, frames: &[FrameRef]) -> Result<Vec<Vec<f64>>> {
+        let z = self
+            .autoencoder
+            .encode(&data.feature_batch(frames, self.autoencoder_params.device())?)?;
+        let flat = crate::convert::tensor_to_f64("latent codes", &z)?;
+        Ok(flat
+            .chunks_exact(self.config.autoencoder.latent)
+            .map(<[f64]>::to_vec)
+            .collect())
+    }
+
     /// Decoded positions `[B, V, 3]` of codes `z` for `frames` (pinned at their controls).
     pub fn positions(&self, data: &EmbedData, frames: &[FrameRef], z: &Tensor) -> Result<Tensor> {
         data.decoder_op(frames).apply(&self.autoencoder.decode(z)?)

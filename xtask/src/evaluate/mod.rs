@@ -1,6 +1,6 @@
 //! `cargo xtask evaluate`: every method against its reference, speed beside accuracy.
 //!
-//! Each experiment (`sim`, `proj`; later issues add theirs) runs its methods and a tight
+//! Each experiment (`sim`, `proj`, `embed`; later issues add theirs) runs its methods and a tight
 //! reference in one process, so time ratios compare one machine state, and returns an
 //! [`ExperimentOutput`]: tidy [`Record`]s, roll-out curves, energies and renders. Outputs
 //! are cached per experiment in `OUT/experiments/<name>.json`, so an interrupted
@@ -8,6 +8,7 @@
 //! tables.md, plots, index.html) is then rebuilt from every cached experiment.
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
+pub mod embed;
 pub mod paper;
 pub mod proj;
 pub mod results;
@@ -24,7 +25,7 @@ use crate::output::write_json;
 pub use results::{Curve, EnergyBar, ExperimentOutput};
 
 /// Experiments `evaluate` runs, in order.
-pub const EXPERIMENTS: [&str; 2] = ["sim", "proj"];
+pub const EXPERIMENTS: [&str; 3] = ["sim", "proj", "embed"];
 
 #[derive(Args)]
 pub struct EvaluateArgs {
@@ -34,7 +35,7 @@ pub struct EvaluateArgs {
     /// Shorthand for --size quick.
     #[arg(long)]
     quick: bool,
-    /// Run only these experiments (comma-separated): sim, proj.
+    /// Run only these experiments (comma-separated): sim, proj, embed.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Output directory (default: out/evaluate-<size>).
@@ -107,6 +108,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         let mut output = match *name {
             "sim" => sim::run(&ctx)?,
             "proj" => proj::run(&ctx)?,
+            "embed" => embed::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();

@@ -8,7 +8,7 @@ use base64::Engine;
 
 use super::Charts;
 use crate::dataset::Size;
-use crate::evaluate::paper::{PENDING, Table};
+use crate::evaluate::paper::Table;
 use crate::evaluate::results::ExperimentOutput;
 
 fn escape(s: &str) -> String {
@@ -91,7 +91,8 @@ pub fn page(
         body.push_str(&table_html(t));
     }
     body.push_str("<h3>Tables that later experiments fill</h3>\n<ul>\n");
-    for (what, exp) in PENDING {
+    let ran: Vec<&str> = outputs.iter().map(|o| o.experiment.as_str()).collect();
+    for (what, exp) in crate::evaluate::paper::pending(&ran) {
         body.push_str(&format!("<li>{} — experiment <code>{exp}</code></li>\n", escape(what)));
     }
     body.push_str("</ul>\n");

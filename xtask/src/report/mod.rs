@@ -12,7 +12,7 @@ use anyhow::{Context, ensure};
 use clap::Args;
 
 use crate::dataset::Size;
-use crate::evaluate::paper::{self, PENDING};
+use crate::evaluate::paper;
 use crate::evaluate::results::{self, ExperimentOutput, Record};
 use crate::output::{write_json, write_text};
 use plots::ParetoPoint;
@@ -145,7 +145,8 @@ fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Ta
         s.push_str(&t.markdown());
     }
     s.push_str("## Tables that later experiments fill\n\n");
-    for (what, exp) in PENDING {
+    let ran: Vec<&str> = outputs.iter().map(|o| o.experiment.as_str()).collect();
+    for (what, exp) in paper::pending(&ran) {
         s.push_str(&format!("- {what}: experiment `{exp}`, not yet in this evaluation.\n"));
     }
     s.push_str("\n## Notes\n\n");
