@@ -1,8 +1,9 @@
 //! `cargo xtask stability`: the measured stability map. Every simulator is swept over a
 //! grid of extreme parameters and each cell's outcome is recorded: converged (with its
 //! Newton iterations, worst residual, time and error against a run with a 1000× tighter
-//! Newton tolerance), converged with a clamp (a diagonal shift or the residual's
-//! round-off floor was needed), or a typed error. A panic or a non-finite value passed on
+//! Newton tolerance), converged with a clamp (a fallback diagonal shift, a step retried
+//! with the other Hessian strategy, or the residual's round-off floor was needed), or a
+//! typed error. A panic or a non-finite value passed on
 //! is a failure, and the command exits non-zero if any cell fails. `docs/STABILITY.md`
 //! holds the committed map.
 
@@ -198,6 +199,7 @@ fn cloth_run(model: &str, n: usize, k: f64, dt: f64, steps: usize, tol_factor: f
         res = res.max(f.report.newton.residual);
         secs += f.report.seconds;
         clamped |= (shift_is_fallback && f.report.newton.regularizations > 0)
+            || f.report.fallback.is_some()
             || f.report.newton.residual_floor > sim.integrator().settings.tolerance;
     }
     Ok(Run {
@@ -262,7 +264,8 @@ fn tet_run(
         its += r.newton.iterations as f64;
         res = res.max(r.newton.residual);
         secs += r.seconds;
-        clamped |= r.newton.regularizations > 0 || r.newton.residual_floor > ie.settings.tolerance;
+        clamped |=
+            r.newton.regularizations > 0 || r.fallback.is_some() || r.newton.residual_floor > ie.settings.tolerance;
     }
     Ok(Run {
         positions: ie.positions().to_vec(),
@@ -514,8 +517,9 @@ fn write_outputs(out: &std::path::Path, cells: &[Cell], quick: bool, seconds: f6
     let families = distinct(cells.iter().map(|c| c.family.as_str()));
     let mut md = format!(
         "# Stability map ({} grid)\n\nProduced by `cargo xtask stability{}` in {seconds:.0} s. Outcome per cell: \
-         **C** converged, **K** converged with a clamp (a diagonal shift, the residual's round-off floor, or an \
-         SOCP point left unpolished with edges at their bound), **E** a typed error, **F** a failure (a panic or a NaN passed on). The number is the \
+         **C** converged, **K** converged with a clamp (a diagonal shift as a fallback, a step retried with the \
+         other Hessian strategy, the residual's round-off floor, or an SOCP point handed over unpolished with edges \
+         at their bound), **E** a typed error, **F** a failure (a panic or a NaN passed on). The number is the \
          mean Newton (or interior-point) iterations per step.\n\n",
         if quick { "quick" } else { "full" },
         if quick { " --quick" } else { "" }

@@ -14,7 +14,7 @@ use std::time::Instant;
 use crate::energies::Inertia;
 use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result};
-use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
+use crate::newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 
 /// What one time step did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -26,6 +26,9 @@ pub struct StepReport {
     pub kinetic_energy: f64,
     /// Wall time of the whole step, including bookkeeping (s).
     pub seconds: f64,
+    /// The Hessian strategy of a second attempt, when the first (the settings') did not
+    /// converge: `Never` and `WhenIndefinite` fall back on each other.
+    pub fallback: Option<HessianProjection>,
 }
 
 /// The implicit Euler integrator over a list of potential terms.
@@ -136,10 +139,33 @@ impl ImplicitEuler {
         for &(dof, value) in prescribed {
             x[dof] = value;
         }
-        let newton = {
-            let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
-            self.solver.minimize(&all, &mut x, &self.settings)?
+        let start_x = x.clone();
+        let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
+        let mut fallback = None;
+        let newton = match self.solver.minimize(&all, &mut x, &self.settings) {
+            Ok(r) => r,
+            Err(first @ Error::NotConverged { .. }) => {
+                // Shifting the exact Hessian leaves saddles fast but can wander in a
+                // crumpling sheet; projecting is steady there but slow to leave a saddle
+                // (docs/CLOTH.md, "Definiteness"). Where one fails the other often
+                // converges, so a failed step is retried once with the other.
+                let other = match self.settings.projection {
+                    HessianProjection::Never => HessianProjection::WhenIndefinite,
+                    HessianProjection::WhenIndefinite => HessianProjection::Never,
+                    HessianProjection::Always => return Err(first),
+                };
+                x.copy_from_slice(&start_x);
+                let settings = NewtonSettings {
+                    projection: other,
+                    ..self.settings
+                };
+                let r = self.solver.minimize(&all, &mut x, &settings).map_err(|_| first)?;
+                fallback = Some(other);
+                r
+            }
+            Err(e) => return Err(e),
         };
+        drop(all);
         let potential_energy = self.terms.iter().map(|t| t.value(&x)).sum();
         let dt = self.dt();
         let kinetic_energy = self
@@ -159,6 +185,7 @@ impl ImplicitEuler {
             potential_energy,
             kinetic_energy,
             seconds: start.elapsed().as_secs_f64(),
+            fallback,
         })
     }
 
