@@ -50,5 +50,7 @@ pub mod metrics;
 pub mod ops;
 pub mod params;
 pub mod pca;
+pub mod rollout;
 
+pub use candle_core::Device;
 pub use error::{Error, Result};

@@ -372,3 +372,52 @@ fn training_the_autoencoder_on_the_quick_sheet_lowers_every_loss() {
     assert!(v1 < 0.01 * v0, "L_vert {v0} → {v1}");
     assert!(e1 < 0.01 * e0, "L_ephys {e0} → {e1}");
 }
+
+#[test]
+fn latent_rollout_decodes_like_the_ops_and_feeds_its_codes_back() {
+    use weft_nn::embed::{LatentSimulator, LatentSimulatorConfig};
+    use weft_nn::rollout::LatentRollout;
+    let c = acap_case();
+    let sheet = weft_mesh::generators::sheet(5, 1.0).unwrap();
+    let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
+    let mut params = Params::new(&cpu(), 21);
+    let ae = MeshAutoencoder::new(
+        &mut params,
+        graph,
+        AutoencoderConfig {
+            conv_layers: 1,
+            latent: 6,
+        },
+    )
+    .unwrap();
+    let sim = LatentSimulator::new(
+        &mut params,
+        LatentSimulatorConfig {
+            latent: 6,
+            controls: 6,
+            hidden: vec![8],
+        },
+    )
+    .unwrap();
+    let z1 = vec![0.1, -0.2, 0.3, 0.0, 0.5, -0.1];
+    let z2 = vec![0.2, -0.1, 0.2, 0.1, 0.4, 0.0];
+    let q: Vec<f64> = c.pins[0].iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    let mut rollout = LatentRollout::new(&ae, &sim, c.inverse.clone(), c.normalization.clone(), &z1, &z2).unwrap();
+    let (first, profile) = rollout.step_profiled(&q).unwrap();
+    let second = rollout.step(&q).unwrap();
+    assert!(profile.solve > std::time::Duration::ZERO);
+    // The same frames through the tensor path: MLP, decoder, then the ACAP⁻¹ op.
+    let t = |z: &[f64]| Tensor::from_vec(z.iter().map(|&v| v as f32).collect::<Vec<_>>(), (1, 6), &cpu()).unwrap();
+    let qt = Tensor::from_vec(q.iter().map(|&v| v as f32).collect::<Vec<_>>(), (1, 6), &cpu()).unwrap();
+    let z3 = sim.step(&t(&z1), &t(&z2), &qt).unwrap();
+    let z4 = sim.step(&t(&z2), &z3, &qt).unwrap();
+    let op = AcapInverse::new(c.inverse.clone(), c.normalization.clone(), vec![c.pins[0].clone()]);
+    for (z, got) in [(z3, first), (z4, second)] {
+        let expect: Vec<f64> = to_vec3(&op.apply(&ae.decode(&z).unwrap()).unwrap())
+            .iter()
+            .map(|&v| v as f64)
+            .collect();
+        assert!(max_norm_rel_error(&got, &expect) < 1e-5);
+    }
+    assert!(matches!(rollout.step(&q[..3]), Err(Error::Shape { .. })));
+}
