@@ -108,6 +108,13 @@ pub struct EmbedData {
     features: Vec<Vec<Vec<Feature>>>,
     pub inverse: Arc<PoissonPseudoInverse>,
     pub integrator: Arc<ImplicitEuler>,
+    /// `Δt² / m̄` (m²/J, `m̄` the mean vertex mass): multiplies `L_phys` in the losses.
+    /// Near a frame, `L_phys ≈ L* + ½ δᵀ H δ` with `H ⪰ M/Δt²`, so the scaled value
+    /// grows like `½‖δ‖²` in soft directions and faster in stiff ones: the same units
+    /// and order as `L_vert`, whatever the scene's masses, stiffness and step. Without
+    /// it one λ_ephys means different things on every scene (Tan et al. tuned it per
+    /// dataset).
+    pub phys_scale: f64,
     /// Training windows (frame `m` and both predecessors in the training split).
     pub train_windows: Vec<FrameRef>,
     /// Test frames with two predecessors in their sequence (for M_phys and roll-outs).
@@ -143,6 +150,9 @@ impl EmbedData {
             .collect();
         let inverse = Arc::new(PoissonPseudoInverse::new(&acap, &dataset.grasp)?);
         let integrator = Arc::new(ClothSimulation::new(dataset.scene.clone(), Some(&dataset.dir))?.into_integrator());
+        let masses = integrator.masses();
+        let mean_mass = masses.iter().sum::<f64>() / masses.len().max(1) as f64;
+        let phys_scale = integrator.dt().powi(2) / mean_mass;
         let mut train_windows = Vec::new();
         let mut test_frames = Vec::new();
         for (s, seq) in dataset.sequences.iter().enumerate() {
@@ -167,6 +177,7 @@ impl EmbedData {
             features,
             inverse,
             integrator,
+            phys_scale,
             train_windows,
             test_frames,
         })
@@ -374,7 +385,7 @@ impl EmbedModel {
             if w.ephys != 0.0 {
                 let p1 = self.positions(data, &b1, &z1)?;
                 let p2 = self.positions(data, &b2, &z2)?;
-                let ephys = lphys.apply(&p2, &p1, &p)?.mean_all()?;
+                let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * data.phys_scale)?;
                 add(ephys, w.ephys, &mut terms.ephys)?;
             }
         } else {
@@ -390,7 +401,7 @@ impl EmbedModel {
                 let p = self.positions(data, batch, &predicted)?;
                 let p1 = self.positions(data, &b1, &z1)?;
                 let p2 = self.positions(data, &b2, &z2)?;
-                let mphys = lphys.apply(&p2, &p1, &p)?.mean_all()?;
+                let mphys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * data.phys_scale)?;
                 add(mphys, w.mphys, &mut terms.mphys)?;
             }
         }
