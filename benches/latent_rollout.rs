@@ -53,7 +53,10 @@ fn latent_rollout(c: &mut Criterion) {
         RefCell::new(LatentRollout::new(&ae, &latent_sim, inverse.clone(), normalization.clone(), &z, &z).unwrap());
     // Where a roll-out frame's time goes, averaged over 50 frames.
     let mut total = weft_nn::rollout::FrameProfile::default();
+    // Each frame is one step from the same two codes: with untrained weights a long
+    // recurrent roll-out grows without bound (and the NaN guard stops it).
     for _ in 0..50 {
+        rollout.borrow_mut().restart(&z, &z).unwrap();
         let (_, p) = rollout.borrow_mut().step_profiled(&q).unwrap();
         total.latent_step += p.latent_step;
         total.decoder += p.decoder;
@@ -74,7 +77,11 @@ fn latent_rollout(c: &mut Criterion) {
         b.iter(|| sim.borrow_mut().step().unwrap())
     });
     group.bench_function("latent roll-out frame (MLP + decoder + ACAP⁻¹)", |b| {
-        b.iter(|| rollout.borrow_mut().step(&q).unwrap())
+        b.iter(|| {
+            let mut r = rollout.borrow_mut();
+            r.restart(&z, &z).unwrap();
+            r.step(&q).unwrap()
+        })
     });
     group.finish();
 }

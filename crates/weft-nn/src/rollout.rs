@@ -60,6 +60,14 @@ impl<'a> LatentRollout<'a> {
         })
     }
 
+    /// Restarts the roll-out from the codes `z1`, `z2`.
+    pub fn restart(&mut self, z1: &[f64], z2: &[f64]) -> Result<()> {
+        let latent = self.autoencoder.config().latent;
+        self.previous = convert::f64_to_tensor("latent code", z1, &[1, latent], &Device::Cpu)?;
+        self.current = convert::f64_to_tensor("latent code", z2, &[1, latent], &Device::Cpu)?;
+        Ok(())
+    }
+
     /// The next frame's positions (flat, metres) for the grasped positions `q` (3 per
     /// grasped vertex, in the pseudo-inverse's pin order).
     pub fn step(&mut self, q: &[f64]) -> Result<Vec<f64>> {
