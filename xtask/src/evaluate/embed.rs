@@ -14,7 +14,7 @@ use anyhow::Context;
 use clap::{Args as _, FromArgMatches as _};
 use weft_nn::data::ClothDataset;
 use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
-use weft_nn::metrics::{RmsAccumulator, StedParams, sted};
+use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
 
 use super::EvalContext;
@@ -177,6 +177,18 @@ fn score(data: &EmbedData, predicted: &[Vec<f64>]) -> anyhow::Result<Scores> {
     })
 }
 
+/// nDCG over the full ranking (K = N − 1) of the test frames' codes by their motion
+/// labels (Tan et al. §VI-C; docs/RESULTS.md).
+fn full_ranking_ndcg(data: &EmbedData, codes: &[Vec<f64>]) -> anyhow::Result<f64> {
+    let labels: Vec<u8> = data
+        .test_frames
+        .iter()
+        .map(|f| data.dataset.sequences[f.sequence].labels[f.frame])
+        .collect();
+    let curve = ndcg_curve(codes, &labels)?;
+    Ok(*curve.last().context("fewer than two test frames")?)
+}
+
 pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("embed", ctx.size);
     let root = ctx.out.join("embed");
@@ -230,6 +242,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                 }
             }
         };
+        let mut ndcg: Vec<(&str, f64)> = Vec::new();
         for (method, no_pb) in [("ours", false), ("no-pb", true)] {
             let model_dir = root.join("models").join(scene).join(method);
             crate::train::run(TrainCommand::Embed(EmbedArgs {
@@ -243,6 +256,10 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             }))
             .with_context(|| format!("training {method} on {scene}"))?;
             let model = EmbedModel::load(&model_dir, &data)?;
+            ndcg.push((
+                method,
+                full_ranking_ndcg(&data, &model.codes(&data, &data.test_frames)?)?,
+            ));
             let t = Instant::now();
             let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
             let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
@@ -270,12 +287,28 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
         push(&mut out, "pca", &score(&data, &predicted)?, seconds);
         write_predictions(ctx, scene, "pca", &data, &predicted)?;
+        let codes: Vec<Vec<f64>> = data
+            .test_frames
+            .iter()
+            .map(|f| pca.encode(data.dataset.sequences[f.sequence].frame(f.frame)))
+            .collect();
+        ndcg.push(("pca", full_ranking_ndcg(&data, &codes)?));
+        let paper = match scene {
+            "sheet-ms" => " (Tan et al. §VI-C: 0.8045)",
+            "ball-ms" => " (Tan et al. §VI-C: 0.9128)",
+            _ => "",
+        };
         out.notes.push(format!(
-            "embed/{scene}: {} vertices, {} training windows, {} test frames, PCA kept {} components",
+            "embed/{scene}: {} vertices, {} training windows, {} test frames, PCA kept {} components; nDCG of \
+             motion-label retrieval in latent space over the full ranking: {}{paper}",
             data.num_vertices(),
             data.train_windows.len(),
             data.test_frames.len(),
-            pca.num_components()
+            pca.num_components(),
+            ndcg.iter()
+                .map(|(m, v)| format!("{m} {v:.4}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
     }
     Ok(out)
