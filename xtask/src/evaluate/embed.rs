@@ -19,7 +19,7 @@ use weft_nn::pca::PositionPca;
 use weft_nn::rollout::LatentRollout;
 
 use super::EvalContext;
-use super::results::{ExperimentOutput, Timing};
+use super::results::{Curve, ExperimentOutput, Timing};
 use crate::dataset::Size;
 use crate::output::{Array, write_safetensors};
 use crate::train::{EmbedArgs, TrainCommand};
@@ -220,6 +220,37 @@ fn rollout_2_to_3(data: &EmbedData, model: &EmbedModel) -> anyhow::Result<f64> {
     Ok(acc.m_rms_mm())
 }
 
+/// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
+/// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
+/// ground truth shows how the error grows with the number of frames N.
+fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> anyhow::Result<Curve> {
+    let seq = &data.dataset.sequences[0];
+    let refs = [0, 1].map(|frame| FrameRef { sequence: 0, frame });
+    let codes = model.codes(data, &refs)?;
+    let mut rollout = LatentRollout::new(
+        &model.autoencoder,
+        &model.simulator,
+        data.inverse.clone(),
+        data.normalization.clone(),
+        &codes[0],
+        &codes[1],
+    )?;
+    let map: Vec<usize> = (0..data.num_vertices()).collect();
+    let mut curve = Curve {
+        scene: scene.into(),
+        method: method.into(),
+        frames: Vec::new(),
+        error_mm: Vec::new(),
+    };
+    for m in 2..seq.num_frames() {
+        let p = rollout.step(seq.control(m))?;
+        let mut acc = RmsAccumulator::default();
+        curve.frames.push(m as f64);
+        curve.error_mm.push(acc.add(&p, seq.frame(m), &map));
+    }
+    Ok(curve)
+}
+
 pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("embed", ctx.size);
     let root = ctx.out.join("embed");
@@ -293,6 +324,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                 full_ranking_ndcg(&data, &model.codes(&data, &data.test_frames)?)?,
             ));
             rollouts.push((method, rollout_2_to_3(&data, &model)?));
+            out.curves.push(long_rollout(scene, method, &data, &model)?);
             let t = Instant::now();
             let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
             let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
