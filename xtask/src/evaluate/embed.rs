@@ -190,6 +190,23 @@ fn full_ranking_ndcg(data: &EmbedData, codes: &[Vec<f64>]) -> anyhow::Result<f64
     Ok(*curve.last().context("fewer than two test frames")?)
 }
 
+/// A latent roll-out started from the encoded ground-truth frames `start`.
+fn rollout_from<'a>(
+    data: &EmbedData,
+    model: &'a EmbedModel,
+    start: [FrameRef; 2],
+) -> anyhow::Result<LatentRollout<'a>> {
+    let codes = model.codes(data, &start)?;
+    Ok(LatentRollout::new(
+        &model.autoencoder,
+        &model.simulator,
+        data.inverse.clone(),
+        data.normalization.clone(),
+        &codes[0],
+        &codes[1],
+    )?)
+}
+
 /// Tan et al. Table IV's test: in each 5-frame test window, encode the first two frames,
 /// let the latent simulator predict the other three from their controls, decode them
 /// (`LatentRollout`), and return M_rms (mm) of the predicted frames.
@@ -201,15 +218,7 @@ fn rollout_2_to_3(data: &EmbedData, model: &EmbedModel) -> anyhow::Result<f64> {
         if w.len() < 5 {
             continue;
         }
-        let codes = model.codes(data, &[frames[w[0]], frames[w[1]]])?;
-        let mut rollout = LatentRollout::new(
-            &model.autoencoder,
-            &model.simulator,
-            data.inverse.clone(),
-            data.normalization.clone(),
-            &codes[0],
-            &codes[1],
-        )?;
+        let mut rollout = rollout_from(data, model, [frames[w[0]], frames[w[1]]])?;
         for &k in &w[2..5] {
             let f = frames[k];
             let seq = &data.dataset.sequences[f.sequence];
@@ -225,16 +234,7 @@ fn rollout_2_to_3(data: &EmbedData, model: &EmbedModel) -> anyhow::Result<f64> {
 /// ground truth shows how the error grows with the number of frames N.
 fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> anyhow::Result<Curve> {
     let seq = &data.dataset.sequences[0];
-    let refs = [0, 1].map(|frame| FrameRef { sequence: 0, frame });
-    let codes = model.codes(data, &refs)?;
-    let mut rollout = LatentRollout::new(
-        &model.autoencoder,
-        &model.simulator,
-        data.inverse.clone(),
-        data.normalization.clone(),
-        &codes[0],
-        &codes[1],
-    )?;
+    let mut rollout = rollout_from(data, model, [0, 1].map(|frame| FrameRef { sequence: 0, frame }))?;
     let map: Vec<usize> = (0..data.num_vertices()).collect();
     let mut curve = Curve {
         scene: scene.into(),
