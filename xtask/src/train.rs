@@ -95,9 +95,10 @@ fn save_checkpoint(
     if fresh.exists() {
         std::fs::remove_dir_all(&fresh)?;
     }
-    let record = serde_json::to_value(progress)?;
-    checkpoint::save(&fresh.join("autoencoder"), &model.autoencoder_params, adams.0, &record)?;
-    checkpoint::save(&fresh.join("simulator"), &model.simulator_params, adams.1, &record)?;
+    // `progress.json` is the one record of where training stands.
+    let none = serde_json::Value::Null;
+    checkpoint::save(&fresh.join("autoencoder"), &model.autoencoder_params, adams.0, &none)?;
+    checkpoint::save(&fresh.join("simulator"), &model.simulator_params, adams.1, &none)?;
     write_atomic(&fresh.join("progress.json"), &serde_json::to_string_pretty(&progress)?)?;
     let current = out.join("checkpoint");
     let old = out.join("checkpoint.old");

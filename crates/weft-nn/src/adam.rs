@@ -76,7 +76,8 @@ impl Adam {
         let mut updates: Vec<(&String, &Var, Tensor, Tensor)> = Vec::new();
         for (name, var) in params.vars() {
             let Some(g) = grads.get(var.as_tensor()) else { continue };
-            let sum: f32 = g.sqr()?.sum_all()?.to_scalar()?;
+            let g2 = g.sqr()?;
+            let sum: f32 = g2.sum_all()?.to_scalar()?;
             if !sum.is_finite() {
                 return Err(Error::NonFinite {
                     what: "gradient",
@@ -86,7 +87,7 @@ impl Adam {
             let (m, v) = &self.moments[name];
             let s = &self.settings;
             let m = ((m * s.beta1)? + (g * (1.0 - s.beta1))?)?;
-            let v = ((v * s.beta2)? + (g.sqr()? * (1.0 - s.beta2))?)?;
+            let v = ((v * s.beta2)? + (g2 * (1.0 - s.beta2))?)?;
             updates.push((name, var, m, v));
         }
         self.step += 1;

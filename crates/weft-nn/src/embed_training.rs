@@ -117,7 +117,7 @@ pub struct EmbedData {
     pub phys_scale: f64,
     /// Training windows (frame `m` and both predecessors in the training split).
     pub train_windows: Vec<FrameRef>,
-    /// Test frames with two predecessors in their sequence (for M_phys and roll-outs).
+    /// Every test frame (the last 5 of each 17), in sequence order.
     pub test_frames: Vec<FrameRef>,
 }
 
@@ -201,34 +201,35 @@ impl EmbedData {
         Ok(Tensor::from_vec(flat, (frames.len(), v, 9), device)?)
     }
 
-    /// `[B, V, 3]` ground-truth positions of `frames`.
-    pub fn position_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
-        let v = self.num_vertices();
+    /// The f32 tensor of shape `[B, shape…]` stacking `values(sequence, frame)` of `frames`.
+    fn stack(
+        &self,
+        frames: &[FrameRef],
+        shape: &[usize],
+        device: &Device,
+        values: impl Fn(&crate::data::ClothSequence, usize) -> &[f64],
+    ) -> Result<Tensor> {
         let flat: Vec<f32> = frames
             .iter()
             .flat_map(|f| {
-                self.dataset.sequences[f.sequence]
-                    .frame(f.frame)
+                values(&self.dataset.sequences[f.sequence], f.frame)
                     .iter()
                     .map(|&x| x as f32)
             })
             .collect();
-        Ok(Tensor::from_vec(flat, (frames.len(), v, 3), device)?)
+        let mut dims = vec![frames.len()];
+        dims.extend(shape);
+        Ok(Tensor::from_vec(flat, dims, device)?)
+    }
+
+    /// `[B, V, 3]` ground-truth positions of `frames`.
+    pub fn position_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
+        self.stack(frames, &[self.num_vertices(), 3], device, |s, m| s.frame(m))
     }
 
     /// `[B, 3G]` controls `q_m` of `frames`.
     pub fn control_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
-        let g = 3 * self.dataset.grasp.len();
-        let flat: Vec<f32> = frames
-            .iter()
-            .flat_map(|f| {
-                self.dataset.sequences[f.sequence]
-                    .control(f.frame)
-                    .iter()
-                    .map(|&x| x as f32)
-            })
-            .collect();
-        Ok(Tensor::from_vec(flat, (frames.len(), g), device)?)
+        self.stack(frames, &[3 * self.dataset.grasp.len()], device, |s, m| s.control(m))
     }
 
     /// ACAP⁻¹ for `frames`, pinned at their grasped positions.
@@ -362,13 +363,19 @@ impl EmbedModel {
         };
         let lphys = data.lphys_op();
         if stage == 1 || stage == 3 {
-            let (z1, z2) = (
-                self.autoencoder.encode(&data.feature_batch(&b1, device)?)?,
-                self.autoencoder.encode(&data.feature_batch(&b2, device)?)?,
-            );
-            let z_used = if stage == 3 {
+            // The predecessors' codes feed the latent step (stage 3) and L_ephys; the
+            // baseline in stage 1 needs neither.
+            let predecessors = if stage == 3 || w.ephys != 0.0 {
+                Some((
+                    self.autoencoder.encode(&data.feature_batch(&b1, device)?)?,
+                    self.autoencoder.encode(&data.feature_batch(&b2, device)?)?,
+                ))
+            } else {
+                None
+            };
+            let z_used = if let (3, Some((z1, z2))) = (stage, &predecessors) {
                 let q = data.control_batch(batch, device)?;
-                let predicted = self.simulator.step(&z2, &z1, &q)?;
+                let predicted = self.simulator.step(z2, z1, &q)?;
                 let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
                 add(sim, w.sim, &mut terms.sim)?;
                 ((&z * 0.5)? + (predicted * 0.5)?)?
@@ -382,9 +389,9 @@ impl EmbedModel {
             let truth = data.position_batch(batch, device)?;
             let vert = (&p - &truth)?.sqr()?.sum((1, 2))?.mean_all()?;
             add(vert, w.vert, &mut terms.vert)?;
-            if w.ephys != 0.0 {
-                let p1 = self.positions(data, &b1, &z1)?;
-                let p2 = self.positions(data, &b2, &z2)?;
+            if let (true, Some((z1, z2))) = (w.ephys != 0.0, &predecessors) {
+                let p1 = self.positions(data, &b1, z1)?;
+                let p2 = self.positions(data, &b2, z2)?;
                 let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * data.phys_scale)?;
                 add(ephys, w.ephys, &mut terms.ephys)?;
             }
