@@ -18,6 +18,13 @@ mod train;
 
 use clap::{Parser, Subcommand};
 
+/// Training allocates and frees tensors the size of the embedding's dense layers (tens of
+/// MB) every step; glibc's allocator returns each to the kernel and the next one is
+/// page-faulted in afresh, which cost more than the arithmetic (docs/EMBEDDING.md,
+/// *Training cost*). mimalloc keeps freed memory for reuse.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[derive(Parser)]
 #[command(
     name = "cargo xtask",

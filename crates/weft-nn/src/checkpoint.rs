@@ -59,7 +59,7 @@ fn read_safetensors(path: &Path, params: &Params) -> Result<BTreeMap<String, Ten
 pub fn save(dir: &Path, params: &Params, adam: &Adam, extra: &serde_json::Value) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
     write_safetensors(&dir.join("params.safetensors"), params.tensors())?;
-    let (moments, adam_steps) = adam.state();
+    let (moments, adam_steps) = adam.state(params.device())?;
     write_safetensors(&dir.join("optimizer.safetensors"), moments)?;
     let state = State {
         adam_steps,

@@ -36,6 +36,34 @@ pub struct ClothSequence {
 }
 
 impl ClothSequence {
+    /// A sequence from its arrays (`F` frames of `V` vertices, `G` grasped), e.g. simulated
+    /// in memory; the lengths must agree.
+    pub fn new(
+        index: usize,
+        positions: Vec<f64>,
+        controls: Vec<f64>,
+        labels: Vec<u8>,
+        num_vertices: usize,
+        num_grasped: usize,
+    ) -> Result<Self> {
+        let f = labels.len();
+        if positions.len() != 3 * num_vertices * f || controls.len() != 3 * num_grasped * f {
+            return Err(Error::Shape {
+                what: "cloth sequence",
+                expected: format!("{f} frames of {num_vertices} positions and {num_grasped} controls"),
+                got: format!("{} position and {} control values", positions.len(), controls.len()),
+            });
+        }
+        Ok(Self {
+            index,
+            positions,
+            controls,
+            labels,
+            num_vertices,
+            num_grasped,
+        })
+    }
+
     pub fn num_frames(&self) -> usize {
         self.labels.len()
     }

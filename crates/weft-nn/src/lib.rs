@@ -8,7 +8,9 @@
 //! - [`ops`]: the physics as custom ops with hand-written backward passes — ACAP⁻¹ through
 //!   weft-acap's pre-factorised Poisson solve and its vector–Jacobian product, and
 //!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
-//!   frames stopped (Eq. 9–10);
+//!   frames stopped (Eq. 9–10), and the elastic potential `P_s + P_b`;
+//! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
+//!   same potential minimised over every vertex;
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
 //!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
 //!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
@@ -45,6 +47,7 @@ pub mod embed;
 pub mod embed_training;
 pub mod error;
 pub mod graph;
+pub mod ik;
 pub mod layers;
 pub mod metrics;
 pub mod ops;

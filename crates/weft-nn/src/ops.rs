@@ -223,3 +223,76 @@ impl CustomOp3 for LPhys {
         Ok((None, None, Some(Tensor::from_vec(out, arg3.dims(), arg3.device())?)))
     }
 }
+
+/// The cloth's elastic potential `P_s + P_b` (Tan et al. Eq. 3) on a batch: `[B, V, 3]`
+/// positions (metres) → `[B]` energies (J), with its gradient from weft-sim's terms. Cloth
+/// inverse kinematics minimises it through `ACAP⁻¹ ∘ D` (§V-A).
+#[derive(Debug, Clone)]
+pub struct ClothPotential {
+    integrator: Arc<ImplicitEuler>,
+}
+
+impl ClothPotential {
+    /// The potential of `integrator`'s elastic terms ([`weft_sim::is_cloth_elastic`]).
+    pub fn new(integrator: Arc<ImplicitEuler>) -> Self {
+        Self { integrator }
+    }
+
+    fn terms(&self) -> impl Iterator<Item = &dyn weft_sim::Energy> {
+        self.integrator
+            .terms()
+            .iter()
+            .map(|t| t.as_ref())
+            .filter(|t| weft_sim::is_cloth_elastic(*t))
+    }
+
+    pub fn apply(&self, p: &Tensor) -> crate::Result<Tensor> {
+        let n = self.integrator.positions().len();
+        let (_, v, c) = p.dims3()?;
+        if 3 * v != n || c != 3 {
+            return Err(crate::Error::Shape {
+                what: "cloth potential input",
+                expected: format!("[B, {}, 3]", n / 3),
+                got: format!("{:?}", p.dims()),
+            });
+        }
+        Ok(p.contiguous()?.apply_op1(self.clone())?)
+    }
+
+    fn split(&self, x: &[f32]) -> candle_core::Result<Vec<Vec<f64>>> {
+        let n = self.integrator.positions().len();
+        let x = convert::f32_to_f64("cloth potential input", x).map_err(op_error)?;
+        Ok(x.chunks_exact(n).map(<[f64]>::to_vec).collect())
+    }
+}
+
+impl CustomOp1 for ClothPotential {
+    fn name(&self) -> &'static str {
+        "cloth-potential"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+        let p = self.split(f32_slice(self.name(), s, l)?)?;
+        let values: Vec<f64> = p.par_iter().map(|x| self.terms().map(|t| t.value(x)).sum()).collect();
+        let out = convert::f64_to_f32("cloth potential", &values).map_err(op_error)?;
+        Ok((CpuStorage::F32(out), Shape::from(p.len())))
+    }
+
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let p = self.split(&arg.flatten_all()?.to_vec1()?)?;
+        let scale: Vec<f32> = grad_res.to_vec1()?;
+        let flat: Vec<f64> = p
+            .par_iter()
+            .zip(&scale)
+            .flat_map_iter(|(x, &s)| {
+                let mut g = vec![0.0; x.len()];
+                for t in self.terms() {
+                    t.add_gradient(x, &mut g);
+                }
+                g.into_iter().map(move |v| v * s as f64)
+            })
+            .collect();
+        let out = convert::f64_to_f32("∂(P_s + P_b)/∂p", &flat).map_err(op_error)?;
+        Ok(Some(Tensor::from_vec(out, arg.dims(), arg.device())?))
+    }
+}

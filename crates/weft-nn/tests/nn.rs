@@ -421,3 +421,133 @@ fn latent_rollout_decodes_like_the_ops_and_feeds_its_codes_back() {
     }
     assert!(matches!(rollout.step(&q[..3]), Err(Error::Shape { .. })));
 }
+
+#[test]
+fn cloth_potential_op_is_the_elastic_terms_and_its_gradient_matches_finite_differences() {
+    use weft_nn::ops::ClothPotential;
+    let (ie, frames) = lphys_case();
+    let v = frames[0].len() / 3;
+    let mut rng = TestRng::new(31);
+    let p: Vec<f64> = frames[3].iter().map(|x| x + rng.uniform(-2e-3, 2e-3)).collect();
+    let p = p.iter().map(|&x| x as f32 as f64).collect::<Vec<_>>();
+    let elastic = |x: &[f64]| -> f64 {
+        ie.terms()
+            .iter()
+            .filter(|t| weft_sim::is_cloth_elastic(t.as_ref()))
+            .map(|t| t.value(x))
+            .sum()
+    };
+    // Gravity is in the integrator but not in P_s + P_b.
+    let all: f64 = ie.terms().iter().map(|t| t.value(&p)).sum();
+    assert!((all - elastic(&p)).abs() > 1e-6 * all.abs());
+    let var = Var::from_vec(p.iter().map(|&x| x as f32).collect::<Vec<_>>(), (1, v, 3), &cpu()).unwrap();
+    let op = ClothPotential::new(ie.clone());
+    let value = op.apply(var.as_tensor()).unwrap();
+    let got = value.to_vec1::<f32>().unwrap()[0] as f64;
+    assert!(
+        (got - elastic(&p)).abs() <= 1e-6 * elastic(&p).abs(),
+        "{got} vs {}",
+        elastic(&p)
+    );
+    let grads = value.sum_all().unwrap().backward().unwrap();
+    let analytic: Vec<f64> = to_vec3(grads.get(var.as_tensor()).unwrap())
+        .iter()
+        .map(|&x| x as f64)
+        .collect();
+    let fd = weft_testkit::fd_gradient(elastic, &p, 1e-7);
+    let err = max_norm_rel_error(&analytic, &fd);
+    assert!(err < 1e-4, "∂(P_s + P_b)/∂p vs FD: {err:e}");
+    let wrong = Tensor::zeros((1, v + 1, 3), DType::F32, &cpu()).unwrap();
+    assert!(matches!(op.apply(&wrong), Err(Error::Shape { .. })));
+}
+
+/// The quick `sheet-ms` simulated for `frames` frames, as an in-memory dataset.
+fn quick_sheet_dataset(frames: usize) -> weft_nn::data::ClothDataset {
+    let scene = ClothScene::builtin("sheet-ms", true).unwrap();
+    let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
+    let rest = sim.mesh().clone();
+    let grasp = sim.grasp_vertices().to_vec();
+    let (mut positions, mut controls, mut labels) = (sim.integrator().positions().to_vec(), Vec::new(), Vec::new());
+    for m in 0..frames {
+        let (q, label) = sim.controls_at(m);
+        controls.extend(q.iter().flat_map(|p| [p.x, p.y, p.z]));
+        labels.push(label.code());
+        if m + 1 < frames {
+            positions.extend(sim.step().unwrap().positions);
+        }
+    }
+    let sequence =
+        weft_nn::data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
+    weft_nn::data::ClothDataset {
+        dir: std::env::temp_dir(),
+        name: "sheet-ms".into(),
+        scene,
+        rest,
+        grasp,
+        sequences: vec![sequence],
+    }
+}
+
+#[test]
+fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
+    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
+    use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let config = EmbedTrainingConfig {
+        autoencoder: AutoencoderConfig {
+            conv_layers: 1,
+            latent: 8,
+        },
+        ..EmbedTrainingConfig::default()
+    };
+    let model = EmbedModel::new(config, &data).unwrap();
+    let z0 = model
+        .codes(&data, &[FrameRef { sequence: 0, frame: 0 }])
+        .unwrap()
+        .remove(0);
+    // New grasp positions: frame 15's corners, moved 5 cm towards each other.
+    let q = data.dataset.sequences[0].control(15);
+    let mut pins: Vec<Vector3<f64>> = q.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect();
+    let mid = (pins[0] + pins[1]) / 2.0;
+    for p in &mut pins {
+        *p += (mid - *p).normalize() * 0.05;
+    }
+    let settings = IkSettings {
+        iterations: 60,
+        learning_rate: 0.05,
+    };
+    let latent = latent_ik(&model, &data, &z0, &pins, settings).unwrap();
+    assert!(
+        latent.energy < 0.9 * latent.start_energy,
+        "{} → {}",
+        latent.start_energy,
+        latent.energy
+    );
+    let elastic = |x: &[f64]| -> f64 {
+        data.integrator
+            .terms()
+            .iter()
+            .filter(|t| weft_sim::is_cloth_elastic(t.as_ref()))
+            .map(|t| t.value(x))
+            .sum()
+    };
+    assert!((elastic(&latent.positions) - latent.energy).abs() <= 1e-4 * latent.energy);
+    for (k, &g) in data.dataset.grasp.iter().enumerate() {
+        let got = Vector3::new(
+            latent.positions[3 * g],
+            latent.positions[3 * g + 1],
+            latent.positions[3 * g + 2],
+        );
+        assert!((got - pins[k]).norm() < 1e-5, "pin {k} moved to {got:?}");
+    }
+    // The full space, from the same start, reaches a lower potential.
+    let x0 = decode_pinned(&model, &data, &z0, &pins).unwrap();
+    assert!((elastic(&x0) - latent.start_energy).abs() <= 1e-4 * latent.start_energy);
+    let (full, converged) = full_space_ik(&data.integrator, &x0, 300).unwrap();
+    assert!(converged);
+    assert!(full.energy < latent.energy, "{} vs {}", full.energy, latent.energy);
+    assert!(matches!(
+        latent_ik(&model, &data, &z0[..3], &pins, settings),
+        Err(Error::Shape { .. })
+    ));
+}

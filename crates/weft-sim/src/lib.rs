@@ -48,5 +48,5 @@ pub use integrators::{
 pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 pub use scenes::{
     AnyScene, BUILTIN_SCENES, BUILTIN_VOLUME_SCENES, ClothScene, ClothSimulation, Frame, LoadedScene, MotionLabel,
-    SoftTissueScene, VolumeScene, VolumeSimulation, builtin_names, load,
+    SoftTissueScene, VolumeScene, VolumeSimulation, builtin_names, is_cloth_elastic, load,
 };

@@ -688,3 +688,31 @@ fn a_step_that_fails_with_one_hessian_strategy_is_retried_with_the_other() {
     // The settings are untouched: the next step starts with the scene's strategy again.
     assert_eq!(sim.integrator().settings.projection, HessianProjection::Never);
 }
+
+#[test]
+fn cloth_elastic_terms_are_exactly_stretching_and_bending_in_every_builtin_scene() {
+    // Cloth inverse kinematics minimises P_s + P_b only: one stretching and one bending
+    // term per scene, never gravity or the obstacle.
+    for name in weft_sim::BUILTIN_SCENES {
+        let scene = weft_sim::ClothScene::builtin(name, true).unwrap();
+        let has_obstacle = scene.obstacle.is_some();
+        let sim = weft_sim::ClothSimulation::new(scene, None).unwrap();
+        let terms = sim.integrator().terms();
+        let elastic: Vec<&str> = terms
+            .iter()
+            .filter(|t| weft_sim::is_cloth_elastic(t.as_ref()))
+            .map(|t| t.name())
+            .collect();
+        assert_eq!(elastic.len(), 2, "{name}: {elastic:?}");
+        assert!(
+            elastic[0].contains("stretch") || elastic[0] == "membrane",
+            "{name}: {elastic:?}"
+        );
+        assert!(elastic[1].contains("bend"), "{name}: {elastic:?}");
+        assert_eq!(
+            terms.len(),
+            3 + usize::from(has_obstacle),
+            "{name}: gravity and obstacle besides"
+        );
+    }
+}

@@ -22,7 +22,7 @@ use clap::Args;
 
 use crate::dataset::Size;
 use crate::output::write_json;
-pub use results::{Curve, EnergyBar, ExperimentOutput};
+pub use results::{Curve, EnergyBar, ExperimentOutput, Scatter};
 
 /// Experiments `evaluate` runs, in order.
 pub const EXPERIMENTS: [&str; 3] = ["sim", "proj", "embed"];

@@ -4,6 +4,7 @@
 use anyhow::ensure;
 use serde::{Deserialize, Serialize};
 
+use super::paper::Table;
 use crate::dataset::Size;
 
 /// One measured figure. Field names and meanings are documented in `docs/RESULTS.md`;
@@ -47,6 +48,19 @@ pub struct EnergyBar {
     pub unit: String,
 }
 
+/// A labelled 2-D point set (Tan et al. Fig. 6's embedding plot): one colour per label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scatter {
+    pub scene: String,
+    pub method: String,
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub points: Vec<[f64; 2]>,
+    /// One label per point.
+    pub labels: Vec<String>,
+}
+
 /// Everything one experiment measured.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ExperimentOutput {
@@ -61,6 +75,12 @@ pub struct ExperimentOutput {
     pub failures: Vec<String>,
     /// Settings and facts the tables cite (meshes, tolerances, time steps).
     pub notes: Vec<String>,
+    /// Tables only this experiment can fill (ablations whose models are not methods of
+    /// the records), in the papers' layouts.
+    #[serde(default)]
+    pub tables: Vec<Table>,
+    #[serde(default)]
+    pub scatters: Vec<Scatter>,
     pub wall_seconds: f64,
 }
 
@@ -75,6 +95,8 @@ impl ExperimentOutput {
             renders: Vec::new(),
             failures: Vec::new(),
             notes: Vec::new(),
+            tables: Vec::new(),
+            scatters: Vec::new(),
             wall_seconds: 0.0,
         }
     }

@@ -48,6 +48,7 @@ pub struct Charts {
     pub pareto: Vec<(String, String)>,
     pub rollout: Vec<(String, String)>,
     pub energy: Vec<(String, String)>,
+    pub scatter: Vec<(String, String)>,
 }
 
 pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> anyhow::Result<()> {
@@ -62,6 +63,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             pareto: Vec::new(),
             rollout: Vec::new(),
             energy: Vec::new(),
+            scatter: Vec::new(),
         };
         let (metric, label) = pareto_metric(&o.experiment);
         for scene in distinct(
@@ -100,6 +102,16 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             let title = format!("{} / {scene}: mean energies", o.experiment);
             plots::energy(&out.join(&stem), &title, &bars)?;
             c.energy.push((title, stem));
+        }
+        for sc in &o.scatters {
+            let stem = format!(
+                "plots/scatter-{}-{}-{}",
+                o.experiment,
+                slug(&sc.scene),
+                slug(&sc.method)
+            );
+            plots::scatter(&out.join(&stem), sc)?;
+            c.scatter.push((sc.title.clone(), stem));
         }
         charts.push(c);
     }

@@ -1,5 +1,5 @@
 //! The report's charts, each as PNG and SVG: Pareto plots of time ratio against error,
-//! roll-out error against frame, and energy bar charts.
+//! roll-out error against frame, energy bar charts and labelled 2-D scatters.
 
 use std::path::Path;
 
@@ -7,7 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::fonts;
-use crate::evaluate::{Curve, EnergyBar};
+use crate::evaluate::{Curve, EnergyBar, Scatter};
 
 /// One method's point on a Pareto plot.
 #[derive(Debug, Clone)]
@@ -261,6 +261,61 @@ where
 
 pub fn energy(stem: &Path, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<()> {
     both(stem, |r| energy_on(r, title, bars), |r| energy_on(r, title, bars))
+}
+
+fn scatter_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, s: &Scatter) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let range = |k: usize| {
+        let (lo, hi) = s
+            .points
+            .iter()
+            .map(|p| p[k])
+            .filter(|v| v.is_finite())
+            .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+        let pad = ((hi - lo) * 0.08).max(1e-9);
+        if lo > hi { -1.0..1.0 } else { lo - pad..hi + pad }
+    };
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&s.title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(range(0), range(1))
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    chart
+        .configure_mesh()
+        .x_desc(s.x_label.as_str())
+        .y_desc(s.y_label.as_str())
+        .x_label_formatter(&|v| format!("{v:.2}"))
+        .y_label_formatter(&|v| format!("{v:.2}"))
+        .draw()
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    for (i, label) in super::distinct(s.labels.iter().map(String::as_str))
+        .into_iter()
+        .enumerate()
+    {
+        let colour = palette(i);
+        let points = s
+            .points
+            .iter()
+            .zip(&s.labels)
+            .filter(|(p, l)| l.as_str() == label && p.iter().all(|v| v.is_finite()))
+            .map(|(p, _)| Circle::new((p[0], p[1]), 4, colour.filled()));
+        chart
+            .draw_series(points)
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .label(label.to_string())
+            .legend(move |(x, y)| Circle::new((x + 6, y), 4, colour.filled()));
+    }
+    finish(&root, &mut chart, SeriesLabelPosition::UpperRight)
+}
+
+/// A labelled 2-D scatter, one colour per label.
+pub fn scatter(stem: &Path, s: &Scatter) -> anyhow::Result<()> {
+    both(stem, |r| scatter_on(r, s), |r| scatter_on(r, s))
 }
 
 fn heat_map_on<DB: DrawingBackend>(

@@ -472,6 +472,16 @@ pub struct ClothSimulation {
     jitter: Vec<f64>,
 }
 
+/// Whether `term` is one of the cloth's internal elastic terms, stretching `P_s` or
+/// bending `P_b` (Tan et al. Eq. 3), rather than gravity, an obstacle or inertia: the
+/// potential that cloth inverse kinematics minimises (Tan et al. §V-A).
+pub fn is_cloth_elastic(term: &dyn Energy) -> bool {
+    matches!(
+        term.name(),
+        "stretch springs" | "bend springs" | "membrane" | "dihedral bending"
+    )
+}
+
 impl ClothSimulation {
     pub fn new(scene: ClothScene, base_dir: Option<&std::path::Path>) -> Result<Self> {
         scene.validate()?;

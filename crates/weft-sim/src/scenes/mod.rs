@@ -15,6 +15,6 @@ pub mod load;
 pub mod soft_tissue;
 pub mod volume;
 
-pub use cloth::{BUILTIN_SCENES, ClothScene, ClothSimulation, Frame, MotionLabel};
+pub use cloth::{BUILTIN_SCENES, ClothScene, ClothSimulation, Frame, MotionLabel, is_cloth_elastic};
 pub use load::{AnyScene, LoadedScene, builtin_names, load};
 pub use volume::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene, VolumeSimulation};
