@@ -7,7 +7,8 @@
 //! only those are built: no obstacle, no collision code runs.
 //!
 //! Every scene kind (cloth, volumetric, soft tissue) loads through one [`load`] from a
-//! built-in name or a TOML file.
+//! built-in name or a TOML file. [`warp`] holds the geometric warps of a linear solution
+//! (modal and rotation-strain warping) and NNWarp's per-node inputs.
 //!
 //! This crate is not a learning library (it never touches candle); its only file I/O is
 //! reading scene files and the meshes they name.
@@ -38,6 +39,7 @@ pub mod integrators;
 pub mod newton;
 pub mod rng;
 pub mod scenes;
+pub mod warp;
 
 pub use energy::Energy;
 pub use error::{Error, Result};

@@ -1,0 +1,371 @@
+//! Geometric warps of linear elasticity and NNWarp's per-node inputs (Luo et al., NNWarp
+//! §3 and §5).
+//!
+//! A linear solve gives displacements `ũ`; near each node `i` the displacement gradient
+//! `G_i = ∂u/∂x̄` is fitted by least squares over the node's 1-ring (NNWarp Eq. 6:
+//! `u_j − u_i ≈ G_i (x̄_j − x̄_i)`). Its skew part is an infinitesimal rotation with
+//! rotation vector `w_i` (`[w_i]× = (G_i − G_iᵀ)/2`, half the curl of `u`), its symmetric
+//! part the small strain `S_i`. From these:
+//! - modal warping (Choi & Ko; NNWarp Eq. 4) moves each node by
+//!   `W_MW ũ_i`, `W_MW = ∫₀¹ exp(s [w_i]×) ds`;
+//! - rotation-strain warping (Huang et al.; NNWarp Eq. 5) forms
+//!   `T_i = exp([w_i]×)(S_i + I)` per node and rebuilds positions by one global Poisson
+//!   solve that makes every 1-ring edge `x_j − x_i` as close as possible to
+//!   `T_i (x̄_j − x̄_i)`, the anchors held at rest (factorised once);
+//! - NNWarp's network sees three rotation-invariant kinematic scalars of `(ũ_i, w_i)` in
+//!   a per-node aligned frame (§5, Fig. 12) and three contextual features: geodesic
+//!   distance to the anchors, potential along the force field, digression (Eq. 9).
+//!
+//! All of this is geometry of the linear solution, not physics: no energy is evaluated.
+
+use std::sync::Arc;
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
+use weft_mesh::{TetMesh, TetTopology};
+
+use crate::error::{Error, Result};
+
+fn node(x: &[f64], i: usize) -> Vector3<f64> {
+    Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2])
+}
+
+/// Least-squares displacement gradients over each node's 1-ring (NNWarp Eq. 6).
+#[derive(Debug, Clone)]
+pub struct NodalGradients {
+    /// `neighbors[i]`: the 1-ring of node `i`.
+    neighbors: Vec<Vec<usize>>,
+    /// `weights[i][k] = (P_i P_iᵀ)⁻¹ (x̄_j − x̄_i)` for the `k`-th neighbour `j`, so that
+    /// `G_i = Σ_k (u_j − u_i) weights[i][k]ᵀ`.
+    weights: Vec<Vec<Vector3<f64>>>,
+}
+
+impl NodalGradients {
+    /// Precomputes the fit for every node of `mesh`. A node whose 1-ring spans less than
+    /// three dimensions (cannot happen in a valid tet mesh) is an error.
+    pub fn new(mesh: &TetMesh) -> Result<Self> {
+        let topo = TetTopology::new(mesh);
+        let rest = mesh.positions();
+        let mut neighbors = Vec::with_capacity(rest.len());
+        let mut weights = Vec::with_capacity(rest.len());
+        for (i, xi) in rest.iter().enumerate() {
+            let ring = topo.one_ring.neighbors(i).to_vec();
+            let ppt: Matrix3<f64> = ring
+                .iter()
+                .map(|&j| {
+                    let d = rest[j] - xi;
+                    d * d.transpose()
+                })
+                .sum();
+            let inv = ppt
+                .try_inverse()
+                .filter(|m| m.iter().all(|v| v.is_finite()))
+                .ok_or(Error::InvalidParameter {
+                    name: "node 1-ring",
+                    value: i as f64,
+                    reason: "spans fewer than three dimensions; no displacement gradient",
+                })?;
+            weights.push(ring.iter().map(|&j| inv * (rest[j] - xi)).collect());
+            neighbors.push(ring);
+        }
+        Ok(Self { neighbors, weights })
+    }
+
+    pub fn num_nodes(&self) -> usize {
+        self.neighbors.len()
+    }
+
+    /// `G_i` of the flat displacements `u` (3 per node).
+    pub fn gradient(&self, u: &[f64], i: usize) -> Matrix3<f64> {
+        let ui = node(u, i);
+        self.neighbors[i]
+            .iter()
+            .zip(&self.weights[i])
+            .map(|(&j, c)| (node(u, j) - ui) * c.transpose())
+            .sum()
+    }
+
+    /// Every node's `G_i`.
+    pub fn gradients(&self, u: &[f64]) -> Result<Vec<Matrix3<f64>>> {
+        self.check(u)?;
+        Ok((0..self.num_nodes()).map(|i| self.gradient(u, i)).collect())
+    }
+
+    fn check(&self, u: &[f64]) -> Result<()> {
+        if u.len() != 3 * self.num_nodes() {
+            return Err(Error::LengthMismatch {
+                what: "nodal displacements",
+                expected: 3 * self.num_nodes(),
+                got: u.len(),
+            });
+        }
+        if let Some(dof) = u.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "nodal displacement",
+                dof,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The rotation vector `w` of `G`'s skew part: `[w]× = (G − Gᵀ)/2`.
+pub fn rotation_vector(g: &Matrix3<f64>) -> Vector3<f64> {
+    0.5 * Vector3::new(g[(2, 1)] - g[(1, 2)], g[(0, 2)] - g[(2, 0)], g[(1, 0)] - g[(0, 1)])
+}
+
+/// `G`'s symmetric part, the small strain `S = (G + Gᵀ)/2`.
+pub fn small_strain(g: &Matrix3<f64>) -> Matrix3<f64> {
+    0.5 * (g + g.transpose())
+}
+
+/// Modal warping's matrix `∫₀¹ exp(s [w]×) ds = I + (1 − cos θ)/θ² [w]× + (θ − sin θ)/θ³ [w]×²`
+/// (θ = |w|; NNWarp Eq. 4 with t = 1), by its series below θ = 1e-4.
+pub fn modal_warp_matrix(w: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = w.norm();
+    let k = w.cross_matrix();
+    let (a, b) = if theta < 1e-4 {
+        let t2 = theta * theta;
+        (0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0)
+    } else {
+        let t2 = theta * theta;
+        ((1.0 - theta.cos()) / t2, (theta - theta.sin()) / (t2 * theta))
+    };
+    Matrix3::identity() + a * k + b * k * k
+}
+
+/// Modal warping (NNWarp Eq. 4): `u_i = W_MW(w_i) ũ_i` at every node.
+pub fn modal_warp(gradients: &NodalGradients, linear: &[f64]) -> Result<Vec<f64>> {
+    let g = gradients.gradients(linear)?;
+    Ok(g.iter()
+        .enumerate()
+        .flat_map(|(i, g)| {
+            let u = modal_warp_matrix(&rotation_vector(g)) * node(linear, i);
+            [u.x, u.y, u.z]
+        })
+        .collect())
+}
+
+/// Rotation-strain warping (NNWarp Eq. 5) with its Poisson reconstruction, the graph
+/// Laplacian of the 1-rings factorised once with the anchors eliminated.
+#[derive(Debug)]
+pub struct RotationStrainWarp {
+    gradients: Arc<NodalGradients>,
+    rest: Vec<Vector3<f64>>,
+    anchored: Vec<bool>,
+    factor: CholeskyFactor,
+}
+
+impl RotationStrainWarp {
+    /// `anchored[i]`: node `i` stays at rest (the Dirichlet boundary). At least one node
+    /// must be anchored, or the reconstruction is defined only up to a translation.
+    pub fn new(mesh: &TetMesh, gradients: Arc<NodalGradients>, anchored: Vec<bool>) -> Result<Self> {
+        let n = mesh.num_vertices();
+        if anchored.len() != n || gradients.num_nodes() != n {
+            return Err(Error::LengthMismatch {
+                what: "anchor mask",
+                expected: n,
+                got: anchored.len(),
+            });
+        }
+        if !anchored.iter().any(|a| *a) {
+            return Err(Error::InvalidParameter {
+                name: "anchors",
+                value: 0.0,
+                reason: "rotation-strain warping needs at least one anchored node",
+            });
+        }
+        let pairs: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| gradients.neighbors[i].iter().map(move |&j| (i, j)))
+            .collect();
+        let pattern = Arc::new(SymmetricPattern::new(n, pairs.iter().copied()));
+        let mut laplacian = SymmetricMatrix::zeros(pattern.clone());
+        // Each directed 1-ring pair (i, j) adds |x_j − x_i − T_i d_ij|² (j's ring holds i
+        // too, so an undirected edge counts twice, in the matrix and in the right-hand side).
+        for &(i, j) in &pairs {
+            laplacian.add(i, i, 1.0);
+            laplacian.add(j, j, 1.0);
+            if i < j {
+                laplacian.add(i, j, -2.0);
+            }
+        }
+        laplacian.constrain_dofs(&anchored);
+        let factor = CholeskySolver::new(pattern)?.factorize(&laplacian)?;
+        Ok(Self {
+            gradients,
+            rest: mesh.positions().to_vec(),
+            anchored,
+            factor,
+        })
+    }
+
+    /// The warped displacements of the linear displacements `linear`.
+    pub fn warp(&self, linear: &[f64]) -> Result<Vec<f64>> {
+        let g = self.gradients.gradients(linear)?;
+        let n = self.rest.len();
+        let transforms: Vec<Matrix3<f64>> = g
+            .iter()
+            .map(|g| {
+                let r = Rotation3::from_scaled_axis(rotation_vector(g));
+                r.matrix() * (small_strain(g) + Matrix3::identity())
+            })
+            .collect();
+        // Column-major right-hand sides, one per coordinate.
+        let mut rhs = vec![0.0; 3 * n];
+        for i in 0..n {
+            for &j in &self.gradients.neighbors[i] {
+                let e = transforms[i] * (self.rest[j] - self.rest[i]);
+                for d in 0..3 {
+                    rhs[d * n + j] += e[d];
+                    rhs[d * n + i] -= e[d];
+                }
+            }
+        }
+        for i in (0..n).filter(|&i| self.anchored[i]) {
+            for d in 0..3 {
+                rhs[d * n + i] = self.rest[i][d];
+            }
+        }
+        self.factor.solve_many_in_place(&mut rhs, 3);
+        Ok((0..n)
+            .flat_map(|i| [0, 1, 2].map(|d| rhs[d * n + i] - self.rest[i][d]))
+            .collect())
+    }
+}
+
+/// NNWarp §5's alignment (Fig. 12): the rotation `Q` that takes `ũ` to the +y axis and
+/// then, about y, the part of `w` orthogonal to `ũ` to the −x axis; and the three
+/// rotation-invariant scalars left, `(|ũ|, w·û, |w − (w·û)û|)`. Below `1e-12` of a
+/// unit the undefined directions are taken as the identity's.
+pub fn aligned_kinematics(u: &Vector3<f64>, w: &Vector3<f64>) -> (Rotation3<f64>, [f64; 3]) {
+    let tiny = 1e-12;
+    let un = u.norm();
+    let first = if un > tiny {
+        Rotation3::rotation_between(u, &Vector3::y()).unwrap_or_else(|| {
+            // ũ along −y: half a turn about x.
+            Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        })
+    } else {
+        Rotation3::identity()
+    };
+    let w1 = first * w;
+    let perp = Vector3::new(w1.x, 0.0, w1.z);
+    let second = if perp.norm() > tiny {
+        // The rotation about +y taking `perp` to −x.
+        let angle = perp.z.atan2(-perp.x);
+        Rotation3::from_axis_angle(&Vector3::y_axis(), -angle)
+    } else {
+        Rotation3::identity()
+    };
+    let q = second * first;
+    (q, [un, w1.y, perp.norm()])
+}
+
+/// The scale and centre that fit `positions` into the unit sphere about their bounding
+/// box's centre (NNWarp §3.3 trains on the body scaled this way).
+pub fn unit_sphere_normalization(positions: &[Vector3<f64>]) -> (Vector3<f64>, f64) {
+    let (lo, hi) = positions.iter().fold(
+        (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+    );
+    let center = (lo + hi) / 2.0;
+    let radius = positions.iter().map(|p| (p - center).norm()).fold(0.0f64, f64::max);
+    (center, if radius > 0.0 { 1.0 / radius } else { 1.0 })
+}
+
+/// The force field a sample was driven by, as the contextual features see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FieldDirection {
+    /// A directional field along this (non-zero) vector.
+    Directional(Vector3<f64>),
+    /// A circular field about the axis through `center` along `axis`.
+    Circular { center: Vector3<f64>, axis: Vector3<f64> },
+}
+
+/// NNWarp §3.3's contextual features per node: geodesic `g` (graph distance to the
+/// nearest anchor over the largest, in [0, 1]), potential `p` (directional field: the rest
+/// position's projection on the field direction, mapped to [0, 1]; circular field: the
+/// distance to the axis over the largest), digression `d` (Eq. 9: the angle between
+/// `x̄_i − x̄_a`, `a` the Euclidean-nearest anchor, and the field direction, in [0, π];
+/// −1 for a circular field; 0 at the anchors themselves). All three are invariant to a
+/// uniform scaling of the body.
+pub fn contextual_features(mesh: &TetMesh, anchors: &[usize], field: FieldDirection) -> Result<Vec<[f64; 3]>> {
+    let rest = mesh.positions();
+    if anchors.is_empty() {
+        return Err(Error::InvalidParameter {
+            name: "anchors",
+            value: 0.0,
+            reason: "the contextual features need at least one anchored node",
+        });
+    }
+    let topo = TetTopology::new(mesh);
+    let geodesic = weft_mesh::geodesic::geodesic_distances(rest, &topo.one_ring, anchors)?;
+    let g_max = geodesic
+        .iter()
+        .copied()
+        .filter(|d| d.is_finite())
+        .fold(0.0f64, f64::max);
+    if geodesic.iter().any(|d| !d.is_finite()) {
+        return Err(Error::InvalidParameter {
+            name: "anchors",
+            value: anchors.len() as f64,
+            reason: "some nodes are not connected to any anchor",
+        });
+    }
+    let unit = |v: Vector3<f64>, what: &'static str| -> Result<Vector3<f64>> {
+        let n = v.norm();
+        if n.is_finite() && n > 0.0 {
+            Ok(v / n)
+        } else {
+            Err(Error::InvalidParameter {
+                name: what,
+                value: n,
+                reason: "must be a non-zero finite vector",
+            })
+        }
+    };
+    let (potential, digression): (Vec<f64>, Vec<f64>) = match field {
+        FieldDirection::Directional(dir) => {
+            let e = unit(dir, "force direction")?;
+            let proj: Vec<f64> = rest.iter().map(|p| p.dot(&e)).collect();
+            let (lo, hi) = proj
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+            let span = if hi > lo { hi - lo } else { 1.0 };
+            let digression = rest
+                .iter()
+                .map(|p| {
+                    let a = anchors
+                        .iter()
+                        .map(|&k| rest[k])
+                        .min_by(|x, y| (x - p).norm().total_cmp(&(y - p).norm()))
+                        .unwrap_or(*p);
+                    let d = p - a;
+                    if d.norm() > 0.0 {
+                        (d.normalize().dot(&e)).clamp(-1.0, 1.0).acos()
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            (proj.iter().map(|v| (v - lo) / span).collect(), digression)
+        }
+        FieldDirection::Circular { center, axis } => {
+            let a = unit(axis, "circular field axis")?;
+            let dist: Vec<f64> = rest
+                .iter()
+                .map(|p| {
+                    let d = p - center;
+                    (d - a * a.dot(&d)).norm()
+                })
+                .collect();
+            let max = dist.iter().copied().fold(0.0f64, f64::max);
+            let scale = if max > 0.0 { 1.0 / max } else { 1.0 };
+            (dist.iter().map(|d| d * scale).collect(), vec![-1.0; rest.len()])
+        }
+    };
+    let g_scale = if g_max > 0.0 { 1.0 / g_max } else { 1.0 };
+    Ok((0..rest.len())
+        .map(|i| [geodesic[i] * g_scale, potential[i], digression[i]])
+        .collect())
+}
