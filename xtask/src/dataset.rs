@@ -17,17 +17,34 @@ use clap::{Args, Subcommand, ValueEnum};
 use serde::{Deserialize, Serialize};
 use weft_sim::{AnyScene, LoadedScene};
 
-use crate::output::{progress_bar, safetensors_bytes, sha256_file, sha256_hex, write_bytes, write_json, write_text};
+use crate::output::{
+    Array, progress_bar, safetensors_bytes, sha256_file, sha256_hex, write_bytes, write_json, write_text,
+};
 use crate::record::Recorder;
 
-/// The datasets: every built-in cloth scene (Tan et al. §VI, design §3) and the
-/// soft-tissue `limb` (design §6).
+pub mod nnwarp;
+
+/// The datasets: every built-in cloth scene (Tan et al. §VI, design §3), the
+/// soft-tissue `limb` (design §6) and NNWarp's registered beam sequences (design §7).
 pub fn dataset_names() -> Vec<&'static str> {
     weft_sim::BUILTIN_SCENES
         .iter()
         .copied()
-        .chain(std::iter::once(weft_sim::scenes::load::SOFT_TISSUE_SCENE))
+        .chain([weft_sim::scenes::load::SOFT_TISSUE_SCENE, nnwarp::NAME])
         .collect()
+}
+
+/// One generated sequence as it is stored.
+pub struct StoredSequence {
+    pub arrays: Vec<Array>,
+    pub metadata: std::collections::HashMap<String, String>,
+    /// Frames stored, the initial state included.
+    pub frames: usize,
+    /// Frames computed (timed), and the solver's seconds over them.
+    pub simulated_frames: usize,
+    pub solver_seconds: f64,
+    /// Why the sequence stopped early, if it did.
+    pub error: Option<String>,
 }
 
 /// How big a dataset (or an evaluation) is.
@@ -194,6 +211,23 @@ impl DatasetSpec {
             dataset_names().join(", ")
         );
         let quick = size == Size::Quick;
+        if name == nnwarp::NAME {
+            // The training beam (12 × 6 × 6 cells, 2592 tets; quick 6 × 3 × 3); the
+            // sequence count and ramp frames by size (the paper: 20 829 poses).
+            let (sequences, frames) = match size {
+                Size::Quick => (4, 8),
+                Size::Standard => (64, 40),
+                Size::Paper => (520, 40),
+            };
+            return Ok(Self {
+                name: name.into(),
+                size,
+                sequences,
+                frames,
+                scene: AnyScene::Volume(weft_sim::VolumeScene::builtin("beam-neo-hookean", quick)?),
+                split: Split::Sequences,
+            });
+        }
         let scene = weft_sim::scenes::load::builtin(name, quick)?.context("built-in scene missing")?;
         let ball = name.starts_with("ball");
         let (sequences, frames, split) = match (name, size) {
@@ -426,23 +460,31 @@ pub fn generate_with(
         base_dir: None,
     };
     let scene_toml = base.scene.to_toml()?;
-    // weft-mesh's OBJ writer (atomic, full precision) writes the rest surface; it is
+    // weft-mesh's writers (atomic, full precision) write the rest shape; they are
     // deterministic, so rewriting it on a resume leaves the same bytes.
-    let recorder = Recorder::new(&base)?;
-    let surface = recorder
-        .rest_surface()
-        .context("datasets record cloth and soft tissue only")?;
-    weft_mesh::io::write_obj(&out.join("rest.obj"), surface.positions(), surface.faces())?;
-    let files = vec![
-        FileEntry {
-            path: "scene.toml".into(),
-            sha256: sha256_hex(scene_toml.as_bytes()),
-        },
-        FileEntry {
-            path: "rest.obj".into(),
-            sha256: sha256_file(&out.join("rest.obj"))?,
-        },
-    ];
+    let rest_files: Vec<&str> = if spec.name == nnwarp::NAME {
+        // The volume itself, scaled into the unit sphere, as TetGen .node/.ele.
+        let (body, _) = nnwarp::training_body(spec)?;
+        weft_mesh::io::write_tetgen(&out.join("rest.node"), &body)?;
+        vec!["rest.node", "rest.ele"]
+    } else {
+        let recorder = Recorder::new(&base)?;
+        let surface = recorder
+            .rest_surface()
+            .context("datasets record cloth and soft tissue only")?;
+        weft_mesh::io::write_obj(&out.join("rest.obj"), surface.positions(), surface.faces())?;
+        vec!["rest.obj"]
+    };
+    let mut files = vec![FileEntry {
+        path: "scene.toml".into(),
+        sha256: sha256_hex(scene_toml.as_bytes()),
+    }];
+    for f in rest_files {
+        files.push(FileEntry {
+            path: f.into(),
+            sha256: sha256_file(&out.join(f))?,
+        });
+    }
     let mut manifest = Manifest {
         format: FORMAT.into(),
         dataset: spec.name.clone(),
@@ -503,16 +545,31 @@ pub fn generate_with(
     let mut failed = Vec::new();
     for i in todo {
         let wall = Instant::now();
-        let loaded = LoadedScene {
-            scene: spec.sequence_scene(seed, i),
-            base_dir: None,
+        let rec = if spec.name == nnwarp::NAME {
+            let rec = nnwarp::sequence(spec, sequence_seed(seed, i), i)?;
+            bar.inc(spec.frames as u64);
+            rec
+        } else {
+            let loaded = LoadedScene {
+                scene: spec.sequence_scene(seed, i),
+                base_dir: None,
+            };
+            let mut recorder = Recorder::new(&loaded)?;
+            let rec = recorder.record(&spec.name, spec.frames, &bar, |_, _| Ok(()))?;
+            let mut metadata = rec.metadata.clone();
+            metadata.insert("scene_toml".into(), loaded.scene.to_toml()?);
+            StoredSequence {
+                arrays: rec.to_arrays(),
+                metadata,
+                frames: rec.frames(),
+                simulated_frames: rec.per_frame.len(),
+                solver_seconds: rec.per_frame.iter().map(|f| f.seconds).sum(),
+                error: rec.error.clone(),
+            }
         };
-        let mut recorder = Recorder::new(&loaded)?;
-        let rec = recorder.record(&spec.name, spec.frames, &bar, |_, _| Ok(()))?;
         let mut meta = rec.metadata.clone();
         meta.insert("sequence".into(), i.to_string());
-        meta.insert("scene_toml".into(), loaded.scene.to_toml()?);
-        let bytes = safetensors_bytes(&rec.to_arrays(), meta)?;
+        let bytes = safetensors_bytes(&rec.arrays, meta)?;
         let path = format!("seq-{i:05}.safetensors");
         write_bytes(&out.join(&path), &bytes)?;
         if let Some(e) = &rec.error {
@@ -522,7 +579,7 @@ pub fn generate_with(
             index: i,
             seed: sequence_seed(seed, i),
             split: spec.split.of_sequence(i, spec.sequences).into(),
-            frames: rec.frames(),
+            frames: rec.frames,
             path,
             sha256: sha256_hex(&bytes),
             error: rec.error.clone(),
@@ -531,11 +588,7 @@ pub fn generate_with(
         write_json(&manifest_path, &manifest)?;
         timing.sequences.insert(
             i,
-            (
-                rec.per_frame.len(),
-                rec.per_frame.iter().map(|f| f.seconds).sum(),
-                wall.elapsed().as_secs_f64(),
-            ),
+            (rec.simulated_frames, rec.solver_seconds, wall.elapsed().as_secs_f64()),
         );
         write_json(&timing_path, &timing)?;
     }

@@ -146,3 +146,45 @@ fn killed_run_resumed_and_merged_shards_match_an_uninterrupted_run() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+#[test]
+fn nnwarp_dataset_registers_every_linear_frame_to_three_materials() {
+    let out = scratch("nnwarp");
+    let status = Command::new(XTASK)
+        .args(["dataset", "nnwarp", "--size", "quick", "--quiet", "--out"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let m = manifest(&out, "manifest.json");
+    let files: Vec<&str> = m["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["path"].as_str().unwrap())
+        .collect();
+    assert_eq!(files, ["scene.toml", "rest.node", "rest.ele"]);
+    let body = weft_mesh::io::read_tetgen(&out.join("rest.node")).unwrap();
+    // The training beam scaled into the unit sphere.
+    let radius = body.positions().iter().map(|p| p.norm()).fold(0.0, f64::max);
+    assert!((radius - 1.0).abs() < 1e-9, "{radius}");
+    let v = body.num_vertices();
+    let mut splits = Vec::new();
+    for (i, s) in m["sequences"].as_array().unwrap().iter().enumerate() {
+        assert!(s["error"].is_null(), "{s}");
+        splits.push(s["split"].as_str().unwrap().to_string());
+        let bytes = std::fs::read(out.join(s["path"].as_str().unwrap())).unwrap();
+        let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+        let f = s["frames"].as_u64().unwrap() as usize;
+        for key in ["linear", "co-rotational", "stvk", "neo-hookean"] {
+            assert_eq!(st.tensor(key).unwrap().shape(), &[f, v, 3], "{key}");
+        }
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+        let meta = meta.metadata().as_ref().unwrap();
+        let field: serde_json::Value = serde_json::from_str(&meta["field"]).unwrap();
+        assert_eq!(field["kind"], if i % 4 == 3 { "circular" } else { "directional" });
+        let nu: f64 = meta["poisson"].parse().unwrap();
+        assert!((0.2..=0.45).contains(&nu));
+    }
+    assert!(splits.contains(&"train".to_string()) && splits.contains(&"test".to_string()));
+}

@@ -369,3 +369,286 @@ pub fn contextual_features(mesh: &TetMesh, anchors: &[usize], field: FieldDirect
         .map(|i| [geodesic[i] * g_scale, potential[i], digression[i]])
         .collect())
 }
+
+/// NNWarp Eq. 6–7: the nonlinear displacement `u` registered to a linear one `ũ`, the
+/// solution of `f_int(u) = 𝓡 K ũ` where `𝓡` rotates each node's linear internal force by
+/// its local rotation `exp([w_i]×)` of `ũ`. It is found as the minimiser of
+/// `E(x̄ + u) − (𝓡Kũ)·u` (the equation is that energy's stationarity condition) by
+/// weft-sim's Newton solver, started from the previous registration: registering a
+/// sequence in order follows one branch of equilibria, which is the point of registering
+/// sequences rather than single poses (NNWarp Fig. 2). The paper imposes Wolfe
+/// conditions on its Newton steps; our solver's Armijo backtracking from the full Newton
+/// step gives the same guarantee of decrease.
+#[derive(Debug)]
+pub struct Registration {
+    gradients: Arc<NodalGradients>,
+    stiffness: SymmetricMatrix,
+    elastic: crate::energies::TetElasticity,
+    solver: crate::newton::NewtonSolver,
+    rest: Vec<f64>,
+    /// The last registered positions (the next solve's start).
+    x: Vec<f64>,
+    /// Newton's residual tolerance relative to the largest target force component.
+    pub relative_tolerance: f64,
+}
+
+impl Registration {
+    /// `stiffness`: the linear solve's `K` (unconstrained, N/m); `fixed`: the anchored
+    /// DOFs (held at rest).
+    pub fn new(
+        mesh: &TetMesh,
+        gradients: Arc<NodalGradients>,
+        elastic: crate::energies::TetElasticity,
+        stiffness: SymmetricMatrix,
+        fixed: Vec<bool>,
+    ) -> Result<Self> {
+        let rest = mesh.flat_positions();
+        if stiffness.dim() != rest.len() || fixed.len() != rest.len() || gradients.num_nodes() != mesh.num_vertices() {
+            return Err(Error::LengthMismatch {
+                what: "registration stiffness, anchors and gradients",
+                expected: rest.len(),
+                got: stiffness.dim().min(fixed.len()),
+            });
+        }
+        let load = crate::energies::ConstantForce::new("registered linear force", vec![0.0; rest.len()])?;
+        let terms: [&dyn crate::energy::Energy; 2] = [&elastic, &load];
+        let solver = crate::newton::NewtonSolver::new(rest.len(), &terms, fixed)?;
+        Ok(Self {
+            gradients,
+            stiffness,
+            elastic,
+            solver,
+            x: rest.clone(),
+            rest,
+            relative_tolerance: 1e-6,
+        })
+    }
+
+    /// Starts a new sequence from the rest shape.
+    pub fn reset(&mut self) {
+        self.x.copy_from_slice(&self.rest);
+    }
+
+    /// `𝓡 K ũ`: the linear internal force, each node's rotated by `exp([w_i]×)`.
+    pub fn target_force(&self, linear: &[f64]) -> Result<Vec<f64>> {
+        let g = self.gradients.gradients(linear)?;
+        let mut f = vec![0.0; linear.len()];
+        self.stiffness.mul_vec(linear, &mut f);
+        for (i, g) in g.iter().enumerate() {
+            let r = Rotation3::from_scaled_axis(rotation_vector(g));
+            let fi = r * node(&f, i);
+            f[3 * i..3 * i + 3].copy_from_slice(fi.as_slice());
+        }
+        Ok(f)
+    }
+
+    /// Registers the linear displacements `linear` (m, flat) and returns the nonlinear
+    /// displacements with the Newton report.
+    pub fn register(&mut self, linear: &[f64]) -> Result<(Vec<f64>, crate::newton::NewtonReport)> {
+        let target = self.target_force(linear)?;
+        let scale = weft_linalg::max_abs(
+            target
+                .iter()
+                .zip(self.solver.fixed())
+                .filter(|(_, fixed)| !**fixed)
+                .map(|(f, _)| *f),
+        );
+        let load = crate::energies::ConstantForce::new("registered linear force", target)?;
+        let terms: [&dyn crate::energy::Energy; 2] = [&self.elastic, &load];
+        let settings = crate::newton::NewtonSettings {
+            tolerance: (self.relative_tolerance * scale).max(1e-300),
+            max_iterations: 300,
+            ..crate::newton::NewtonSettings::default()
+        };
+        let mut x = self.x.clone();
+        let report = self.solver.minimize(&terms, &mut x, &settings)?;
+        self.x.copy_from_slice(&x);
+        Ok((x.iter().zip(&self.rest).map(|(x, r)| x - r).collect(), report))
+    }
+}
+
+/// How one NNWarp training sequence is driven (NNWarp §3.2 and §5).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SequenceSettings {
+    /// Frames over which the load ramps to the one whose static linear answer first
+    /// reaches `stop_displacement`.
+    pub ramp_frames: usize,
+    /// The sequence ends when some node's linear displacement reaches this (m; NNWarp
+    /// stops at 2 on the body scaled into the unit sphere) or after `2 · ramp_frames`.
+    pub stop_displacement: f64,
+    /// Young's modulus (Pa) and density (kg/m³); the modulus only scales the load needed
+    /// (NNWarp §5: it acts as a linear amplifier).
+    pub young: f64,
+    pub density: f64,
+}
+
+impl Default for SequenceSettings {
+    fn default() -> Self {
+        Self {
+            ramp_frames: 40,
+            stop_displacement: 2.0,
+            young: 1e5,
+            density: 1000.0,
+        }
+    }
+}
+
+/// A damped quasi-static linear sequence and its registration to each nonlinear material.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegisteredSequence {
+    /// Field acceleration per frame (m/s²; frame 0 is the rest state, 0).
+    pub accelerations: Vec<f64>,
+    /// Linear displacements per frame (m, flat).
+    pub linear: Vec<Vec<f64>>,
+    /// Per material (in the order asked), its registered displacements per frame.
+    pub nonlinear: Vec<Vec<Vec<f64>>>,
+    /// Newton iterations over all registrations.
+    pub newton_iterations: usize,
+    /// Why the sequence stopped before reaching the stop displacement, if it did.
+    pub error: Option<String>,
+}
+
+/// The unit-acceleration body force of `field` on `mesh` with `masses` (N per m/s²).
+fn unit_field_forces(rest: &[f64], masses: &[f64], field: FieldDirection) -> Result<Vec<f64>> {
+    let f = match field {
+        FieldDirection::Directional(d) => crate::energies::ConstantForce::directional(masses, d.into(), 1.0)?,
+        FieldDirection::Circular { center, axis } => {
+            crate::energies::ConstantForce::circular(masses, rest, center.into(), axis.into(), 1.0)?
+        }
+    };
+    Ok(f.forces().to_vec())
+}
+
+/// NNWarp §3.2's training sequence: the body (anchored at `anchors`) under `field`, its
+/// magnitude ramped up; each frame one backward-Euler step of linear elasticity with
+/// mass damping `α = 2ω₁` (critical for the first mode, whose `ω₁` is estimated by the
+/// Rayleigh quotient of the static deflection), so the linear solution creeps through
+/// near-equilibria; each frame then registered (Eq. 6–7) to every material in
+/// `materials`, warm-started from the previous frame.
+pub fn register_sequence(
+    mesh: &TetMesh,
+    anchors: &[usize],
+    field: FieldDirection,
+    poisson: f64,
+    materials: &[crate::energies::Material],
+    settings: SequenceSettings,
+) -> Result<RegisteredSequence> {
+    use crate::energies::{LameParameters, Material, TetElasticity};
+    use crate::integrators::prefactorized::{LinearSolve, PrefactorizedLinear, RayleighDamping};
+    if settings.ramp_frames == 0 || !(settings.stop_displacement > 0.0) {
+        return Err(Error::InvalidParameter {
+            name: "sequence settings",
+            value: settings.ramp_frames as f64,
+            reason: "need at least one ramp frame and a positive stop displacement",
+        });
+    }
+    let rest = mesh.flat_positions();
+    let n = rest.len();
+    let lame = LameParameters::from_young_poisson(settings.young, poisson)?;
+    let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
+    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), settings.density);
+    let mut fixed = vec![false; n];
+    for &a in anchors {
+        if a >= mesh.num_vertices() {
+            return Err(Error::VertexOutOfRange {
+                what: "anchor",
+                index: a,
+                num_vertices: mesh.num_vertices(),
+            });
+        }
+        fixed[3 * a..3 * a + 3].iter_mut().for_each(|f| *f = true);
+    }
+    let unit = unit_field_forces(&rest, &masses, field)?;
+    let mut statics = PrefactorizedLinear::new(
+        &rest,
+        &[&linear_energy],
+        masses.clone(),
+        fixed.clone(),
+        LinearSolve::Static,
+    )?;
+    statics.step(&unit, &[])?;
+    let u1 = statics.displacements().to_vec();
+    let reach = (0..mesh.num_vertices())
+        .map(|i| node(&u1, i).norm())
+        .fold(0.0f64, f64::max);
+    if !(reach > 0.0) {
+        return Err(Error::InvalidParameter {
+            name: "force field",
+            value: reach,
+            reason: "moves no node (a field that vanishes on the free nodes)",
+        });
+    }
+    let a_stop = settings.stop_displacement / reach;
+    let work: f64 = u1.iter().zip(&unit).map(|(u, f)| u * f).sum();
+    let inertia: f64 = (0..mesh.num_vertices())
+        .map(|i| masses[i] * node(&u1, i).norm_squared())
+        .sum();
+    let omega = (work / inertia).sqrt();
+    let alpha = 2.0 * omega;
+    // Ten first-mode relaxation times (τ₁ = α/ω₁² = 2/ω₁) over the ramp.
+    let dt = 10.0 * (2.0 / omega) / settings.ramp_frames as f64;
+    let mut dynamic = PrefactorizedLinear::new(
+        &rest,
+        &[&linear_energy],
+        masses,
+        fixed.clone(),
+        LinearSolve::Dynamic {
+            dt,
+            damping: RayleighDamping {
+                mass: alpha,
+                stiffness: 0.0,
+            },
+        },
+    )?;
+    let gradients = Arc::new(NodalGradients::new(mesh)?);
+    let mut registrations = materials
+        .iter()
+        .map(|&m| {
+            Registration::new(
+                mesh,
+                gradients.clone(),
+                TetElasticity::new(mesh, m, lame)?,
+                statics.stiffness().clone(),
+                fixed.clone(),
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut out = RegisteredSequence {
+        accelerations: vec![0.0],
+        linear: vec![vec![0.0; n]],
+        nonlinear: vec![vec![vec![0.0; n]]; materials.len()],
+        newton_iterations: 0,
+        error: None,
+    };
+    for k in 1..=2 * settings.ramp_frames {
+        let a = a_stop * k as f64 / settings.ramp_frames as f64;
+        let forces: Vec<f64> = unit.iter().map(|f| f * a).collect();
+        dynamic.step(&forces, &[])?;
+        let lin = dynamic.displacements().to_vec();
+        let reached = (0..mesh.num_vertices())
+            .map(|i| node(&lin, i).norm())
+            .fold(0.0f64, f64::max);
+        let mut registered = Vec::with_capacity(materials.len());
+        for (m, reg) in materials.iter().zip(&mut registrations) {
+            match reg.register(&lin) {
+                Ok((u, report)) => {
+                    out.newton_iterations += report.iterations;
+                    registered.push(u);
+                }
+                Err(e) => {
+                    out.error = Some(format!("frame {k}, {}: {e}", m.name()));
+                    return Ok(out);
+                }
+            }
+        }
+        out.accelerations.push(a);
+        out.linear.push(lin);
+        for (store, u) in out.nonlinear.iter_mut().zip(registered) {
+            store.push(u);
+        }
+        if reached >= settings.stop_displacement {
+            break;
+        }
+    }
+    Ok(out)
+}

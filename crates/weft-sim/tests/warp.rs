@@ -193,3 +193,133 @@ fn contextual_features_on_a_clamped_beam() {
     assert!(contextual_features(&mesh, &[], circular).is_err());
     assert!(contextual_features(&mesh, &anchors, FieldDirection::Directional(Vector3::zeros())).is_err());
 }
+
+/// The small beam clamped at x = 0: its anchored DOFs and the linear static solve.
+fn clamped_beam() -> (TetMesh, Vec<bool>, weft_sim::PrefactorizedLinear, Vec<f64>) {
+    use weft_sim::energies::{LameParameters, Material, TetElasticity};
+    let mesh = small_beam();
+    let lame = LameParameters::from_young_poisson(1e5, 0.35).unwrap();
+    let linear = TetElasticity::new(&mesh, Material::Linear, lame).unwrap();
+    let fixed: Vec<bool> = mesh.positions().iter().flat_map(|p| [p.x.abs() < 1e-12; 3]).collect();
+    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), 1000.0);
+    let solve = weft_sim::PrefactorizedLinear::new(
+        &mesh.flat_positions(),
+        &[&linear],
+        masses.clone(),
+        fixed.clone(),
+        weft_sim::LinearSolve::Static,
+    )
+    .unwrap();
+    (mesh, fixed, solve, masses)
+}
+
+#[test]
+fn registration_solves_eq_7_and_tends_to_the_linear_solution_under_small_loads() {
+    use weft_sim::energies::{LameParameters, Material, TetElasticity};
+    use weft_sim::warp::Registration;
+    let (mesh, fixed, mut linear_solve, masses) = clamped_beam();
+    let grads = Arc::new(NodalGradients::new(&mesh).unwrap());
+    let lame = LameParameters::from_young_poisson(1e5, 0.35).unwrap();
+    let gravity = |a: f64| -> Vec<f64> { masses.iter().flat_map(|m| [0.0, -m * a, 0.0]).collect() };
+    for material in [Material::CoRotational, Material::StVK, Material::NeoHookean] {
+        let elastic = TetElasticity::new(&mesh, material, lame).unwrap();
+        let mut reg = Registration::new(
+            &mesh,
+            grads.clone(),
+            TetElasticity::new(&mesh, material, lame).unwrap(),
+            linear_solve.stiffness().clone(),
+            fixed.clone(),
+        )
+        .unwrap();
+        let mut gaps = Vec::new();
+        // Loads from large to small, each registered from rest.
+        for a in [20.0, 2.0] {
+            linear_solve.reset();
+            linear_solve.step(&gravity(a), &[]).unwrap();
+            let lin = linear_solve.displacements().to_vec();
+            reg.reset();
+            let (u, report) = reg.register(&lin).unwrap();
+            assert!(
+                report.residual <= 1e-6 * report.initial_residual.max(1e-30),
+                "{material:?}: {report:?}"
+            );
+            // Eq. 7 checked independently: f_int(x̄ + u) = 𝓡 K ũ on the free DOFs.
+            let x: Vec<f64> = mesh.flat_positions().iter().zip(&u).map(|(r, u)| r + u).collect();
+            let mut f_int = vec![0.0; x.len()];
+            weft_sim::Energy::add_gradient(&elastic, &x, &mut f_int);
+            let target = reg.target_force(&lin).unwrap();
+            let scale = target.iter().map(|f| f.abs()).fold(0.0, f64::max);
+            for d in (0..x.len()).filter(|&d| !fixed[d]) {
+                assert!((f_int[d] - target[d]).abs() <= 1e-6 * scale, "{material:?} dof {d}");
+            }
+            let size = lin.iter().map(|v| v.abs()).fold(0.0, f64::max);
+            assert!(size > 0.0);
+            gaps.push(max_diff(&u, &lin) / size);
+        }
+        // Nonlinearity fades with the load: the relative gap shrinks about tenfold.
+        assert!(gaps[1] < 0.3 * gaps[0], "{material:?}: {gaps:?}");
+        assert!(
+            gaps[0] > 1e-3,
+            "{material:?}: the large load should be nonlinear ({gaps:?})"
+        );
+    }
+}
+
+#[test]
+fn a_training_sequence_ramps_to_the_stop_displacement_and_registers_every_frame() {
+    use weft_sim::energies::Material;
+    use weft_sim::warp::{SequenceSettings, register_sequence, unit_sphere_normalization};
+    let mesh = small_beam();
+    let (center, scale) = unit_sphere_normalization(mesh.positions());
+    let unit = TetMesh::new(
+        mesh.positions().iter().map(|p| (p - center) * scale).collect(),
+        mesh.tets().to_vec(),
+    )
+    .unwrap();
+    let x_min = unit.positions().iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
+    let anchors: Vec<usize> = (0..unit.num_vertices())
+        .filter(|&i| (unit.positions()[i].x - x_min).abs() < 1e-9)
+        .collect();
+    let settings = SequenceSettings {
+        ramp_frames: 12,
+        ..SequenceSettings::default()
+    };
+    let materials = [Material::CoRotational, Material::NeoHookean];
+    let seq = register_sequence(
+        &unit,
+        &anchors,
+        FieldDirection::Directional(Vector3::new(0.0, -1.0, 0.3)),
+        0.3,
+        &materials,
+        settings,
+    )
+    .unwrap();
+    assert_eq!(seq.error, None);
+    let frames = seq.linear.len();
+    assert!(frames > 2 && frames <= 2 * settings.ramp_frames + 1, "{frames} frames");
+    let reach = |u: &[f64]| {
+        (0..u.len() / 3)
+            .map(|i| Vector3::new(u[3 * i], u[3 * i + 1], u[3 * i + 2]).norm())
+            .fold(0.0, f64::max)
+    };
+    // The linear answer grows frame by frame and stops once it reaches 2.
+    for k in 1..frames {
+        assert!(reach(&seq.linear[k]) > reach(&seq.linear[k - 1]));
+        assert!(seq.accelerations[k] > seq.accelerations[k - 1]);
+    }
+    assert!(reach(&seq.linear[frames - 1]) >= 2.0);
+    assert!(reach(&seq.linear[frames - 2]) < 2.0);
+    // Every material is registered on every frame, anchors at rest, and the registered
+    // shapes differ from the linear one by more at the end than at the start.
+    for per_material in &seq.nonlinear {
+        assert_eq!(per_material.len(), frames);
+        for u in per_material {
+            for &a in &anchors {
+                assert_eq!(&u[3 * a..3 * a + 3], &[0.0, 0.0, 0.0]);
+            }
+        }
+        let gap = |k: usize| max_diff(&per_material[k], &seq.linear[k]) / reach(&seq.linear[k]);
+        assert!(gap(frames - 1) > gap(1), "{} vs {}", gap(frames - 1), gap(1));
+    }
+    assert!(seq.newton_iterations >= materials.len() * (frames - 1));
+}

@@ -180,14 +180,22 @@ fn train_ours(
     Ok(snapshot)
 }
 
+/// Generates `scene`'s dataset into `dir`, or completes one an interrupted run left there
+/// (the generator rewrites its manifest after every sequence, so a manifest alone does
+/// not mean the dataset is whole).
 fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<()> {
-    if dir.join("manifest.json").exists() {
+    let manifest = dir.join("manifest.json");
+    let exists = manifest.exists();
+    if exists && crate::dataset::read_manifest(&manifest)?.is_complete() {
         return Ok(());
     }
     let cmd = crate::dataset::DatasetArgs::augment_args(clap::Command::new("dataset"));
     let dir_arg = dir.display().to_string();
-    let matches =
-        cmd.try_get_matches_from(["dataset", scene, "--size", size.as_str(), "--quiet", "--out", &dir_arg])?;
+    let mut args = vec!["dataset", scene, "--size", size.as_str(), "--quiet", "--out", &dir_arg];
+    if exists {
+        args.push("--resume");
+    }
+    let matches = cmd.try_get_matches_from(args)?;
     crate::dataset::run(crate::dataset::DatasetArgs::from_arg_matches(&matches)?)
 }
 
