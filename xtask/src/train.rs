@@ -24,6 +24,50 @@ use crate::output::progress_bar;
 pub enum TrainCommand {
     /// Tan et al.'s mesh embedding and latent simulator, in three stages (§VI-A).
     Embed(EmbedArgs),
+    /// NNWarp's node-wise correction MLP for one material, on the `nnwarp` dataset (§5).
+    Nnwarp(NnwarpArgs),
+}
+
+/// The nonlinear materials an NNWarp network is trained for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WarpMaterial {
+    CoRotational,
+    Stvk,
+    NeoHookean,
+}
+
+impl WarpMaterial {
+    /// The dataset's array name.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::CoRotational => "co-rotational",
+            Self::Stvk => "stvk",
+            Self::NeoHookean => "neo-hookean",
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct NnwarpArgs {
+    /// An `nnwarp` dataset directory written by `cargo xtask dataset nnwarp`.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The material whose registered shapes the network learns.
+    #[arg(long, value_enum)]
+    pub material: WarpMaterial,
+    /// Training configuration (JSON; omitted fields keep their defaults): `hidden`
+    /// (empty: 2 × 16, 3 × 16 for StVK), `adam`, `batch` (1024), `epochs` (10), `seed`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Where the model is written.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from the model directory's last checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Args)]
@@ -56,6 +100,7 @@ pub struct EmbedArgs {
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Embed(args) => embed(args),
+        TrainCommand::Nnwarp(args) => nnwarp(args),
     }
 }
 
@@ -100,12 +145,17 @@ fn save_checkpoint(
     checkpoint::save(&fresh.join("autoencoder"), &model.autoencoder_params, adams.0, &none)?;
     checkpoint::save(&fresh.join("simulator"), &model.simulator_params, adams.1, &none)?;
     write_atomic(&fresh.join("progress.json"), &serde_json::to_string_pretty(&progress)?)?;
-    let current = out.join("checkpoint");
-    let old = out.join("checkpoint.old");
+    swap_in(&fresh, &out.join("checkpoint"))
+}
+
+/// Replaces the directory `current` by `fresh` through renames, so that an interruption
+/// leaves either the old or the new one whole (or both, as `current` and `*.old`).
+fn swap_in(fresh: &Path, current: &Path) -> anyhow::Result<()> {
+    let old = current.with_extension("old");
     if current.exists() {
-        std::fs::rename(&current, &old)?;
+        std::fs::rename(current, &old)?;
     }
-    std::fs::rename(&fresh, &current)?;
+    std::fs::rename(fresh, current)?;
     if old.exists() {
         std::fs::remove_dir_all(&old)?;
     }
@@ -217,6 +267,109 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
             epoch: 0,
         };
     }
+    eprintln!("model → {}", args.out.display());
+    Ok(())
+}
+
+/// `cargo xtask train nnwarp`: pairs from the dataset's train and validation splits,
+/// standardised on the training pairs, one checkpoint per epoch.
+fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
+    use weft_nn::nnwarp::{
+        Standardization, WarpMlp, WarpTrainingConfig, collect_pairs, hidden_layers, mean_loss, pair_tensors,
+        train_epoch,
+    };
+    let mut config: WarpTrainingConfig = match &args.config {
+        Some(p) => {
+            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("parsing {}", p.display()))?
+        }
+        None => WarpTrainingConfig::default(),
+    };
+    if config.batch == 0 || config.epochs == 0 {
+        bail!("batch and epochs must be at least 1");
+    }
+    let material = args.material.key();
+    if config.hidden.is_empty() {
+        config.hidden = hidden_layers(material);
+    }
+    let config_path = args.out.join("config.json");
+    let resuming = args.resume && args.out.join("checkpoint").exists();
+    if args.out.join("checkpoint").exists() && !args.resume {
+        bail!(
+            "{} already holds a model; pass --resume to continue it or choose another --out",
+            args.out.display()
+        );
+    }
+    let dataset = weft_nn::data::WarpDataset::load(&args.data, material)
+        .with_context(|| format!("loading {}", args.data.display()))?;
+    let (train_x, train_y) = collect_pairs(&dataset, "train")?;
+    let (val_x, val_y) = collect_pairs(&dataset, "validation")?;
+    anyhow::ensure!(!train_x.is_empty(), "the dataset's train split holds no pairs");
+    std::fs::create_dir_all(&args.out)?;
+    let standardization = if resuming {
+        let stored: WarpTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
+        if stored != config {
+            bail!(
+                "the configuration differs from the one {} was trained with; resume with the same --config",
+                args.out.display()
+            );
+        }
+        serde_json::from_str(&std::fs::read_to_string(args.out.join("standardization.json"))?)?
+    } else {
+        let s = Standardization::fit(&train_x, &train_y)?;
+        write_atomic(&config_path, &serde_json::to_string_pretty(&config)?)?;
+        write_atomic(
+            &args.out.join("standardization.json"),
+            &serde_json::to_string_pretty(&s)?,
+        )?;
+        let mut log = std::fs::File::create(args.out.join("log.csv"))?;
+        writeln!(log, "epoch,train,validation")?;
+        s
+    };
+    let device = weft_nn::Device::Cpu;
+    let (x, y) = pair_tensors(&train_x, &train_y, &standardization, &device)?;
+    let (vx, vy) = pair_tensors(&val_x, &val_y, &standardization, &device)?;
+    let mut params = weft_nn::params::Params::new(&device, config.seed);
+    let mlp = WarpMlp::new(&mut params, &config.hidden)?;
+    let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
+    let ck = args.out.join("checkpoint");
+    let mut first = 0;
+    if resuming {
+        let state = checkpoint::load(&ck, &params, &mut adam)?;
+        first = state["epoch"].as_u64().context("checkpoint lacks its epoch")? as usize;
+        eprintln!("resuming after epoch {first}");
+    }
+    eprintln!(
+        "nnwarp/{material}: {} training and {} validation pairs, hidden {:?}",
+        train_x.len(),
+        val_x.len(),
+        config.hidden
+    );
+    let batches = train_x.len().div_ceil(config.batch) as u64;
+    let bar = progress_bar(
+        args.quiet,
+        (config.epochs.saturating_sub(first)) as u64 * batches,
+        "nnwarp",
+        "batches",
+    )?;
+    for epoch in first..config.epochs {
+        let train = train_epoch(&mlp, &params, &mut adam, &x, &y, &config, epoch, |l| {
+            bar.set_message(format!("epoch {epoch} loss {l:.3e}"));
+            bar.inc(1);
+        })?;
+        let validation = mean_loss(&mlp, &vx, &vy)?;
+        let fresh = args.out.join("checkpoint.partial");
+        if fresh.exists() {
+            std::fs::remove_dir_all(&fresh)?;
+        }
+        checkpoint::save(&fresh, &params, &adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
+        swap_in(&fresh, &ck)?;
+        let mut log = std::fs::OpenOptions::new()
+            .append(true)
+            .open(args.out.join("log.csv"))?;
+        writeln!(log, "{epoch},{train},{validation}")?;
+    }
+    bar.finish_and_clear();
     eprintln!("model → {}", args.out.display());
     Ok(())
 }

@@ -209,3 +209,118 @@ impl ClothDataset {
         })
     }
 }
+
+/// One sequence of the `nnwarp` dataset: the field that drove it, its Poisson ratio, and
+/// per frame the linear and one material's registered displacements (unit-sphere units).
+#[derive(Debug, Clone)]
+pub struct WarpSequence {
+    pub index: usize,
+    /// `train`, `validation` or `test` (the manifest's split of whole sequences).
+    pub split: String,
+    pub field: weft_sim::warp::FieldDirection,
+    pub poisson: f64,
+    /// `linear[f]`, `nonlinear[f]`: flat `3V` displacements of frame `f`.
+    pub linear: Vec<Vec<f64>>,
+    pub nonlinear: Vec<Vec<f64>>,
+}
+
+/// The `nnwarp` dataset for one material (NNWarp §5; docs/DATASETS.md).
+#[derive(Debug, Clone)]
+pub struct WarpDataset {
+    pub dir: PathBuf,
+    /// The training beam scaled into the unit sphere (`rest.node`/`rest.ele`).
+    pub body: weft_mesh::TetMesh,
+    pub anchors: Vec<usize>,
+    /// The array name of the material (`co-rotational`, `stvk`, `neo-hookean`).
+    pub material: String,
+    pub sequences: Vec<WarpSequence>,
+}
+
+fn vec3_of(path: &Path, v: &serde_json::Value, key: &str) -> Result<nalgebra::Vector3<f64>> {
+    let a: Vec<f64> =
+        serde_json::from_value(v[key].clone()).map_err(|e| data_error(path, format!("field {key}: {e}")))?;
+    if a.len() != 3 {
+        return Err(data_error(path, format!("field {key} has {} components", a.len())));
+    }
+    Ok(nalgebra::Vector3::new(a[0], a[1], a[2]))
+}
+
+impl WarpDataset {
+    /// Reads every sequence of the dataset in `dir`, keeping `material`'s registration.
+    pub fn load(dir: &Path, material: &str) -> Result<Self> {
+        let manifest_path = dir.join("manifest.json");
+        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
+        let manifest: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "nnwarp" {
+            return Err(data_error(&manifest_path, "not a weft-dataset/1 nnwarp manifest"));
+        }
+        let rest_path = dir.join("rest.node");
+        let body = weft_mesh::io::read_tetgen(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
+        let v = body.num_vertices();
+        let listed = manifest["sequences"]
+            .as_array()
+            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
+        let mut anchors: Option<Vec<usize>> = None;
+        let mut sequences = Vec::with_capacity(listed.len());
+        for entry in listed {
+            let path = dir.join(entry["path"].as_str().unwrap_or_default());
+            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let meta = meta
+                .metadata()
+                .clone()
+                .ok_or_else(|| data_error(&path, "no metadata"))?;
+            let get = |key: &str| {
+                meta.get(key)
+                    .cloned()
+                    .ok_or_else(|| data_error(&path, format!("metadata lacks {key}")))
+            };
+            let a: Vec<usize> = serde_json::from_str(&get("anchors")?).map_err(|e| data_error(&path, e.to_string()))?;
+            if a.iter().any(|&i| i >= v) {
+                return Err(data_error(&path, "an anchor is outside the body"));
+            }
+            match &anchors {
+                Some(prev) if *prev != a => return Err(data_error(&path, "anchors differ between sequences")),
+                _ => anchors = Some(a),
+            }
+            let field: serde_json::Value =
+                serde_json::from_str(&get("field")?).map_err(|e| data_error(&path, e.to_string()))?;
+            let field = match field["kind"].as_str() {
+                Some("directional") => {
+                    weft_sim::warp::FieldDirection::Directional(vec3_of(&path, &field, "direction")?)
+                }
+                Some("circular") => weft_sim::warp::FieldDirection::Circular {
+                    center: vec3_of(&path, &field, "center")?,
+                    axis: vec3_of(&path, &field, "axis")?,
+                },
+                _ => return Err(data_error(&path, "field kind is neither directional nor circular")),
+            };
+            let poisson: f64 = get("poisson")?
+                .parse()
+                .map_err(|e| data_error(&path, format!("poisson: {e}")))?;
+            let (f, linear) = f64_array(&path, &st, "linear", &[v, 3])?;
+            let (fm, nonlinear) = f64_array(&path, &st, material, &[v, 3])?;
+            if f != fm {
+                return Err(data_error(&path, "linear and registered frames disagree in number"));
+            }
+            let split = |x: Vec<f64>| x.chunks_exact(3 * v).map(<[f64]>::to_vec).collect::<Vec<_>>();
+            sequences.push(WarpSequence {
+                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
+                split: entry["split"].as_str().unwrap_or("train").to_string(),
+                field,
+                poisson,
+                linear: split(linear),
+                nonlinear: split(nonlinear),
+            });
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            body,
+            anchors: anchors.ok_or_else(|| data_error(&manifest_path, "the dataset has no sequence"))?,
+            material: material.to_string(),
+            sequences,
+        })
+    }
+}

@@ -11,6 +11,8 @@
 //!   frames stopped (Eq. 9–10), and the elastic potential `P_s + P_b`;
 //! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
 //!   same potential minimised over every vertex;
+//! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
+//!   sequences, training in candle, and a plain-Rust runtime over the trained weights;
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
 //!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
 //!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
@@ -50,6 +52,7 @@ pub mod graph;
 pub mod ik;
 pub mod layers;
 pub mod metrics;
+pub mod nnwarp;
 pub mod ops;
 pub mod params;
 pub mod pca;

@@ -551,3 +551,78 @@ fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
         Err(Error::Shape { .. })
     ));
 }
+
+#[test]
+fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
+    use nalgebra::Rotation3;
+    use weft_nn::nnwarp::{INPUTS, NnWarp, Standardization, WarpContext, WarpMlp, hidden_layers};
+    use weft_sim::warp::FieldDirection;
+    let mut rng = TestRng::new(17);
+    let mut params = Params::new(&cpu(), 3);
+    let mlp = WarpMlp::new(&mut params, &hidden_layers("stvk")).unwrap();
+    let rows: Vec<[f64; INPUTS]> = (0..40)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
+        .collect();
+    let outs: Vec<[f64; 3]> = (0..40)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
+        .collect();
+    let standardization = Standardization::fit(&rows, &outs).unwrap();
+    let (x, _) = weft_nn::nnwarp::pair_tensors(&rows, &outs, &standardization, &cpu()).unwrap();
+    let candle_out: Vec<f32> = mlp.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+    let node = mlp.to_node_mlp(standardization.clone()).unwrap();
+    for (k, r) in rows.iter().enumerate() {
+        let got = node.forward(r);
+        let want = standardization.unoutput(&std::array::from_fn(|d| candle_out[3 * k + d] as f64));
+        for d in 0..3 {
+            assert!(
+                (got[d] - want[d]).abs() < 1e-5 * (1.0 + want[d].abs()),
+                "{k}/{d}: {got:?} vs {want:?}"
+            );
+        }
+    }
+    // Pairs: a registered shape equal to the linear one needs no correction; and the
+    // runtime puts an aligned correction back in the world frame (u = ũ + Qᵀ δu).
+    let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+        cells: [4, 2, 2],
+        size: [1.0, 0.4, 0.4],
+    })
+    .unwrap();
+    let anchors: Vec<usize> = (0..beam.num_vertices())
+        .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
+        .collect();
+    let ctx = WarpContext::new(
+        &beam,
+        &anchors,
+        FieldDirection::Directional(-nalgebra::Vector3::y()),
+        0.3,
+    )
+    .unwrap();
+    let lin: Vec<f64> = beam
+        .positions()
+        .iter()
+        .flat_map(|p| [0.0, -0.2 * p.x * p.x, 0.05 * p.x])
+        .collect();
+    let (inputs, targets) = ctx.pairs(&lin, &lin).unwrap();
+    assert_eq!(inputs.len(), ctx.free_nodes().len());
+    assert!(targets.iter().flatten().all(|v| v.abs() < 1e-15));
+    let moved: Vec<f64> = lin.iter().enumerate().map(|(k, v)| v + 0.01 * (k % 3) as f64).collect();
+    let (_, targets) = ctx.pairs(&lin, &moved).unwrap();
+    let frames = ctx.inputs(&lin).unwrap().rotations;
+    let (_, scale) = weft_sim::warp::unit_sphere_normalization(beam.positions());
+    for ((&i, t), q) in ctx.free_nodes().iter().zip(&targets).zip(&frames) {
+        let world: Rotation3<f64> = q.inverse();
+        let back = world * nalgebra::Vector3::new(t[0], t[1], t[2]) / scale;
+        for d in 0..3 {
+            assert!((back[d] - (moved[3 * i + d] - lin[3 * i + d])).abs() < 1e-12);
+        }
+    }
+    let warp = NnWarp {
+        context: ctx,
+        mlp: node,
+    };
+    let out = warp.warp(&lin).unwrap();
+    for &a in &anchors {
+        assert_eq!(&out[3 * a..3 * a + 3], &lin[3 * a..3 * a + 3]);
+    }
+    assert!(matches!(warp.warp(&lin[3..]), Err(Error::Shape { .. })));
+}

@@ -1,0 +1,530 @@
+//! NNWarp (Luo et al.): a node-wise MLP that turns a linear FEM displacement into the
+//! nonlinear material's (§3–5).
+//!
+//! For each free node the network sees seven numbers:
+//! - the three rotation-invariant scalars of its linear displacement `ũ_i` and local
+//!   rotation vector `w_i`, in the frame that takes `ũ_i` to +y and `w_i` into the
+//!   xy-plane (§5, Fig. 12; `weft_sim::warp::aligned_kinematics`);
+//! - geodesic, potential and digression (§3.3);
+//! - the Poisson ratio.
+//!
+//! It answers the correction `δu_i` in that aligned frame, so `u_i = ũ_i + Q_iᵀ δu_i`.
+//! Everything is measured on the body scaled into the unit sphere, as the network was
+//! trained; [`WarpContext`] does the scaling, so a body of any size can be warped.
+//!
+//! Training runs in candle ([`WarpMlp`]); the runtime ([`NnWarp`]) evaluates the same
+//! weights in plain Rust ([`NodeMlp`]) over all nodes in parallel, because 16-wide layers
+//! are far below the size at which a tensor library's per-call overhead pays off (the
+//! bench `nnwarp_correction` measures both).
+
+use std::sync::Arc;
+
+use candle_core::Tensor;
+use nalgebra::{Rotation3, Vector3};
+use rayon::prelude::*;
+use weft_mesh::TetMesh;
+use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics, contextual_features, rotation_vector};
+
+use crate::error::{Error, Result};
+use crate::params::{Init, Params};
+
+/// Inputs per node: three kinematic scalars, geodesic, potential, digression, ν.
+pub const INPUTS: usize = 7;
+/// Outputs per node: the correction in the aligned frame.
+pub const OUTPUTS: usize = 3;
+
+/// What stays fixed while one body is warped under one field: the gradient fit, the
+/// contextual features, the free nodes, ν and the unit-sphere scale.
+#[derive(Debug, Clone)]
+pub struct WarpContext {
+    gradients: Arc<NodalGradients>,
+    context: Vec<[f64; 3]>,
+    free: Vec<usize>,
+    poisson: f64,
+    /// Lengths of the body times this are unit-sphere lengths.
+    scale: f64,
+}
+
+/// The per-node inputs of one linear solution: the aligning rotations and features of the
+/// free nodes (in [`WarpContext::free_nodes`] order).
+#[derive(Debug, Clone)]
+pub struct NodeInputs {
+    pub rotations: Vec<Rotation3<f64>>,
+    pub features: Vec<[f64; INPUTS]>,
+}
+
+impl WarpContext {
+    /// `mesh` in its own units, its `anchors`, the field's direction and ν.
+    pub fn new(mesh: &TetMesh, anchors: &[usize], field: FieldDirection, poisson: f64) -> Result<Self> {
+        let (_, scale) = weft_sim::warp::unit_sphere_normalization(mesh.positions());
+        let gradients = Arc::new(NodalGradients::new(mesh)?);
+        Self::with_gradients(mesh, gradients, anchors, field, poisson, scale)
+    }
+
+    /// As [`WarpContext::new`], sharing a gradient fit of the same mesh and with the scale given.
+    pub fn with_gradients(
+        mesh: &TetMesh,
+        gradients: Arc<NodalGradients>,
+        anchors: &[usize],
+        field: FieldDirection,
+        poisson: f64,
+        scale: f64,
+    ) -> Result<Self> {
+        if !(poisson.is_finite() && (0.0..0.5).contains(&poisson)) {
+            return Err(Error::InvalidParameter {
+                name: "Poisson ratio",
+                value: poisson.to_string(),
+                reason: "must lie in [0, 0.5)",
+            });
+        }
+        let context = contextual_features(mesh, anchors, field)?;
+        let mut is_anchor = vec![false; mesh.num_vertices()];
+        for &a in anchors {
+            is_anchor[a] = true;
+        }
+        Ok(Self {
+            gradients,
+            context,
+            free: (0..mesh.num_vertices()).filter(|&i| !is_anchor[i]).collect(),
+            poisson,
+            scale,
+        })
+    }
+
+    pub fn free_nodes(&self) -> &[usize] {
+        &self.free
+    }
+
+    pub fn num_nodes(&self) -> usize {
+        self.context.len()
+    }
+
+    /// The network's inputs for the linear displacements `linear` (flat, the body's units).
+    pub fn inputs(&self, linear: &[f64]) -> Result<NodeInputs> {
+        if linear.len() != 3 * self.num_nodes() {
+            return Err(Error::Shape {
+                what: "linear displacements",
+                expected: format!("{} values", 3 * self.num_nodes()),
+                got: format!("{}", linear.len()),
+            });
+        }
+        if let Some(index) = linear.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "linear displacements",
+                index,
+            });
+        }
+        let (rotations, features) = self
+            .free
+            .par_iter()
+            .map(|&i| {
+                // The displacement gradient is dimensionless: the same at any scale.
+                let w = rotation_vector(&self.gradients.gradient(linear, i));
+                let u = Vector3::new(linear[3 * i], linear[3 * i + 1], linear[3 * i + 2]) * self.scale;
+                let (q, k) = aligned_kinematics(&u, &w);
+                let c = self.context[i];
+                (q, [k[0], k[1], k[2], c[0], c[1], c[2], self.poisson])
+            })
+            .unzip();
+        Ok(NodeInputs { rotations, features })
+    }
+
+    /// Training pairs of one frame: inputs and the aligned correction `Q_i (u_i − ũ_i)`
+    /// in unit-sphere units, for every free node.
+    pub fn pairs(&self, linear: &[f64], nonlinear: &[f64]) -> Result<(Vec<[f64; INPUTS]>, Vec<[f64; OUTPUTS]>)> {
+        if nonlinear.len() != linear.len() {
+            return Err(Error::Shape {
+                what: "registered displacements",
+                expected: format!("{} values", linear.len()),
+                got: format!("{}", nonlinear.len()),
+            });
+        }
+        let inputs = self.inputs(linear)?;
+        let targets = self
+            .free
+            .iter()
+            .zip(&inputs.rotations)
+            .map(|(&i, q)| {
+                let d = Vector3::new(
+                    nonlinear[3 * i] - linear[3 * i],
+                    nonlinear[3 * i + 1] - linear[3 * i + 1],
+                    nonlinear[3 * i + 2] - linear[3 * i + 2],
+                ) * self.scale;
+                let a = q * d;
+                [a.x, a.y, a.z]
+            })
+            .collect();
+        Ok((inputs.features, targets))
+    }
+}
+
+/// Per-column means and standard deviations of inputs and outputs, fitted on the training
+/// pairs; the network sees and answers standardised values.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Standardization {
+    pub input_mean: [f64; INPUTS],
+    pub input_std: [f64; INPUTS],
+    pub output_mean: [f64; OUTPUTS],
+    pub output_std: [f64; OUTPUTS],
+}
+
+fn mean_std<const N: usize>(rows: &[[f64; N]]) -> ([f64; N], [f64; N]) {
+    let n = rows.len().max(1) as f64;
+    let mut mean = [0.0; N];
+    for r in rows {
+        for d in 0..N {
+            mean[d] += r[d] / n;
+        }
+    }
+    let mut std = [0.0; N];
+    for r in rows {
+        for d in 0..N {
+            std[d] += (r[d] - mean[d]).powi(2) / n;
+        }
+    }
+    // A constant column (one Poisson ratio, one field kind) is passed through unscaled.
+    (mean, std.map(|v| if v.sqrt() > 1e-12 { v.sqrt() } else { 1.0 }))
+}
+
+impl Standardization {
+    pub fn fit(inputs: &[[f64; INPUTS]], outputs: &[[f64; OUTPUTS]]) -> Result<Self> {
+        if inputs.is_empty() || inputs.len() != outputs.len() {
+            return Err(Error::InvalidParameter {
+                name: "training pairs",
+                value: format!("{} inputs, {} outputs", inputs.len(), outputs.len()),
+                reason: "need as many outputs as inputs, and at least one",
+            });
+        }
+        let (input_mean, input_std) = mean_std(inputs);
+        let (output_mean, output_std) = mean_std(outputs);
+        Ok(Self {
+            input_mean,
+            input_std,
+            output_mean,
+            output_std,
+        })
+    }
+
+    pub fn input(&self, x: &[f64; INPUTS]) -> [f64; INPUTS] {
+        std::array::from_fn(|d| (x[d] - self.input_mean[d]) / self.input_std[d])
+    }
+
+    pub fn output(&self, y: &[f64; OUTPUTS]) -> [f64; OUTPUTS] {
+        std::array::from_fn(|d| (y[d] - self.output_mean[d]) / self.output_std[d])
+    }
+
+    pub fn unoutput(&self, y: &[f64; OUTPUTS]) -> [f64; OUTPUTS] {
+        std::array::from_fn(|d| y[d] * self.output_std[d] + self.output_mean[d])
+    }
+}
+
+/// NNWarp §5's network sizes: two hidden layers of 16 for co-rotational and Neo-Hookean,
+/// three for StVK.
+pub fn hidden_layers(material: &str) -> Vec<usize> {
+    if material == "stvk" { vec![16; 3] } else { vec![16; 2] }
+}
+
+/// The MLP in candle: tanh hidden layers, a linear output (§5).
+#[derive(Debug, Clone)]
+pub struct WarpMlp {
+    layers: Vec<(Tensor, Tensor)>,
+}
+
+impl WarpMlp {
+    /// Creates `layer{k}.w` `[in, out]` and `layer{k}.b` in `params`, Glorot-uniform
+    /// (the initialisation made for tanh).
+    pub fn new(params: &mut Params, hidden: &[usize]) -> Result<Self> {
+        let mut widths = vec![INPUTS];
+        widths.extend(hidden);
+        widths.push(OUTPUTS);
+        let layers = widths
+            .windows(2)
+            .enumerate()
+            .map(|(k, w)| {
+                let bound = (6.0 / (w[0] + w[1]) as f64).sqrt();
+                Ok((
+                    params.create(&format!("layer{k}.w"), &[w[0], w[1]], Init::Uniform(bound))?,
+                    params.create(&format!("layer{k}.b"), &[w[1]], Init::Zeros)?,
+                ))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self { layers })
+    }
+
+    /// `[N, 7]` standardised inputs → `[N, 3]` standardised corrections.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let mut h = x.clone();
+        for (k, (w, b)) in self.layers.iter().enumerate() {
+            h = h.broadcast_matmul(w)?.broadcast_add(b)?;
+            if k + 1 < self.layers.len() {
+                h = h.tanh()?;
+            }
+        }
+        Ok(h)
+    }
+
+    /// The same weights for the plain-Rust runtime.
+    pub fn to_node_mlp(&self, standardization: Standardization) -> Result<NodeMlp> {
+        let layers = self
+            .layers
+            .iter()
+            .map(|(w, b)| {
+                let (n_in, n_out) = w.dims2()?;
+                Ok(DenseLayer {
+                    n_in,
+                    n_out,
+                    weight: crate::convert::tensor_to_f64("NNWarp weight", w)?,
+                    bias: crate::convert::tensor_to_f64("NNWarp bias", b)?,
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(NodeMlp {
+            layers,
+            standardization,
+        })
+    }
+}
+
+#[derive(Debug, Clone)]
+struct DenseLayer {
+    n_in: usize,
+    n_out: usize,
+    /// Row-major `[n_in, n_out]`, as candle stores `W` of `x W + b`.
+    weight: Vec<f64>,
+    bias: Vec<f64>,
+}
+
+/// The trained network as plain Rust: one node at a time, no allocation per layer beyond
+/// two small buffers.
+#[derive(Debug, Clone)]
+pub struct NodeMlp {
+    layers: Vec<DenseLayer>,
+    pub standardization: Standardization,
+}
+
+impl NodeMlp {
+    /// The correction (aligned frame, unit-sphere units) of one node's raw inputs.
+    pub fn forward(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
+        let mut h: Vec<f64> = self.standardization.input(x).to_vec();
+        let mut next = Vec::with_capacity(32);
+        for (k, l) in self.layers.iter().enumerate() {
+            next.clear();
+            next.extend_from_slice(&l.bias);
+            for (i, hi) in h.iter().enumerate().take(l.n_in) {
+                let row = &l.weight[i * l.n_out..(i + 1) * l.n_out];
+                for (o, w) in next.iter_mut().zip(row) {
+                    *o += hi * w;
+                }
+            }
+            if k + 1 < self.layers.len() {
+                next.iter_mut().for_each(|v| *v = v.tanh());
+            }
+            std::mem::swap(&mut h, &mut next);
+        }
+        self.standardization.unoutput(&[h[0], h[1], h[2]])
+    }
+}
+
+/// NNWarp's runtime correction of one body under one field.
+#[derive(Debug, Clone)]
+pub struct NnWarp {
+    pub context: WarpContext,
+    pub mlp: NodeMlp,
+}
+
+impl NnWarp {
+    /// `u = ũ + Qᵀ δu` at every free node (anchored nodes keep their linear value).
+    pub fn warp(&self, linear: &[f64]) -> Result<Vec<f64>> {
+        let inputs = self.context.inputs(linear)?;
+        let corrections: Vec<Vector3<f64>> = inputs
+            .features
+            .par_iter()
+            .zip(&inputs.rotations)
+            .map(|(x, q)| {
+                let d = self.mlp.forward(x);
+                q.inverse() * Vector3::new(d[0], d[1], d[2]) / self.context.scale
+            })
+            .collect();
+        let mut out = linear.to_vec();
+        for (&i, d) in self.context.free.iter().zip(&corrections) {
+            for k in 0..3 {
+                out[3 * i + k] += d[k];
+            }
+        }
+        if let Some(index) = out.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "NNWarp displacements",
+                index,
+            });
+        }
+        Ok(out)
+    }
+}
+
+/// The training pairs of one split of a dataset: every free node of every frame after
+/// the first (the rest frame has nothing to correct).
+pub fn collect_pairs(
+    dataset: &crate::data::WarpDataset,
+    split: &str,
+) -> Result<(Vec<[f64; INPUTS]>, Vec<[f64; OUTPUTS]>)> {
+    let gradients = Arc::new(NodalGradients::new(&dataset.body)?);
+    let mut inputs = Vec::new();
+    let mut outputs = Vec::new();
+    for s in dataset.sequences.iter().filter(|s| s.split == split) {
+        // The dataset's body is already in the unit sphere: scale 1.
+        let ctx = WarpContext::with_gradients(
+            &dataset.body,
+            gradients.clone(),
+            &dataset.anchors,
+            s.field,
+            s.poisson,
+            1.0,
+        )?;
+        for (lin, non) in s.linear.iter().zip(&s.nonlinear).skip(1) {
+            let (x, y) = ctx.pairs(lin, non)?;
+            inputs.extend(x);
+            outputs.extend(y);
+        }
+    }
+    Ok((inputs, outputs))
+}
+
+/// How an NNWarp network is trained (NNWarp §5: Adam, learning rate 1e-3, batch 1024,
+/// about 10 epochs).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WarpTrainingConfig {
+    /// Hidden widths; empty means the paper's for the material ([`hidden_layers`]).
+    pub hidden: Vec<usize>,
+    pub adam: crate::adam::AdamSettings,
+    pub batch: usize,
+    pub epochs: usize,
+    pub seed: u64,
+}
+
+impl Default for WarpTrainingConfig {
+    fn default() -> Self {
+        Self {
+            hidden: Vec::new(),
+            adam: crate::adam::AdamSettings::default(),
+            batch: 1024,
+            epochs: 10,
+            seed: 0,
+        }
+    }
+}
+
+/// Standardised pairs as `[N, 7]` and `[N, 3]` f32 tensors.
+pub fn pair_tensors(
+    inputs: &[[f64; INPUTS]],
+    outputs: &[[f64; OUTPUTS]],
+    standardization: &Standardization,
+    device: &candle_core::Device,
+) -> Result<(Tensor, Tensor)> {
+    let x: Vec<f32> = inputs
+        .iter()
+        .flat_map(|r| standardization.input(r).map(|v| v as f32))
+        .collect();
+    let y: Vec<f32> = outputs
+        .iter()
+        .flat_map(|r| standardization.output(r).map(|v| v as f32))
+        .collect();
+    Ok((
+        Tensor::from_vec(x, (inputs.len(), INPUTS), device)?,
+        Tensor::from_vec(y, (outputs.len(), OUTPUTS), device)?,
+    ))
+}
+
+/// Mean squared error (standardised units) of `mlp` on `x`, `y`, in chunks.
+pub fn mean_loss(mlp: &WarpMlp, x: &Tensor, y: &Tensor) -> Result<f64> {
+    let n = x.dim(0)?;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    let mut sum = 0.0;
+    let chunk = 65536;
+    for start in (0..n).step_by(chunk) {
+        let len = chunk.min(n - start);
+        let e = (mlp.forward(&x.narrow(0, start, len)?)? - y.narrow(0, start, len)?)?;
+        sum += e
+            .sqr()?
+            .sum_all()?
+            .to_dtype(candle_core::DType::F64)?
+            .to_scalar::<f64>()?;
+    }
+    Ok(sum / (n * OUTPUTS) as f64)
+}
+
+/// One epoch over the pairs in an order drawn from SplitMix64(seed, epoch); returns the
+/// mean batch loss.
+pub fn train_epoch(
+    mlp: &WarpMlp,
+    params: &Params,
+    adam: &mut crate::adam::Adam,
+    x: &Tensor,
+    y: &Tensor,
+    config: &WarpTrainingConfig,
+    epoch: usize,
+    mut on_batch: impl FnMut(f64),
+) -> Result<f64> {
+    let n = x.dim(0)?;
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    let mut rng = weft_sim::rng::SplitMix64::new(config.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    for i in (1..order.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        order.swap(i, j);
+    }
+    let device = x.device();
+    let (mut total, mut batches) = (0.0, 0usize);
+    for chunk in order.chunks(config.batch.max(1)) {
+        let idx = Tensor::from_slice(chunk, chunk.len(), device)?;
+        let (xb, yb) = (x.index_select(&idx, 0)?, y.index_select(&idx, 0)?);
+        let loss = (mlp.forward(&xb)? - yb)?.sqr()?.mean_all()?;
+        let value = loss.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+        adam.step(params, &loss.backward()?)?;
+        total += value;
+        batches += 1;
+        on_batch(value);
+    }
+    Ok(total / batches.max(1) as f64)
+}
+
+/// A trained model directory written by `cargo xtask train nnwarp`: `config.json` (the
+/// training configuration, hidden widths resolved), `standardization.json` and the
+/// latest `checkpoint/`.
+pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)> {
+    let read = |name: &str| -> Result<String> {
+        let path = dir.join(name);
+        std::fs::read_to_string(&path).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })
+    };
+    let parse_error = |name: &str, e: serde_json::Error| Error::Checkpoint {
+        path: dir.join(name).display().to_string(),
+        reason: e.to_string(),
+    };
+    let config: WarpTrainingConfig =
+        serde_json::from_str(&read("config.json")?).map_err(|e| parse_error("config.json", e))?;
+    let standardization: Standardization =
+        serde_json::from_str(&read("standardization.json")?).map_err(|e| parse_error("standardization.json", e))?;
+    let mut params = Params::new(&candle_core::Device::Cpu, config.seed);
+    let mlp = WarpMlp::new(&mut params, &config.hidden)?;
+    crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
+    let node = mlp.to_node_mlp(standardization)?;
+    Ok((config, node))
+}
+
+/// NNWarp's error measure `rel-error`: the mean over nodes of `|u_i − u*_i|` divided by
+/// the largest reference displacement `max_i |u*_i|` (both flat `3V`). Zero when the
+/// reference does not move.
+pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
+    let n = reference.len() / 3;
+    let norm = |v: &[f64], i: usize| (v[3 * i].powi(2) + v[3 * i + 1].powi(2) + v[3 * i + 2].powi(2)).sqrt();
+    let max = (0..n).map(|i| norm(reference, i)).fold(0.0f64, f64::max);
+    if n == 0 || max == 0.0 {
+        return 0.0;
+    }
+    let diff: Vec<f64> = predicted.iter().zip(reference).map(|(p, r)| p - r).collect();
+    (0..n).map(|i| norm(&diff, i)).sum::<f64>() / (n as f64 * max)
+}
