@@ -215,7 +215,7 @@ impl DatasetSpec {
             // The training beam (12 × 6 × 6 cells, 2592 tets; quick 6 × 3 × 3); the
             // sequence count and ramp frames by size (the paper: 20 829 poses).
             let (sequences, frames) = match size {
-                Size::Quick => (4, 8),
+                Size::Quick => (16, 8),
                 Size::Standard => (64, 40),
                 Size::Paper => (520, 40),
             };

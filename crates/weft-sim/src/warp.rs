@@ -153,6 +153,9 @@ pub struct RotationStrainWarp {
     gradients: Arc<NodalGradients>,
     rest: Vec<Vector3<f64>>,
     anchored: Vec<bool>,
+    /// `(free row, anchor, L_ra)`: the couplings to anchors that the elimination drops
+    /// from the matrix and the solve moves to the right-hand side.
+    anchor_couplings: Vec<(usize, usize, f64)>,
     factor: CholeskyFactor,
 }
 
@@ -189,12 +192,21 @@ impl RotationStrainWarp {
                 laplacian.add(i, j, -2.0);
             }
         }
+        let anchor_couplings = pattern
+            .entries()
+            .filter(|&(_, r, c)| anchored[r] != anchored[c])
+            .map(|(slot, r, c)| {
+                let v = laplacian.values()[slot];
+                if anchored[c] { (r, c, v) } else { (c, r, v) }
+            })
+            .collect();
         laplacian.constrain_dofs(&anchored);
         let factor = CholeskySolver::new(pattern)?.factorize(&laplacian)?;
         Ok(Self {
             gradients,
             rest: mesh.positions().to_vec(),
             anchored,
+            anchor_couplings,
             factor,
         })
     }
@@ -219,6 +231,11 @@ impl RotationStrainWarp {
                     rhs[d * n + j] += e[d];
                     rhs[d * n + i] -= e[d];
                 }
+            }
+        }
+        for &(row, anchor, value) in &self.anchor_couplings {
+            for d in 0..3 {
+                rhs[d * n + row] -= value * self.rest[anchor][d];
             }
         }
         for i in (0..n).filter(|&i| self.anchored[i]) {

@@ -94,9 +94,10 @@ fn modal_warp_matrix_is_the_mean_of_the_rotation_along_the_path() {
 fn both_warps_turn_a_linearised_rigid_rotation_into_the_rotation() {
     let mesh = small_beam();
     let grads = Arc::new(NodalGradients::new(&mesh).unwrap());
-    // Anchor one node (the pivot); the linear solution of a rigid rotation by θ about it
-    // is the infinitesimal one, ũ = [θ]× (x̄ − x̄_a).
-    let pivot = 0;
+    // Anchor one node (the pivot, away from the origin); the linear solution of a rigid
+    // rotation by θ about it is the infinitesimal one, ũ = [θ]× (x̄ − x̄_a).
+    let pivot = mesh.num_vertices() / 2;
+    assert!(mesh.positions()[pivot].norm() > 0.1);
     let xa = mesh.positions()[pivot];
     let theta = Vector3::new(0.2, -0.5, 0.6);
     let linear = field(&mesh, |p| theta.cross(&(p - xa)));

@@ -183,7 +183,7 @@ fn train_ours(
 /// Generates `scene`'s dataset into `dir`, or completes one an interrupted run left there
 /// (the generator rewrites its manifest after every sequence, so a manifest alone does
 /// not mean the dataset is whole).
-fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<()> {
+pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<()> {
     let manifest = dir.join("manifest.json");
     let exists = manifest.exists();
     if exists && crate::dataset::read_manifest(&manifest)?.is_complete() {

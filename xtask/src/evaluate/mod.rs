@@ -9,6 +9,7 @@
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
 pub mod embed;
+pub mod nnwarp;
 pub mod paper;
 pub mod proj;
 pub mod results;
@@ -25,7 +26,7 @@ use crate::output::write_json;
 pub use results::{Curve, EnergyBar, ExperimentOutput, Scatter};
 
 /// Experiments `evaluate` runs, in order.
-pub const EXPERIMENTS: [&str; 3] = ["sim", "proj", "embed"];
+pub const EXPERIMENTS: [&str; 4] = ["sim", "proj", "embed", "nnwarp"];
 
 #[derive(Args)]
 pub struct EvaluateArgs {
@@ -35,7 +36,7 @@ pub struct EvaluateArgs {
     /// Shorthand for --size quick.
     #[arg(long)]
     quick: bool,
-    /// Run only these experiments (comma-separated): sim, proj, embed.
+    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Output directory (default: out/evaluate-<size>).
@@ -109,6 +110,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             "sim" => sim::run(&ctx)?,
             "proj" => proj::run(&ctx)?,
             "embed" => embed::run(&ctx)?,
+            "nnwarp" => nnwarp::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();

@@ -330,7 +330,7 @@ const PENDING: [(&str, &str, bool); 6] = [
     (
         "Tan et al. Tables II–IV (loss weights, resolutions, 2nd vs 3rd stage), cloth IK and the 2-D embedding plot",
         "embed",
-        false,
+        true,
     ),
     (
         "Alt-ConvLSTM Tables 1–2 (per-vertex error, single-step and roll-out, known and unseen motions)",

@@ -39,6 +39,7 @@ pub mod fonts {
 fn pareto_metric(experiment: &str) -> (&'static str, &'static str) {
     match experiment {
         "proj" => ("sqrt-mse", "SqrtMSE against the tight reference (mm)"),
+        "nnwarp" => ("rel-error", "rel-error against full nonlinear FEM"),
         _ => ("m-rms", "M_rms against the tight reference (mm)"),
     }
 }
