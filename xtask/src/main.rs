@@ -15,6 +15,7 @@ mod report;
 mod simulate;
 mod stability;
 mod train;
+mod warp;
 
 use clap::{Parser, Subcommand};
 
@@ -61,6 +62,8 @@ enum Command {
     /// Train a neural model on a dataset (resumable from checkpoints, progress bars with the losses).
     #[command(subcommand)]
     Train(train::TrainCommand),
+    /// Run a volumetric scene as pre-factorised linear FEM corrected by a trained NNWarp network (VTK per frame).
+    Warp(warp::WarpArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -73,6 +76,7 @@ fn main() -> anyhow::Result<()> {
         Command::Dataset(args) => dataset::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::Train(cmd) => train::run(cmd),
+        Command::Warp(args) => warp::run(args),
         Command::CheckReport(args) => report::check(args),
         Command::Stability(args) => stability::run(args),
     }

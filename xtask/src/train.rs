@@ -289,6 +289,13 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
         bail!("batch and epochs must be at least 1");
     }
     let material = args.material.key();
+    if !config.material.is_empty() && config.material != material {
+        bail!(
+            "the configuration names material {:?} but --material is {material}",
+            config.material
+        );
+    }
+    config.material = material.to_string();
     if config.hidden.is_empty() {
         config.hidden = hidden_layers(material);
     }
@@ -330,7 +337,7 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     let (x, y) = pair_tensors(&train_x, &train_y, &standardization, &device)?;
     let (vx, vy) = pair_tensors(&val_x, &val_y, &standardization, &device)?;
     let mut params = weft_nn::params::Params::new(&device, config.seed);
-    let mlp = WarpMlp::new(&mut params, &config.hidden)?;
+    let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
     let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
     let ck = args.out.join("checkpoint");
     let mut first = 0;

@@ -153,4 +153,36 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     }
     assert!(tested >= 3);
     assert!(directional.0 < 0.8 * directional.1, "{directional:?}");
+    // The runtime command on the quick beam under gravity, against full FEM.
+    let warp_out = root.join("warp");
+    let out = xtask(
+        &[
+            "warp",
+            "--scene",
+            "beam-neo-hookean",
+            "--quick",
+            "--frames",
+            "4",
+            "--reference",
+        ],
+        &[("--model", &model), ("--out", &warp_out)],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(warp_out.join("summary.json")).unwrap()).unwrap();
+    let frames = summary["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 4);
+    assert!(
+        frames
+            .iter()
+            .all(|f| f["rel_error_nnwarp"].as_f64().is_some_and(f64::is_finite))
+    );
+    let vtk = std::fs::read_to_string(warp_out.join("frame-0004.vtk")).unwrap();
+    assert!(vtk.contains("displacement") && vtk.contains("error"));
+    let cloth = xtask(
+        &["warp", "--scene", "sheet-ms", "--quick"],
+        &[("--model", &model), ("--out", &root.join("cloth"))],
+    );
+    assert!(!cloth.status.success());
+    assert!(String::from_utf8_lossy(&cloth.stderr).contains("not a volumetric scene"));
 }

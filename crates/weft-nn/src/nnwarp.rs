@@ -224,19 +224,37 @@ pub fn hidden_layers(material: &str) -> Vec<usize> {
     if material == "stvk" { vec![16; 3] } else { vec![16; 2] }
 }
 
-/// The MLP in candle: tanh hidden layers, a linear output (§5).
+/// The kinematic inputs (the first three) that mean "no displacement".
+const KINEMATIC: usize = 3;
+
+/// The MLP in candle: tanh hidden layers, a linear output (§5), with one addition: the
+/// correction is `net(x) − net(x₀)`, `x₀` being `x` with the three kinematic inputs at
+/// zero. A node that does not move is then never corrected, whatever the contextual
+/// features. Without it the trained networks moved nodes of a barely loaded body by many
+/// times its own displacement (docs/NNWARP.md, *Zero correction at rest*).
 #[derive(Debug, Clone)]
 pub struct WarpMlp {
     layers: Vec<(Tensor, Tensor)>,
+    /// Standardised zero kinematics `[1, 3]` and the standardised zero output `[3]`.
+    zero_input: Tensor,
+    zero_output: Tensor,
 }
 
 impl WarpMlp {
     /// Creates `layer{k}.w` `[in, out]` and `layer{k}.b` in `params`, Glorot-uniform
-    /// (the initialisation made for tanh).
-    pub fn new(params: &mut Params, hidden: &[usize]) -> Result<Self> {
+    /// (the initialisation made for tanh), for inputs and outputs standardised by
+    /// `standardization`.
+    pub fn new(params: &mut Params, hidden: &[usize], standardization: &Standardization) -> Result<Self> {
         let mut widths = vec![INPUTS];
         widths.extend(hidden);
         widths.push(OUTPUTS);
+        if widths.iter().any(|&w| w == 0 || w > MAX_WIDTH) {
+            return Err(Error::InvalidParameter {
+                name: "NNWarp hidden widths",
+                value: format!("{hidden:?}"),
+                reason: "each must lie in 1..=64",
+            });
+        }
         let layers = widths
             .windows(2)
             .enumerate()
@@ -248,11 +266,23 @@ impl WarpMlp {
                 ))
             })
             .collect::<Result<_>>()?;
-        Ok(Self { layers })
+        let device = params.device();
+        let zero = standardization.input(&[0.0; INPUTS]);
+        let zero_input = Tensor::from_vec(
+            zero[..KINEMATIC].iter().map(|&v| v as f32).collect::<Vec<_>>(),
+            (1, KINEMATIC),
+            device,
+        )?;
+        let out = standardization.output(&[0.0; OUTPUTS]);
+        let zero_output = Tensor::from_vec(out.iter().map(|&v| v as f32).collect::<Vec<_>>(), OUTPUTS, device)?;
+        Ok(Self {
+            layers,
+            zero_input,
+            zero_output,
+        })
     }
 
-    /// `[N, 7]` standardised inputs → `[N, 3]` standardised corrections.
-    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+    fn net(&self, x: &Tensor) -> Result<Tensor> {
         let mut h = x.clone();
         for (k, (w, b)) in self.layers.iter().enumerate() {
             h = h.broadcast_matmul(w)?.broadcast_add(b)?;
@@ -261,6 +291,19 @@ impl WarpMlp {
             }
         }
         Ok(h)
+    }
+
+    /// `[N, 7]` standardised inputs → `[N, 3]` standardised corrections.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let n = x.dim(0)?;
+        let at_rest = Tensor::cat(
+            &[
+                self.zero_input.broadcast_as((n, KINEMATIC))?,
+                x.narrow(1, KINEMATIC, INPUTS - KINEMATIC)?,
+            ],
+            1,
+        )?;
+        Ok((self.net(x)? - self.net(&at_rest)?)?.broadcast_add(&self.zero_output)?)
     }
 
     /// The same weights for the plain-Rust runtime.
@@ -285,6 +328,9 @@ impl WarpMlp {
     }
 }
 
+/// The widest layer the plain-Rust runtime evaluates on the stack.
+const MAX_WIDTH: usize = 64;
+
 #[derive(Debug, Clone)]
 struct DenseLayer {
     n_in: usize,
@@ -294,8 +340,7 @@ struct DenseLayer {
     bias: Vec<f64>,
 }
 
-/// The trained network as plain Rust: one node at a time, no allocation per layer beyond
-/// two small buffers.
+/// The trained network as plain Rust: one node at a time, on stack buffers.
 #[derive(Debug, Clone)]
 pub struct NodeMlp {
     layers: Vec<DenseLayer>,
@@ -303,25 +348,35 @@ pub struct NodeMlp {
 }
 
 impl NodeMlp {
-    /// The correction (aligned frame, unit-sphere units) of one node's raw inputs.
-    pub fn forward(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
-        let mut h: Vec<f64> = self.standardization.input(x).to_vec();
-        let mut next = Vec::with_capacity(32);
+    /// The network's raw output for standardised inputs `x`.
+    fn net(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
+        let mut h = [0.0; MAX_WIDTH];
+        let mut next = [0.0; MAX_WIDTH];
+        h[..INPUTS].copy_from_slice(x);
         for (k, l) in self.layers.iter().enumerate() {
-            next.clear();
-            next.extend_from_slice(&l.bias);
-            for (i, hi) in h.iter().enumerate().take(l.n_in) {
+            next[..l.n_out].copy_from_slice(&l.bias);
+            for (i, hi) in h[..l.n_in].iter().enumerate() {
                 let row = &l.weight[i * l.n_out..(i + 1) * l.n_out];
-                for (o, w) in next.iter_mut().zip(row) {
+                for (o, w) in next[..l.n_out].iter_mut().zip(row) {
                     *o += hi * w;
                 }
             }
             if k + 1 < self.layers.len() {
-                next.iter_mut().for_each(|v| *v = v.tanh());
+                next[..l.n_out].iter_mut().for_each(|v| *v = v.tanh());
             }
             std::mem::swap(&mut h, &mut next);
         }
-        self.standardization.unoutput(&[h[0], h[1], h[2]])
+        [h[0], h[1], h[2]]
+    }
+
+    /// The correction (aligned frame, unit-sphere units) of one node's raw inputs; zero
+    /// when the kinematic inputs are.
+    pub fn forward(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
+        let xs = self.standardization.input(x);
+        let mut x0 = xs;
+        x0[..KINEMATIC].copy_from_slice(&self.standardization.input(&[0.0; INPUTS])[..KINEMATIC]);
+        let (a, b) = (self.net(&xs), self.net(&x0));
+        std::array::from_fn(|d| (a[d] - b[d]) * self.standardization.output_std[d])
     }
 }
 
@@ -394,6 +449,9 @@ pub fn collect_pairs(
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct WarpTrainingConfig {
+    /// The material the network was trained for (the dataset's array name, e.g.
+    /// `neo-hookean`); set by the trainer.
+    pub material: String,
     /// Hidden widths; empty means the paper's for the material ([`hidden_layers`]).
     pub hidden: Vec<usize>,
     pub adam: crate::adam::AdamSettings,
@@ -405,6 +463,7 @@ pub struct WarpTrainingConfig {
 impl Default for WarpTrainingConfig {
     fn default() -> Self {
         Self {
+            material: String::new(),
             hidden: Vec::new(),
             adam: crate::adam::AdamSettings::default(),
             batch: 1024,
@@ -509,7 +568,7 @@ pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)
     let standardization: Standardization =
         serde_json::from_str(&read("standardization.json")?).map_err(|e| parse_error("standardization.json", e))?;
     let mut params = Params::new(&candle_core::Device::Cpu, config.seed);
-    let mlp = WarpMlp::new(&mut params, &config.hidden)?;
+    let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
     crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
     let node = mlp.to_node_mlp(standardization)?;
     Ok((config, node))

@@ -559,7 +559,6 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
     use weft_sim::warp::FieldDirection;
     let mut rng = TestRng::new(17);
     let mut params = Params::new(&cpu(), 3);
-    let mlp = WarpMlp::new(&mut params, &hidden_layers("stvk")).unwrap();
     let rows: Vec<[f64; INPUTS]> = (0..40)
         .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
         .collect();
@@ -567,6 +566,7 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
         .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
         .collect();
     let standardization = Standardization::fit(&rows, &outs).unwrap();
+    let mlp = WarpMlp::new(&mut params, &hidden_layers("stvk"), &standardization).unwrap();
     let (x, _) = weft_nn::nnwarp::pair_tensors(&rows, &outs, &standardization, &cpu()).unwrap();
     let candle_out: Vec<f32> = mlp.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap();
     let node = mlp.to_node_mlp(standardization.clone()).unwrap();

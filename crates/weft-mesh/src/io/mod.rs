@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 pub use obj::{parse_obj, read_obj, write_obj};
 pub use ply::write_ply;
 pub use tetgen::{parse_tetgen, read_tetgen, write_tetgen};
-pub use vtk::{parse_vtk_tets, read_vtk_tets, write_vtk_tets, write_vtk_triangles};
+pub use vtk::{PointField, parse_vtk_tets, read_vtk_tets, write_vtk_tets, write_vtk_triangles};
 
 use crate::error::{Error, Result};
 use crate::tetmesh::TetMesh;

@@ -401,6 +401,10 @@ impl VolumeSimulation {
     pub fn anchors(&self) -> &[usize] {
         &self.anchors
     }
+    /// The external load: gravity plus the scene's force field, as nodal forces (N, flat).
+    pub fn external_forces(&self) -> &[f64] {
+        &self.forces
+    }
     pub fn frame_index(&self) -> usize {
         self.frame
     }
