@@ -110,6 +110,34 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
     c
 }
 
+/// Whether the model in `out` has finished the last of `stages` under the configuration
+/// in `config` (then there is nothing to resume, and loading the dataset is skipped).
+fn trained(config: &Path, out: &Path, no_pb: bool, stages: &[u8]) -> bool {
+    let read = |p: &Path| std::fs::read_to_string(p).ok();
+    let (Some(want), Some(have), Some(progress)) = (
+        read(config),
+        read(&out.join("config.json")),
+        read(&out.join("checkpoint/progress.json")),
+    ) else {
+        return false;
+    };
+    let parse = |t: &str| serde_json::from_str::<EmbedTrainingConfig>(t).ok();
+    let (Some(mut want), Some(have)) = (parse(&want), parse(&have)) else {
+        return false;
+    };
+    // As `cargo xtask train embed --no-pb` stores it.
+    if no_pb {
+        want.weights.ephys = 0.0;
+        want.weights.mphys = 0.0;
+    }
+    let Ok(p) = serde_json::from_str::<weft_nn::embed_training::Progress>(&progress) else {
+        return false;
+    };
+    let last = *stages.iter().max().unwrap_or(&3);
+    want == have && (p.stage > last || (p.stage == last && p.epoch >= have.epochs[last as usize - 1]))
+}
+
+/// Trains (or resumes) one model of the experiment into `out`.
 fn train(
     ctx: &EvalContext,
     data_dir: &Path,
@@ -118,6 +146,9 @@ fn train(
     no_pb: bool,
     stages: &[u8],
 ) -> anyhow::Result<()> {
+    if trained(config, out, no_pb, stages) {
+        return Ok(());
+    }
     crate::train::run(TrainCommand::Embed(EmbedArgs {
         data: data_dir.to_path_buf(),
         config: Some(config.to_path_buf()),
@@ -785,5 +816,49 @@ fn tan_table_4(rows: &[(String, &str, Scores)]) -> Table {
                 vec![format!("`{scene}`"), label.to_string(), a, b, c]
             })
             .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_counts_as_trained_only_with_its_configuration_and_its_last_epoch() {
+        let dir = std::env::temp_dir().join(format!("weft-embed-trained-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let model = dir.join("model");
+        std::fs::create_dir_all(model.join("checkpoint")).unwrap();
+        let config = training_config(Size::Quick);
+        let config_path = dir.join("config.json");
+        std::fs::write(&config_path, serde_json::to_string(&config).unwrap()).unwrap();
+        let progress = |stage: u8, epoch: usize| {
+            let p = weft_nn::embed_training::Progress { stage, epoch };
+            std::fs::write(
+                model.join("checkpoint/progress.json"),
+                serde_json::to_string(&p).unwrap(),
+            )
+            .unwrap();
+        };
+        // The baseline stores its configuration with the physics weights zeroed.
+        let mut stored = config.clone();
+        stored.weights.ephys = 0.0;
+        stored.weights.mphys = 0.0;
+        std::fs::write(model.join("config.json"), serde_json::to_string(&stored).unwrap()).unwrap();
+        progress(3, config.epochs[2]);
+        assert!(trained(&config_path, &model, true, &[1, 2, 3]));
+        assert!(!trained(&config_path, &model, false, &[1, 2, 3]));
+        progress(3, config.epochs[2] - 1);
+        assert!(!trained(&config_path, &model, true, &[1, 2, 3]));
+        // Stage 2 done counts for the stage-2 snapshot, not for the whole run.
+        progress(2, config.epochs[1]);
+        assert!(trained(&config_path, &model, true, &[1, 2]));
+        assert!(!trained(&config_path, &model, true, &[1, 2, 3]));
+        // Any other change of the configuration means retraining (train refuses to resume).
+        let mut other = config.clone();
+        other.adam.learning_rate *= 2.0;
+        std::fs::write(&config_path, serde_json::to_string(&other).unwrap()).unwrap();
+        assert!(!trained(&config_path, &model, true, &[1, 2]));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
