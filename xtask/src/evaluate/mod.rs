@@ -92,6 +92,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         quiet: args.quiet,
     };
     let start = Instant::now();
+    let mut ran: Vec<&str> = Vec::new();
     for name in &selected {
         let cache = out.join("experiments").join(format!("{name}.json"));
         if !args.force {
@@ -116,6 +117,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         output.wall_seconds = t.elapsed().as_secs_f64();
         results::validate(&output.records)?;
         write_json(&cache, &output)?;
+        ran.push(name);
         eprintln!(
             "{name}: {} records in {:.1} s{}",
             output.records.len(),
@@ -141,14 +143,20 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         out.join("index.html").display()
     );
     if let Some(dest) = &args.publish {
-        publish(&out, dest, size)?;
+        let reused: Vec<&str> = outputs
+            .iter()
+            .map(|o| o.experiment.as_str())
+            .filter(|e| !ran.contains(e))
+            .collect();
+        publish(&out, dest, &ran, &reused)?;
         println!("published to {}", dest.display());
     }
     Ok(())
 }
 
-/// Copies the report to `dest` with its provenance.
-fn publish(out: &Path, dest: &Path, size: Size) -> anyhow::Result<()> {
+/// Copies the report to `dest` with its provenance: the command, and which experiments it
+/// ran and which it took from earlier runs cached in the same output directory.
+fn publish(out: &Path, dest: &Path, ran: &[&str], reused: &[&str]) -> anyhow::Result<()> {
     for sub in ["plots", "renders"] {
         let _ = std::fs::remove_dir_all(dest.join(sub));
     }
@@ -157,7 +165,10 @@ fn publish(out: &Path, dest: &Path, size: Size) -> anyhow::Result<()> {
         std::fs::copy(out.join(f), dest.join(f)).with_context(|| format!("copying {f}"))?;
     }
     for sub in ["plots", "renders"] {
-        copy_tree(&out.join(sub), &dest.join(sub))?;
+        // An evaluation without renders (or plots) has no such directory.
+        if out.join(sub).exists() {
+            copy_tree(&out.join(sub), &dest.join(sub))?;
+        }
     }
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
@@ -169,14 +180,25 @@ fn publish(out: &Path, dest: &Path, size: Size) -> anyhow::Result<()> {
         })
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let list = |v: &[&str]| {
+        if v.is_empty() {
+            "none".to_string()
+        } else {
+            v.iter().map(|e| format!("`{e}`")).collect::<Vec<_>>().join(", ")
+        }
+    };
     let text = format!(
-        "# Provenance\n\nProduced by\n\n```sh\ncargo xtask {}\n```\n\non {cores} cores of {cpu}, code version {}. \
-         The per-experiment wall times are at the top of `tables.md`; `index.html` is the whole report in one \
-         file. The predictions (every method's positions beside the reference) are not committed: the same \
-         command writes them to `out/evaluate-{}/predictions/` (or its `--out`).\n",
+        "# Provenance\n\nProduced by\n\n```sh\ncargo xtask {}\n```\n\nExperiments it ran: {}. Experiments it reused from \
+         `{}/experiments/`, where earlier runs of `cargo xtask evaluate` with the same `--out` left them: {} \
+         (each experiment's wall time is at the top of `tables.md`; `--only NAME --force` reruns one). \
+         Machine: {cores} cores of {cpu}; code version {}. `index.html` is the whole report in one file. The predictions (every method's positions beside the reference) are not committed: the same \
+         command writes them to `{}/predictions/`.\n",
         std::env::args().skip(1).collect::<Vec<_>>().join(" "),
+        list(ran),
+        out.display(),
+        list(reused),
         crate::dataset::code_version(),
-        size.as_str()
+        out.display()
     );
     crate::output::write_text(&dest.join("PROVENANCE.md"), &text)
 }
