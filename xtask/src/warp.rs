@@ -121,7 +121,7 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
     let gradients = Arc::new(NodalGradients::new(&mesh)?);
     let (_, scale) = unit_sphere_normalization(mesh.positions());
     let context = WarpContext::with_gradients(&mesh, gradients.clone(), &anchors, field, scene.poisson, scale)?;
-    let nnwarp = NnWarp { context, mlp };
+    let nnwarp = NnWarp::new(context, mlp);
     std::fs::create_dir_all(&args.out)?;
     let mut frames = Vec::new();
     let (mut solve_seconds, mut warp_seconds, mut reference_seconds) = (0.0, 0.0, 0.0);

@@ -128,10 +128,7 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     for s in set.sequences.iter().filter(|s| s.split == "test") {
         let context =
             WarpContext::with_gradients(&set.body, grads.clone(), &set.anchors, s.field, s.poisson, 1.0).unwrap();
-        let warp = NnWarp {
-            context,
-            mlp: mlp.clone(),
-        };
+        let warp = NnWarp::new(context, mlp.clone());
         let last = s.linear.len() - 1;
         let (lin, reference) = (&s.linear[last], &s.nonlinear[last]);
         let linear = rel_error(lin, reference);

@@ -616,10 +616,7 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
             assert!((back[d] - (moved[3 * i + d] - lin[3 * i + d])).abs() < 1e-12);
         }
     }
-    let warp = NnWarp {
-        context: ctx,
-        mlp: node,
-    };
+    let warp = NnWarp::new(ctx, node);
     let out = warp.warp(&lin).unwrap();
     for &a in &anchors {
         assert_eq!(&out[3 * a..3 * a + 3], &lin[3 * a..3 * a + 3]);

@@ -184,7 +184,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             let scene = format!("{}/{}", shape.name, m.key());
             let (_, mlp) = load_model(&root.join("models").join(m.key()))?;
             let context = WarpContext::with_gradients(mesh, gradients.clone(), &shape.anchors, field, POISSON, scale)?;
-            let nnwarp = NnWarp { context, mlp };
+            let nnwarp = NnWarp::new(context, mlp);
             let elastic = TetElasticity::new(mesh, material_of(m), lame)?;
             let mut quasistatic = Quasistatic::new(n, &[&elastic], fixed.clone())?;
             let mut x = rest.clone();
