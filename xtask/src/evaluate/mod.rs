@@ -115,6 +115,8 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();
+        output.command = format!("cargo xtask {}", std::env::args().skip(1).collect::<Vec<_>>().join(" "));
+        output.code_version = crate::dataset::code_version();
         results::validate(&output.records)?;
         write_json(&cache, &output)?;
         ran.push(name);
@@ -143,12 +145,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         out.join("index.html").display()
     );
     if let Some(dest) = &args.publish {
-        let reused: Vec<&str> = outputs
-            .iter()
-            .map(|o| o.experiment.as_str())
-            .filter(|e| !ran.contains(e))
-            .collect();
-        publish(&out, dest, &ran, &reused)?;
+        publish(&out, dest, &ran, &outputs)?;
         println!("published to {}", dest.display());
     }
     Ok(())
@@ -156,7 +153,12 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
 
 /// Copies the report to `dest` with its provenance: the command, and which experiments it
 /// ran and which it took from earlier runs cached in the same output directory.
-fn publish(out: &Path, dest: &Path, ran: &[&str], reused: &[&str]) -> anyhow::Result<()> {
+fn publish(out: &Path, dest: &Path, ran: &[&str], outputs: &[ExperimentOutput]) -> anyhow::Result<()> {
+    let reused: Vec<&str> = outputs
+        .iter()
+        .map(|o| o.experiment.as_str())
+        .filter(|e| !ran.contains(e))
+        .collect();
     for sub in ["plots", "renders"] {
         let _ = std::fs::remove_dir_all(dest.join(sub));
     }
@@ -196,11 +198,30 @@ fn publish(out: &Path, dest: &Path, ran: &[&str], reused: &[&str]) -> anyhow::Re
         std::env::args().skip(1).collect::<Vec<_>>().join(" "),
         list(ran),
         out.display(),
-        list(reused),
+        list(&reused),
         crate::dataset::code_version(),
         out.display()
-    );
+    ) + &provenance_per_experiment(outputs);
     crate::output::write_text(&dest.join("PROVENANCE.md"), &text)
+}
+
+/// One line per experiment: the command and code version that produced it.
+fn provenance_per_experiment(outputs: &[ExperimentOutput]) -> String {
+    let mut s = String::from("\nPer experiment:\n\n");
+    for o in outputs {
+        if o.command.is_empty() {
+            s.push_str(&format!(
+                "- `{}` ({:.0} s): its command was not recorded (cached before commands were)\n",
+                o.experiment, o.wall_seconds
+            ));
+        } else {
+            s.push_str(&format!(
+                "- `{}` ({:.0} s): `{}`, code version {}\n",
+                o.experiment, o.wall_seconds, o.command, o.code_version
+            ));
+        }
+    }
+    s
 }
 
 fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {

@@ -82,6 +82,12 @@ pub struct ExperimentOutput {
     #[serde(default)]
     pub scatters: Vec<Scatter>,
     pub wall_seconds: f64,
+    /// The command line and code version that produced this output (empty in outputs
+    /// cached before they were recorded).
+    #[serde(default)]
+    pub command: String,
+    #[serde(default)]
+    pub code_version: String,
 }
 
 impl ExperimentOutput {
@@ -98,6 +104,8 @@ impl ExperimentOutput {
             tables: Vec::new(),
             scatters: Vec::new(),
             wall_seconds: 0.0,
+            command: String::new(),
+            code_version: String::new(),
         }
     }
 
