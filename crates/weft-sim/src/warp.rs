@@ -564,17 +564,7 @@ pub fn register_sequence(
     let lame = LameParameters::from_young_poisson(settings.young, poisson)?;
     let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
     let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), settings.density);
-    let mut fixed = vec![false; n];
-    for &a in anchors {
-        if a >= mesh.num_vertices() {
-            return Err(Error::VertexOutOfRange {
-                what: "anchor",
-                index: a,
-                num_vertices: mesh.num_vertices(),
-            });
-        }
-        fixed[3 * a..3 * a + 3].iter_mut().for_each(|f| *f = true);
-    }
+    let fixed = crate::anchors::fixed_dofs(mesh.num_vertices(), anchors)?;
     let unit = unit_field_forces(&rest, &masses, field)?;
     let mut statics = PrefactorizedLinear::new(
         &rest,
