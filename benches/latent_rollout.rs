@@ -60,13 +60,21 @@ fn latent_rollout(c: &mut Criterion) {
         let (_, p) = rollout.borrow_mut().step_profiled(&q).unwrap();
         total.latent_step += p.latent_step;
         total.decoder += p.decoder;
+        if total.decoder_layers.is_empty() {
+            total.decoder_layers = vec![std::time::Duration::ZERO; p.decoder_layers.len()];
+        }
+        for (a, d) in total.decoder_layers.iter_mut().zip(&p.decoder_layers) {
+            *a += *d;
+        }
         total.rotations += p.rotations;
         total.solve += p.solve;
     }
     eprintln!(
-        "roll-out frame profile (mean of 50): latent MLP {:?}, decoder {:?}, Rodrigues and T = RS {:?}, Poisson solve {:?}",
+        "roll-out frame profile (mean of 50): latent MLP {:?}, decoder {:?} (fully connected, then each graph \
+         convolution: {:?}), Rodrigues and T = RS {:?}, Poisson solve {:?}",
         total.latent_step / 50,
         total.decoder / 50,
+        total.decoder_layers.iter().map(|d| *d / 50).collect::<Vec<_>>(),
         total.rotations / 50,
         total.solve / 50
     );

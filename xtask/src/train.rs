@@ -186,7 +186,7 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
     };
     if args.resume && args.out.join("checkpoint").exists() {
         let stored: EmbedTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
-        if stored != config {
+        if !stored.trains_like(&config) {
             bail!(
                 "the configuration differs from the one {} was trained with; resume with the same --config and flags",
                 args.out.display()
@@ -213,6 +213,13 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
         data.num_vertices(),
         model.autoencoder_params.num_parameters(),
         model.simulator_params.num_parameters()
+    );
+    eprintln!(
+        "L_phys scale: {:?} {:.4e} m²/J (inertial Δt²/m̄ {:.4e}, curvature 1/mean diag H {:.4e})",
+        config.phys_scale,
+        data.phys_scale(config.phys_scale),
+        data.inertial_scale,
+        data.curvature_scale
     );
     for &stage in &args.stages {
         if stage < start.stage {

@@ -2,24 +2,19 @@
 //!
 //! The scene's body runs as linear elasticity with a constant, pre-factorised system
 //! (backward Euler with the scene's time step and damping, or static load increments for
-//! a static scene). As in stiffness warping, each node's external force is rotated back to
-//! the rest orientation by the local rotation of the previous frame before the solve.
-//! Every frame's linear displacement is then corrected node by node by the trained network.
+//! a static scene), each node's load rotated back to its rest orientation first, and every
+//! frame corrected node by node by the trained network (`weft_nn::nnwarp::NnWarpSimulation`).
 //! With `--reference` the scene also runs as it is written (full nonlinear FEM), and each
 //! frame's VTK carries the per-node error against it.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nalgebra::{Rotation3, Vector3};
-use weft_nn::nnwarp::{NnWarp, WarpContext, load_model, rel_error};
-use weft_sim::energies::{LameParameters, Material, TetElasticity};
-use weft_sim::scenes::volume::{ForceField, VolumeSolve};
-use weft_sim::warp::{FieldDirection, NodalGradients, rotation_vector, unit_sphere_normalization};
-use weft_sim::{AnyScene, LinearSolve, PrefactorizedLinear, RayleighDamping, VolumeSimulation};
+use nalgebra::Vector3;
+use weft_nn::nnwarp::{NnWarpSimulation, load_model, rel_error};
+use weft_sim::{AnyScene, VolumeSimulation};
 
 use crate::output::write_json;
 
@@ -48,21 +43,6 @@ pub struct WarpArgs {
     quick: bool,
 }
 
-/// The field direction the contextual features need, from the scene's loads.
-fn field_of(scene: &weft_sim::VolumeScene) -> anyhow::Result<FieldDirection> {
-    match (&scene.force_field, scene.gravity) {
-        (Some(ForceField::Directional { direction, .. }), _) => {
-            Ok(FieldDirection::Directional(Vector3::from(*direction)))
-        }
-        (Some(ForceField::Circular { center, axis, .. }), _) => Ok(FieldDirection::Circular {
-            center: Vector3::from(*center),
-            axis: Vector3::from(*axis),
-        }),
-        (None, Some(g)) if g.iter().any(|v| *v != 0.0) => Ok(FieldDirection::Directional(Vector3::from(g))),
-        _ => bail!("the scene has no load (gravity or a force field) for NNWarp to warp"),
-    }
-}
-
 pub fn run(args: WarpArgs) -> anyhow::Result<()> {
     if args.every == 0 {
         bail!("--every must be at least 1");
@@ -79,71 +59,21 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
     }
     let base_dir = loaded.base_dir.as_deref();
     let (config, mlp) = load_model(&args.model).with_context(|| format!("loading {}", args.model.display()))?;
-    let field = field_of(&scene)?;
     // The reference twin builds the body, anchors and loads once; the linear twin shares them.
     let reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
+    let mut runtime = NnWarpSimulation::new(&reference_sim, mlp)?;
     let mesh = reference_sim.mesh().clone();
-    let anchors = reference_sim.anchors().to_vec();
-    let forces = reference_sim.external_forces().to_vec();
     let mut reference = if args.reference { Some(reference_sim) } else { None };
     let rest = mesh.flat_positions();
     let n = rest.len();
-    let lame = LameParameters::from_young_poisson(scene.young, scene.poisson)?;
-    let linear_energy = TetElasticity::new(&mesh, Material::Linear, lame)?;
-    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), scene.density);
-    let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), &anchors)?;
-    let mode = match scene.solve {
-        VolumeSolve::ImplicitEuler { dt } => LinearSolve::Dynamic {
-            dt,
-            damping: RayleighDamping::NONE,
-        },
-        VolumeSolve::Newmark {
-            dt,
-            rayleigh_mass,
-            rayleigh_stiffness,
-        }
-        | VolumeSolve::DynamicLinear {
-            dt,
-            rayleigh_mass,
-            rayleigh_stiffness,
-        } => LinearSolve::Dynamic {
-            dt,
-            damping: RayleighDamping {
-                mass: rayleigh_mass,
-                stiffness: rayleigh_stiffness,
-            },
-        },
-        VolumeSolve::Quasistatic | VolumeSolve::StaticLinear => LinearSolve::Static,
-    };
-    let t = Instant::now();
-    let mut linear = PrefactorizedLinear::new(&rest, &[&linear_energy], masses, fixed, mode)?;
-    let setup_seconds = t.elapsed().as_secs_f64();
-    let gradients = Arc::new(NodalGradients::new(&mesh)?);
-    let (_, scale) = unit_sphere_normalization(mesh.positions());
-    let context = WarpContext::with_gradients(&mesh, gradients.clone(), &anchors, field, scene.poisson, scale)?;
-    let nnwarp = NnWarp::new(context, mlp);
     std::fs::create_dir_all(&args.out)?;
     let mut frames = Vec::new();
     let (mut solve_seconds, mut warp_seconds, mut reference_seconds) = (0.0, 0.0, 0.0);
     for k in 1..=scene.frames {
-        // Stiffness warping: the load seen in each node's rest frame.
-        let u_prev = linear.displacements().to_vec();
-        let mut f: Vec<f64> = match mode {
-            LinearSolve::Static => forces.iter().map(|v| v * k as f64 / scene.frames as f64).collect(),
-            LinearSolve::Dynamic { .. } => forces.clone(),
-        };
-        for i in 0..mesh.num_vertices() {
-            let r = Rotation3::from_scaled_axis(rotation_vector(&gradients.gradient(&u_prev, i)));
-            let local = r.inverse() * Vector3::new(f[3 * i], f[3 * i + 1], f[3 * i + 2]);
-            f[3 * i..3 * i + 3].copy_from_slice(local.as_slice());
-        }
-        let t = Instant::now();
-        linear.step(&f, &[])?;
-        solve_seconds += t.elapsed().as_secs_f64();
-        let u_lin = linear.displacements().to_vec();
-        let t = Instant::now();
-        let u = nnwarp.warp(&u_lin)?;
-        warp_seconds += t.elapsed().as_secs_f64();
+        let frame = runtime.step()?;
+        solve_seconds += frame.solve_seconds;
+        warp_seconds += frame.warp_seconds;
+        let (u, u_lin) = (frame.warped, frame.linear);
         let mut record = serde_json::json!({ "frame": k });
         let mut error: Option<Vec<f64>> = None;
         if let Some(sim) = &mut reference {
@@ -152,7 +82,7 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
             reference_seconds += t.elapsed().as_secs_f64();
             let u_ref: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
             record["rel_error_nnwarp"] = rel_error(&u, &u_ref).into();
-            record["rel_error_linear"] = rel_error(&u_lin, &u_ref).into();
+            record["rel_error_linear_solve"] = rel_error(&u_lin, &u_ref).into();
             error = Some(
                 (0..n / 3)
                     .map(|i| {
@@ -199,8 +129,7 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         "nodes": mesh.num_vertices(),
         "tets": mesh.num_tets(),
         "frames": frames,
-        "factorization_seconds": linear.factorization_seconds(),
-        "setup_seconds": setup_seconds,
+        "factorization_seconds": runtime.linear().factorization_seconds(),
         "solve_seconds_per_frame": solve_seconds / frames_run,
         "nnwarp_seconds_per_frame": warp_seconds / frames_run,
         "reference_seconds_per_frame": if args.reference { Some(reference_seconds / frames_run) } else { None },

@@ -118,6 +118,13 @@ impl MeshAutoencoder {
 
     /// `D`: `[B, latent]` → `[B, V, 9]` normalised features in (−1, 1).
     pub fn decode(&self, z: &Tensor) -> Result<Tensor> {
+        Ok(self.decode_timed(z)?.0)
+    }
+
+    /// [`MeshAutoencoder::decode`] with the wall time of each layer: the fully connected
+    /// one first, then each graph convolution (candle's CPU ops run eagerly, so each time
+    /// is the layer's own).
+    pub fn decode_timed(&self, z: &Tensor) -> Result<(Tensor, Vec<std::time::Duration>)> {
         let (b, latent) = z.dims2()?;
         if latent != self.config.latent {
             return Err(Error::Shape {
@@ -126,13 +133,18 @@ impl MeshAutoencoder {
                 got: format!("{:?}", z.dims()),
             });
         }
+        let mut times = Vec::with_capacity(1 + self.decoder_convs.len());
+        let t = std::time::Instant::now();
         let mut h = leaky_relu(&self.decoder_fc.forward(z)?)?.reshape((b, self.num_vertices, FEATURE_CHANNELS))?;
+        times.push(t.elapsed());
         let last = self.decoder_convs.len() - 1;
         for (l, conv) in self.decoder_convs.iter().enumerate() {
+            let t = std::time::Instant::now();
             let y = conv.forward(&h)?;
             h = if l == last { y.tanh()? } else { leaky_relu(&y)? };
+            times.push(t.elapsed());
         }
-        Ok(h)
+        Ok((h, times))
     }
 }
 

@@ -64,6 +64,71 @@ pub struct EmbedTrainingConfig {
     /// Epochs (passes over the training windows) of stages 1, 2 and 3.
     pub epochs: [usize; 3],
     pub seed: u64,
+    /// How `L_phys` is made commensurate with `L_vert` before its weight applies. A
+    /// stored config without the field predates the choice and used
+    /// [`PhysScale::Inertial`], so it reads as that and a finished model of it is not
+    /// mistaken for one trained with today's default.
+    #[serde(default = "PhysScale::legacy")]
+    pub phys_scale: PhysScale,
+    /// Stage-1 epochs over which λ_ephys ramps linearly from 0 to its value (0: none).
+    /// A decoder that does not yet reconstruct gives shapes far from any frame, where a
+    /// stiff membrane's `L_phys` outweighs reconstruction by orders of magnitude and
+    /// training settles on flat, unstretched shapes instead (docs/EMBEDDING.md). A
+    /// stored configuration without the field had no ramp.
+    #[serde(default)]
+    pub ephys_warmup: usize,
+}
+
+/// The factor that multiplies `L_phys` (J) in `L_ephys` and `L_mphys` (m²/J).
+///
+/// Near a frame, `L_phys ≈ L* + ½ δᵀ H δ` with `H = M/Δt² + K` (`K` the potential's
+/// stiffness). `L_vert = ‖δ‖²`, so a scale `s` makes the physics term's curvature `s H`
+/// against `L_vert`'s `2I`. Tan et al. tuned λ_ephys per dataset instead; weft fixes the
+/// scale from the scene so that one λ_ephys means the same on every scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PhysScale {
+    /// `Δt²/m̄`: normalises the inertia only. On a stiff FEM membrane `K ≫ M/Δt²`, the
+    /// physics term outweighs reconstruction by the ratio, and training diverges (the
+    /// FEM balls, docs/EMBEDDING.md).
+    Inertial,
+    /// `1 / mean(diag H)` over the free DOFs at the dataset's first frame: the mean
+    /// curvature of the whole `L_phys` becomes 1, on soft and stiff scenes alike.
+    #[default]
+    Curvature,
+}
+
+impl EmbedTrainingConfig {
+    /// λ_ephys after `progress` and the `fraction` of the current epoch done: ramped over
+    /// the first [`EmbedTrainingConfig::ephys_warmup`] epochs of stage 1, constant after.
+    pub fn ephys_weight(&self, progress: Progress, fraction: f64) -> f64 {
+        if progress.stage != 1 || self.ephys_warmup == 0 {
+            return self.weights.ephys;
+        }
+        let t = (progress.epoch as f64 + fraction.clamp(0.0, 1.0)) / self.ephys_warmup as f64;
+        self.weights.ephys * t.min(1.0)
+    }
+
+    /// Whether a model trained under `self` is the one `other` would train: the same
+    /// configuration, with [`EmbedTrainingConfig::phys_scale`] ignored when both physics
+    /// weights are zero (the `no-pb` baseline never evaluates `L_phys`).
+    pub fn trains_like(&self, other: &Self) -> bool {
+        let physics = |c: &Self| c.weights.ephys != 0.0 || c.weights.mphys != 0.0;
+        if physics(self) || physics(other) {
+            self == other
+        } else {
+            Self {
+                phys_scale: other.phys_scale,
+                ..self.clone()
+            } == *other
+        }
+    }
+}
+
+impl PhysScale {
+    fn legacy() -> Self {
+        PhysScale::Inertial
+    }
 }
 
 impl Default for EmbedTrainingConfig {
@@ -76,6 +141,8 @@ impl Default for EmbedTrainingConfig {
             batch: 8,
             epochs: [30, 30, 10],
             seed: 0,
+            phys_scale: PhysScale::default(),
+            ephys_warmup: 0,
         }
     }
 }
@@ -108,13 +175,11 @@ pub struct EmbedData {
     features: Vec<Vec<Vec<Feature>>>,
     pub inverse: Arc<PoissonPseudoInverse>,
     pub integrator: Arc<ImplicitEuler>,
-    /// `Δt² / m̄` (m²/J, `m̄` the mean vertex mass): multiplies `L_phys` in the losses.
-    /// Near a frame, `L_phys ≈ L* + ½ δᵀ H δ` with `H ⪰ M/Δt²`, so the scaled value
-    /// grows like `½‖δ‖²` in soft directions and faster in stiff ones: the same units
-    /// and order as `L_vert`, whatever the scene's masses, stiffness and step. Without
-    /// it one λ_ephys means different things on every scene (Tan et al. tuned it per
-    /// dataset).
-    pub phys_scale: f64,
+    /// `Δt² / m̄` (m²/J, `m̄` the mean vertex mass): [`PhysScale::Inertial`].
+    pub inertial_scale: f64,
+    /// `1 / mean(diag ∂²L_phys/∂p²)` over the free DOFs at the first frame of the first
+    /// sequence, held still (m²/J): [`PhysScale::Curvature`].
+    pub curvature_scale: f64,
     /// Training windows (frame `m` and both predecessors in the training split).
     pub train_windows: Vec<FrameRef>,
     /// Every test frame (the last 5 of each 17), in sequence order.
@@ -152,7 +217,31 @@ impl EmbedData {
         let integrator = Arc::new(ClothSimulation::new(dataset.scene.clone(), Some(&dataset.dir))?.into_integrator());
         let masses = integrator.masses();
         let mean_mass = masses.iter().sum::<f64>() / masses.len().max(1) as f64;
-        let phys_scale = integrator.dt().powi(2) / mean_mass;
+        let inertial_scale = integrator.dt().powi(2) / mean_mass;
+        let curvature_scale = {
+            let first = dataset.sequences.first().ok_or_else(|| Error::InvalidParameter {
+                name: "dataset",
+                value: dataset.name.clone(),
+                reason: "has no sequence",
+            })?;
+            let p = first.frame(0);
+            let diag = integrator.l_phys_hessian_diagonal(p, p, p)?;
+            let free: Vec<f64> = diag
+                .iter()
+                .zip(integrator.fixed())
+                .filter(|(_, f)| !**f)
+                .map(|(d, _)| *d)
+                .collect();
+            let mean = free.iter().sum::<f64>() / free.len().max(1) as f64;
+            if !(mean.is_finite() && mean > 0.0) {
+                return Err(Error::InvalidParameter {
+                    name: "dataset",
+                    value: dataset.name.clone(),
+                    reason: "L_phys has no positive curvature at its first frame",
+                });
+            }
+            1.0 / mean
+        };
         let mut train_windows = Vec::new();
         let mut test_frames = Vec::new();
         for (s, seq) in dataset.sequences.iter().enumerate() {
@@ -177,7 +266,8 @@ impl EmbedData {
             features,
             inverse,
             integrator,
-            phys_scale,
+            inertial_scale,
+            curvature_scale,
             train_windows,
             test_frames,
         })
@@ -185,6 +275,14 @@ impl EmbedData {
 
     pub fn num_vertices(&self) -> usize {
         self.dataset.rest.num_vertices()
+    }
+
+    /// The factor on `L_phys` in the losses (m²/J).
+    pub fn phys_scale(&self, kind: PhysScale) -> f64 {
+        match kind {
+            PhysScale::Inertial => self.inertial_scale,
+            PhysScale::Curvature => self.curvature_scale,
+        }
     }
 
     /// `[B, V, 9]` normalised features of `frames`.
@@ -336,9 +434,14 @@ impl EmbedModel {
 
     /// The losses of `stage` (1, 2 or 3) on the windows `batch` (frames `m`), as a graph
     /// whose `total` can be differentiated, plus their values.
-    pub fn losses(&self, data: &EmbedData, batch: &[FrameRef], stage: u8) -> Result<(Tensor, LossTerms)> {
+    /// The losses of `stage` on `batch`, with λ_ephys = `ephys` (see
+    /// [`EmbedTrainingConfig::ephys_weight`]); the other weights are the configuration's.
+    pub fn losses(&self, data: &EmbedData, batch: &[FrameRef], stage: u8, ephys: f64) -> Result<(Tensor, LossTerms)> {
         let device = self.autoencoder_params.device();
-        let w = self.config.weights;
+        let w = LossWeights {
+            ephys,
+            ..self.config.weights
+        };
         let prev = |k: usize| -> Vec<FrameRef> {
             batch
                 .iter()
@@ -362,6 +465,7 @@ impl EmbedModel {
             Ok(())
         };
         let lphys = data.lphys_op();
+        let phys_scale = data.phys_scale(self.config.phys_scale);
         if stage == 1 || stage == 3 {
             // The predecessors' codes feed the latent step (stage 3) and L_ephys; the
             // baseline in stage 1 needs neither.
@@ -392,7 +496,7 @@ impl EmbedModel {
             if let (true, Some((z1, z2))) = (w.ephys != 0.0, &predecessors) {
                 let p1 = self.positions(data, &b1, z1)?;
                 let p2 = self.positions(data, &b2, z2)?;
-                let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * data.phys_scale)?;
+                let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
                 add(ephys, w.ephys, &mut terms.ephys)?;
             }
         } else {
@@ -408,7 +512,7 @@ impl EmbedModel {
                 let p = self.positions(data, batch, &predicted)?;
                 let p1 = self.positions(data, &b1, &z1)?;
                 let p2 = self.positions(data, &b2, &z2)?;
-                let mphys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * data.phys_scale)?;
+                let mphys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
                 add(mphys, w.mphys, &mut terms.mphys)?;
             }
         }
@@ -454,8 +558,9 @@ pub fn train_epoch(
     let batches = epoch_batches(&data.train_windows, model.config.batch, model.config.seed, progress);
     let (ae_adam, sim_adam) = optimizers;
     let mut mean = LossTerms::default();
-    for batch in &batches {
-        let (total, terms) = model.losses(data, batch, progress.stage)?;
+    for (k, batch) in batches.iter().enumerate() {
+        let ephys = model.config.ephys_weight(progress, k as f64 / batches.len() as f64);
+        let (total, terms) = model.losses(data, batch, progress.stage, ephys)?;
         let grads = total.backward()?;
         if progress.stage != 2 {
             ae_adam.step(&model.autoencoder_params, &grads)?;

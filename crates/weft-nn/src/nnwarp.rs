@@ -456,6 +456,190 @@ impl NnWarp {
     }
 }
 
+/// One frame of [`NnWarpSimulation`].
+#[derive(Debug, Clone)]
+pub struct NnWarpFrame {
+    /// The linear solve's displacements `ũ` (m, flat).
+    pub linear: Vec<f64>,
+    /// NNWarp's displacements `u` (m, flat).
+    pub warped: Vec<f64>,
+    /// Rotating the loads to the rest frames and the pre-factorised solve (s).
+    pub solve_seconds: f64,
+    /// The node-wise correction (s).
+    pub warp_seconds: f64,
+}
+
+/// NNWarp's runtime on a volumetric scene (§4, §6): linear elasticity with a constant,
+/// pre-factorised system, then the node-wise correction of every frame.
+///
+/// A dynamic scene (implicit Euler, Newmark or dynamic linear) runs as backward Euler
+/// with the scene's time step and Rayleigh damping; a static one applies its load in
+/// `frames` equal increments. As in stiffness warping, each node's load is first rotated
+/// back to its rest orientation by the local rotation of the previous frame's linear
+/// displacement ([`weft_sim::warp::loads_in_rest_frames`]); only then is the network's
+/// training target, `f_int(u) = 𝓡 K ũ`, the nonlinear body under the actual load.
+#[derive(Debug)]
+pub struct NnWarpSimulation {
+    linear: weft_sim::PrefactorizedLinear,
+    gradients: Arc<NodalGradients>,
+    warp: NnWarp,
+    forces: Vec<f64>,
+    frames: usize,
+    frame: usize,
+}
+
+/// A body for [`NnWarpSimulation::from_body`]: everything NNWarp's runtime needs, without
+/// a nonlinear scene.
+#[derive(Debug, Clone)]
+pub struct WarpBody<'a> {
+    pub mesh: &'a TetMesh,
+    pub anchors: &'a [usize],
+    /// Young's modulus (Pa) and Poisson ratio of the linear material.
+    pub young: f64,
+    pub poisson: f64,
+    /// kg/m³.
+    pub density: f64,
+    /// External forces (N, flat): the full load of a static run, the constant load of a
+    /// dynamic one.
+    pub forces: &'a [f64],
+    pub solve: weft_sim::LinearSolve,
+    /// The field the contextual features are measured along.
+    pub field: FieldDirection,
+    /// Load increments of a static run (ignored by a dynamic one).
+    pub frames: usize,
+}
+
+impl NnWarpSimulation {
+    /// The linear twin of `reference` (its mesh, anchors, loads and time step, with the
+    /// linear material of its Lamé parameters), corrected by `mlp`.
+    pub fn new(reference: &weft_sim::VolumeSimulation, mlp: NodeMlp) -> Result<Self> {
+        use weft_sim::scenes::volume::VolumeSolve;
+        use weft_sim::{LinearSolve, RayleighDamping};
+        let scene = reference.scene();
+        let solve = match scene.solve {
+            VolumeSolve::ImplicitEuler { dt } => LinearSolve::Dynamic {
+                dt,
+                damping: RayleighDamping::NONE,
+            },
+            VolumeSolve::Newmark {
+                dt,
+                rayleigh_mass,
+                rayleigh_stiffness,
+            }
+            | VolumeSolve::DynamicLinear {
+                dt,
+                rayleigh_mass,
+                rayleigh_stiffness,
+            } => LinearSolve::Dynamic {
+                dt,
+                damping: RayleighDamping {
+                    mass: rayleigh_mass,
+                    stiffness: rayleigh_stiffness,
+                },
+            },
+            VolumeSolve::Quasistatic | VolumeSolve::StaticLinear => LinearSolve::Static,
+        };
+        Self::from_body(
+            WarpBody {
+                mesh: reference.mesh(),
+                anchors: reference.anchors(),
+                young: scene.young,
+                poisson: scene.poisson,
+                density: scene.density,
+                forces: reference.external_forces(),
+                solve,
+                field: field_direction(scene)?,
+                frames: scene.frames,
+            },
+            mlp,
+        )
+    }
+
+    /// NNWarp's runtime on `body`, corrected by `mlp`.
+    pub fn from_body(body: WarpBody<'_>, mlp: NodeMlp) -> Result<Self> {
+        let mesh = body.mesh;
+        let lame = weft_sim::energies::LameParameters::from_young_poisson(body.young, body.poisson)?;
+        let linear_energy = weft_sim::energies::TetElasticity::new(mesh, weft_sim::energies::Material::Linear, lame)?;
+        let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), body.density);
+        let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), body.anchors)?;
+        let linear =
+            weft_sim::PrefactorizedLinear::new(&mesh.flat_positions(), &[&linear_energy], masses, fixed, body.solve)?;
+        if body.forces.len() != 3 * mesh.num_vertices() {
+            return Err(Error::Shape {
+                what: "external forces",
+                expected: format!("{} values", 3 * mesh.num_vertices()),
+                got: body.forces.len().to_string(),
+            });
+        }
+        let gradients = Arc::new(NodalGradients::new(mesh)?);
+        let (_, scale) = weft_sim::warp::unit_sphere_normalization(mesh.positions());
+        let context =
+            WarpContext::with_gradients(mesh, gradients.clone(), body.anchors, body.field, body.poisson, scale)?;
+        Ok(Self {
+            linear,
+            gradients,
+            warp: NnWarp::new(context, mlp),
+            forces: body.forces.to_vec(),
+            frames: body.frames.max(1),
+            frame: 0,
+        })
+    }
+
+    pub fn linear(&self) -> &weft_sim::PrefactorizedLinear {
+        &self.linear
+    }
+
+    pub fn warp(&self) -> &NnWarp {
+        &self.warp
+    }
+
+    /// Advances one frame.
+    pub fn step(&mut self) -> Result<NnWarpFrame> {
+        self.frame += 1;
+        let t = std::time::Instant::now();
+        let load: Vec<f64> = match self.linear.mode() {
+            weft_sim::LinearSolve::Static => {
+                let s = self.frame.min(self.frames) as f64 / self.frames as f64;
+                self.forces.iter().map(|f| f * s).collect()
+            }
+            weft_sim::LinearSolve::Dynamic { .. } => self.forces.clone(),
+        };
+        let load = weft_sim::warp::loads_in_rest_frames(&self.gradients, self.linear.displacements(), &load)?;
+        self.linear.step(&load, &[])?;
+        let solve_seconds = t.elapsed().as_secs_f64();
+        let linear = self.linear.displacements().to_vec();
+        let t = std::time::Instant::now();
+        let warped = self.warp.warp(&linear)?;
+        Ok(NnWarpFrame {
+            linear,
+            warped,
+            solve_seconds,
+            warp_seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// The field direction the contextual features need, from a scene's loads: its force
+/// field, or gravity.
+pub fn field_direction(scene: &weft_sim::VolumeScene) -> Result<FieldDirection> {
+    use weft_sim::scenes::volume::ForceField;
+    match (&scene.force_field, scene.gravity) {
+        (Some(ForceField::Directional { direction, .. }), _) => {
+            Ok(FieldDirection::Directional(Vector3::from(*direction)))
+        }
+        (Some(ForceField::Circular { center, axis, .. }), _) => Ok(FieldDirection::Circular {
+            center: Vector3::from(*center),
+            axis: Vector3::from(*axis),
+        }),
+        (None, Some(g)) if g.iter().any(|v| *v != 0.0) => Ok(FieldDirection::Directional(Vector3::from(g))),
+        _ => Err(Error::InvalidParameter {
+            name: "scene",
+            value: scene.name.clone(),
+            reason: "has no load (gravity or a force field) for NNWarp to warp",
+        }),
+    }
+}
+
 /// The training pairs of one split of a dataset: every free node of every frame after
 /// the first (the rest frame has nothing to correct).
 pub fn collect_pairs(

@@ -15,12 +15,14 @@ use crate::embed::{LatentSimulator, MeshAutoencoder};
 use crate::error::{Error, Result};
 
 /// Where one roll-out frame's time went.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameProfile {
     /// The latent simulator's step (`MLP`).
     pub latent_step: Duration,
     /// The decoder's layers (`D`), to normalised features.
     pub decoder: Duration,
+    /// Of which each layer: the fully connected one, then each graph convolution.
+    pub decoder_layers: Vec<Duration>,
     /// Denormalisation, Rodrigues and `T = R S` per vertex (weft-acap).
     pub rotations: Duration,
     /// The pre-factorised Poisson solve for positions (weft-acap).
@@ -90,9 +92,10 @@ impl<'a> LatentRollout<'a> {
         let z = self.simulator.step(&self.previous, &self.current, &qt)?;
         profile.latent_step = t.elapsed();
         let t = Instant::now();
-        let y = self.autoencoder.decode(&z)?;
+        let (y, layers) = self.autoencoder.decode_timed(&z)?;
         let flat: Vec<f32> = y.flatten_all()?.to_vec1()?;
         profile.decoder = t.elapsed();
+        profile.decoder_layers = layers;
         let t = Instant::now();
         let normalised = convert::f32_to_f64("decoded features", &flat)?;
         let features: Vec<Feature> = normalised

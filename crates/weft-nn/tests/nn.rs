@@ -623,3 +623,34 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
     }
     assert!(matches!(warp.warp(&lin[3..]), Err(Error::Shape { .. })));
 }
+
+#[test]
+fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
+    use weft_nn::embed_training::{EmbedTrainingConfig, PhysScale, Progress};
+    let mut c = EmbedTrainingConfig::default();
+    c.weights.ephys = 0.5;
+    c.ephys_warmup = 4;
+    let at_with = |c: &EmbedTrainingConfig, stage: u8, epoch: usize, fraction: f64| {
+        c.ephys_weight(Progress { stage, epoch }, fraction)
+    };
+    let at = |stage: u8, epoch: usize, fraction: f64| at_with(&c, stage, epoch, fraction);
+    assert_eq!(at(1, 0, 0.0), 0.0);
+    assert!((at(1, 1, 0.5) - 0.5 * 1.5 / 4.0).abs() < 1e-15);
+    assert_eq!(at(1, 4, 0.0), 0.5);
+    assert_eq!(at(1, 9, 0.9), 0.5);
+    // The ramp is stage 1's: stage 3 fine-tunes at the full weight from its first batch.
+    assert_eq!(at(3, 0, 0.0), 0.5);
+    let none = EmbedTrainingConfig {
+        ephys_warmup: 0,
+        ..c.clone()
+    };
+    assert_eq!(at_with(&none, 1, 0, 0.0), 0.5);
+    // A configuration stored before the fields existed: inertial scale, no ramp.
+    let mut v = serde_json::to_value(EmbedTrainingConfig::default()).unwrap();
+    let o = v.as_object_mut().unwrap();
+    o.remove("phys_scale");
+    o.remove("ephys_warmup");
+    let legacy: EmbedTrainingConfig = serde_json::from_value(v).unwrap();
+    assert_eq!(legacy.phys_scale, PhysScale::Inertial);
+    assert_eq!(legacy.ephys_warmup, 0);
+}

@@ -89,6 +89,31 @@ pub fn total_gradient(terms: &[&dyn Energy], x: &[f64], grad: &mut [f64]) {
     }
 }
 
+/// The diagonal of `Σ_k ∂²E_k/∂x²` at `x` (N/m), each element block projected to
+/// positive semi-definite with `project`. Assembled through the terms' own Hessians, so
+/// it is the diagonal Newton factorises, not a second formula for it.
+pub fn total_hessian_diagonal(
+    num_dofs: usize,
+    terms: &[&dyn Energy],
+    x: &[f64],
+    project: bool,
+) -> crate::Result<Vec<f64>> {
+    if x.len() != num_dofs {
+        return Err(crate::Error::LengthMismatch {
+            what: "positions",
+            expected: num_dofs,
+            got: x.len(),
+        });
+    }
+    let pairs = checked_pairs(num_dofs, terms)?;
+    let pattern = std::sync::Arc::new(weft_linalg::SymmetricPattern::from_vertex_pairs(num_dofs / 3, pairs));
+    let mut hessian = SymmetricMatrix::zeros(pattern);
+    for t in terms {
+        t.add_hessian(x, project, &mut hessian);
+    }
+    Ok((0..num_dofs).map(|i| hessian.get(i, i)).collect())
+}
+
 /// Position of vertex `v` in a flat DOF vector.
 #[inline]
 pub fn vertex(x: &[f64], v: usize) -> nalgebra::Vector3<f64> {

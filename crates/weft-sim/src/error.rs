@@ -16,6 +16,13 @@ pub enum Error {
         residual: f64,
         tolerance: f64,
     },
+    #[error(
+        "the warped static solve did not settle: successive displacements still differ by {change:e} of their \
+         largest after {solves} solves (the load is far past the linear regime)"
+    )]
+    WarpNotSettled { solves: usize, change: f64 },
+    #[error("a warped static solve needs a static (stiffness-only) linear system")]
+    NotStatic,
     #[error("non-finite {what} (at DOF {dof}); the step was rejected")]
     NonFinite { what: &'static str, dof: usize },
     #[error("invalid parameter {name} = {value}: {reason}")]

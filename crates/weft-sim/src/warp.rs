@@ -146,6 +146,98 @@ pub fn modal_warp(gradients: &NodalGradients, linear: &[f64]) -> Result<Vec<f64>
         .collect())
 }
 
+/// Each node's load seen in its rest frame, `R_iᵀ f_i` with `R_i = exp([w_i]×)` the local
+/// rotation of displacements `u`: stiffness warping's treatment of external forces
+/// (Müller et al. 2002), which NNWarp's runtime adopts (§4). Eq. 7 trains the network on
+/// shapes with `f_int(u) = 𝓡 K ũ`; when the linear solve is `K ũ = 𝓡ᵀ f`, that target
+/// is `f_int(u) = f`, the nonlinear equilibrium under the actual load.
+pub fn loads_in_rest_frames(gradients: &NodalGradients, u: &[f64], forces: &[f64]) -> Result<Vec<f64>> {
+    if forces.len() != u.len() {
+        return Err(Error::LengthMismatch {
+            what: "forces",
+            expected: u.len(),
+            got: forces.len(),
+        });
+    }
+    let g = gradients.gradients(u)?;
+    let mut out = forces.to_vec();
+    for (i, g) in g.iter().enumerate() {
+        let local = Rotation3::from_scaled_axis(rotation_vector(g)).inverse() * node(forces, i);
+        out[3 * i..3 * i + 3].copy_from_slice(local.as_slice());
+    }
+    Ok(out)
+}
+
+/// How [`warped_static_solve`] ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WarpedStaticReport {
+    /// Linear solves done (the first, unrotated one included).
+    pub solves: usize,
+    /// `max |ũ_k − ũ_{k−1}| / max |ũ_k|` of the last iteration.
+    pub change: f64,
+    /// The relaxation factor the iteration ended with (1 = plain fixed-point iteration).
+    pub relaxation: f64,
+}
+
+/// The static stiffness-warped linear displacement: the fixed point of
+/// `ũ = K⁻¹ 𝓡(ũ)ᵀ f` (see [`loads_in_rest_frames`]), iterated from `ũ = K⁻¹ f` with the
+/// pre-factorised `K` of `linear` (static mode) until successive answers differ by at most
+/// `tolerance` of their largest entry. Leaves the answer in `linear.displacements()`.
+///
+/// Each iteration solves for the relaxed load `h ← (1 − ω) h + ω 𝓡(ũ)ᵀ f` (so `ũ` moves
+/// by the fraction `ω` of the plain iteration's step, `K` being linear). `ω` starts at 1
+/// and halves whenever the change fails to shrink: where the rotations swing with the
+/// displacement (a body hanging from interior anchors), the plain iteration oscillates.
+/// A fixed point not reached within `max_solves` solves is [`Error::WarpNotSettled`].
+pub fn warped_static_solve(
+    linear: &mut crate::PrefactorizedLinear,
+    gradients: &NodalGradients,
+    forces: &[f64],
+    tolerance: f64,
+    max_solves: usize,
+) -> Result<WarpedStaticReport> {
+    if linear.mode() != crate::LinearSolve::Static {
+        return Err(Error::NotStatic);
+    }
+    linear.step(forces, &[])?;
+    let mut load = forces.to_vec();
+    let (mut change, mut relaxation) = (f64::INFINITY, 1.0f64);
+    for solves in 2..=max_solves {
+        let previous = linear.displacements().to_vec();
+        let rotated = loads_in_rest_frames(gradients, &previous, forces)?;
+        for (h, g) in load.iter_mut().zip(&rotated) {
+            *h += relaxation * (g - *h);
+        }
+        linear.step(&load, &[])?;
+        let u = linear.displacements();
+        let largest = weft_linalg::max_abs(u.iter().copied());
+        let diff = u.iter().zip(&previous).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let next = if largest > 0.0 { diff / largest } else { 0.0 };
+        if next <= tolerance {
+            return Ok(WarpedStaticReport {
+                solves,
+                change: next,
+                relaxation,
+            });
+        }
+        if next >= change {
+            relaxation = (0.5 * relaxation).max(1.0 / 64.0);
+        }
+        change = next;
+    }
+    if max_solves <= 1 {
+        return Ok(WarpedStaticReport {
+            solves: 1,
+            change,
+            relaxation,
+        });
+    }
+    Err(Error::WarpNotSettled {
+        solves: max_solves,
+        change,
+    })
+}
+
 /// Rotation-strain warping (NNWarp Eq. 5) with its Poisson reconstruction, the graph
 /// Laplacian of the 1-rings factorised once with the anchors eliminated.
 #[derive(Debug)]

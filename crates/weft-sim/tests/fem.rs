@@ -815,3 +815,41 @@ fn corotational_stress_derivative_is_exact_for_a_uniformly_shrunken_rotated_elem
         }
     }
 }
+
+#[test]
+fn quasistatic_continued_from_an_equilibrium_reaches_the_same_equilibrium() {
+    let mesh = beam(&BeamParams {
+        cells: [6, 2, 2],
+        size: [1.0, 0.3, 0.3],
+    })
+    .unwrap();
+    let nv = mesh.num_vertices();
+    let fixed = fixed_dofs(nv, &nodes_at_min(mesh.positions(), 0, 1e-9).unwrap()).unwrap();
+    let energy = TetElasticity::new(&mesh, Material::NeoHookean, lame(1e5, 0.3)).unwrap();
+    let load: Vec<f64> = (0..nv).flat_map(|_| [0.0, -2.0, -1.0]).collect();
+    let half: Vec<f64> = load.iter().map(|f| 0.5 * f).collect();
+    let mut qs = Quasistatic::new(3 * nv, &[&energy], fixed).unwrap();
+    let mut direct = mesh.flat_positions();
+    qs.solve(&[&energy], &load, &mut direct, 8).unwrap();
+    let mut stepped = mesh.flat_positions();
+    qs.solve(&[&energy], &half, &mut stepped, 4).unwrap();
+    let report = qs.solve_from(&[&energy], Some(&half), &load, &mut stepped, 4).unwrap();
+    // The continuation's first increment starts at the half load, not back at zero.
+    assert_close!(report.load_factors[0], 0.25, rtol = 0.0, atol = 1e-15);
+    let scale = direct
+        .iter()
+        .zip(mesh.flat_positions())
+        .map(|(x, r)| (x - r).abs())
+        .fold(0.0, f64::max);
+    assert!(scale > 0.05, "the load should bend the beam ({scale})");
+    let gap = direct
+        .iter()
+        .zip(&stepped)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(gap < 1e-6 * scale, "gap {gap:e} of {scale:e}");
+    assert!(
+        qs.solve_from(&[&energy], Some(&half[3..]), &load, &mut stepped, 1)
+            .is_err()
+    );
+}

@@ -214,24 +214,35 @@ fn clamped_beam() -> (TetMesh, Vec<bool>, weft_sim::PrefactorizedLinear, Vec<f64
     (mesh, fixed, solve, masses)
 }
 
+/// The registration of `material` against `linear`'s stiffness.
+fn registration(
+    mesh: &TetMesh,
+    grads: &Arc<NodalGradients>,
+    material: weft_sim::energies::Material,
+    lame: weft_sim::energies::LameParameters,
+    linear: &weft_sim::PrefactorizedLinear,
+    fixed: &[bool],
+) -> weft_sim::warp::Registration {
+    weft_sim::warp::Registration::new(
+        mesh,
+        grads.clone(),
+        weft_sim::energies::TetElasticity::new(mesh, material, lame).unwrap(),
+        linear.stiffness().clone(),
+        fixed.to_vec(),
+    )
+    .unwrap()
+}
+
 #[test]
 fn registration_solves_eq_7_and_tends_to_the_linear_solution_under_small_loads() {
     use weft_sim::energies::{LameParameters, Material, TetElasticity};
-    use weft_sim::warp::Registration;
     let (mesh, fixed, mut linear_solve, masses) = clamped_beam();
     let grads = Arc::new(NodalGradients::new(&mesh).unwrap());
     let lame = LameParameters::from_young_poisson(1e5, 0.35).unwrap();
     let gravity = |a: f64| -> Vec<f64> { masses.iter().flat_map(|m| [0.0, -m * a, 0.0]).collect() };
     for material in [Material::CoRotational, Material::StVK, Material::NeoHookean] {
         let elastic = TetElasticity::new(&mesh, material, lame).unwrap();
-        let mut reg = Registration::new(
-            &mesh,
-            grads.clone(),
-            TetElasticity::new(&mesh, material, lame).unwrap(),
-            linear_solve.stiffness().clone(),
-            fixed.clone(),
-        )
-        .unwrap();
+        let mut reg = registration(&mesh, &grads, material, lame, &linear_solve, &fixed);
         let mut gaps = Vec::new();
         // Loads from large to small, each registered from rest.
         for a in [20.0, 2.0] {
@@ -323,4 +334,60 @@ fn a_training_sequence_ramps_to_the_stop_displacement_and_registers_every_frame(
         assert!(gap(frames - 1) > gap(1), "{} vs {}", gap(frames - 1), gap(1));
     }
     assert!(seq.newton_iterations >= materials.len() * (frames - 1));
+}
+
+#[test]
+fn the_registered_warped_static_solve_is_the_nonlinear_equilibrium_under_the_load() {
+    use weft_sim::energies::{LameParameters, Material, TetElasticity};
+    use weft_sim::warp::{loads_in_rest_frames, warped_static_solve};
+    let (mesh, fixed, mut linear_solve, masses) = clamped_beam();
+    let grads = Arc::new(NodalGradients::new(&mesh).unwrap());
+    let lame = LameParameters::from_young_poisson(1e5, 0.35).unwrap();
+    // A load that bends the beam well past the linear regime (see the test above).
+    let load: Vec<f64> = masses.iter().flat_map(|m| [0.0, -20.0 * m, 0.0]).collect();
+    let report = warped_static_solve(&mut linear_solve, &grads, &load, 1e-11, 200).unwrap();
+    assert!(report.solves > 2 && report.change <= 1e-11, "{report:?}");
+    let lin = linear_solve.displacements().to_vec();
+    // The fixed point: K ũ = 𝓡(ũ)ᵀ f on the free DOFs.
+    let mut k_u = vec![0.0; lin.len()];
+    linear_solve.stiffness().mul_vec(&lin, &mut k_u);
+    let rotated = loads_in_rest_frames(&grads, &lin, &load).unwrap();
+    let scale = load.iter().map(|f| f.abs()).fold(0.0, f64::max);
+    for d in (0..lin.len()).filter(|&d| !fixed[d]) {
+        assert!((k_u[d] - rotated[d]).abs() <= 1e-8 * scale, "dof {d}");
+    }
+    // Registering it (Eq. 7, f_int(u) = 𝓡 K ũ = 𝓡 𝓡ᵀ f) lands on f_int(u) = f: the
+    // training target is the equilibrium under the actual load. Without the rotated
+    // load, the same registration misses it by the rotation of every node's force.
+    for material in [Material::CoRotational, Material::NeoHookean] {
+        let elastic = TetElasticity::new(&mesh, material, lame).unwrap();
+        let mut reg = registration(&mesh, &grads, material, lame, &linear_solve, &fixed);
+        let (u, _) = reg.register(&lin).unwrap();
+        let x: Vec<f64> = mesh.flat_positions().iter().zip(&u).map(|(r, u)| r + u).collect();
+        let mut f_int = vec![0.0; x.len()];
+        weft_sim::Energy::add_gradient(&elastic, &x, &mut f_int);
+        let gap = (0..x.len())
+            .filter(|&d| !fixed[d])
+            .map(|d| (f_int[d] - load[d]).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            gap <= 1e-5 * scale,
+            "{material:?}: |f_int − f| = {gap:e} (scale {scale:e})"
+        );
+        let plain = reg.target_force(&{
+            linear_solve.step(&load, &[]).unwrap();
+            linear_solve.displacements().to_vec()
+        });
+        let plain_gap = (0..x.len())
+            .filter(|&d| !fixed[d])
+            .map(|d| (plain.as_ref().unwrap()[d] - load[d]).abs())
+            .fold(0.0, f64::max);
+        assert!(plain_gap > 1e-2 * scale, "{material:?}: plain target gap {plain_gap:e}");
+    }
+    // Too few solves to settle, and a dynamic system, are errors.
+    assert!(matches!(
+        warped_static_solve(&mut linear_solve, &grads, &load, 1e-11, 3),
+        Err(weft_sim::Error::WarpNotSettled { solves: 3, .. })
+    ));
+    assert!(loads_in_rest_frames(&grads, &lin, &load[3..]).is_err());
 }

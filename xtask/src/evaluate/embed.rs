@@ -113,28 +113,52 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
 /// Whether the model in `out` has finished the last of `stages` under the configuration
 /// in `config` (then there is nothing to resume, and loading the dataset is skipped).
 fn trained(config: &Path, out: &Path, no_pb: bool, stages: &[u8]) -> bool {
-    let read = |p: &Path| std::fs::read_to_string(p).ok();
-    let (Some(want), Some(have), Some(progress)) = (
-        read(config),
-        read(&out.join("config.json")),
-        read(&out.join("checkpoint/progress.json")),
-    ) else {
+    let Some((want, have)) = configs(config, out, no_pb) else {
         return false;
     };
-    let parse = |t: &str| serde_json::from_str::<EmbedTrainingConfig>(t).ok();
-    let (Some(mut want), Some(have)) = (parse(&want), parse(&have)) else {
+    let Some(p) = std::fs::read_to_string(out.join("checkpoint/progress.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<weft_nn::embed_training::Progress>(&t).ok())
+    else {
         return false;
     };
-    // As `cargo xtask train embed --no-pb` stores it.
+    let last = *stages.iter().max().unwrap_or(&3);
+    want.trains_like(&have) && (p.stage > last || (p.stage == last && p.epoch >= have.epochs[last as usize - 1]))
+}
+
+/// The configuration the experiment asks for in `config` (as `cargo xtask train embed
+/// --no-pb` stores it, with `no_pb`) and the one the model in `out` was trained under.
+fn configs(config: &Path, out: &Path, no_pb: bool) -> Option<(EmbedTrainingConfig, EmbedTrainingConfig)> {
+    let read =
+        |p: &Path| -> Option<EmbedTrainingConfig> { serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok() };
+    let (mut want, have) = (read(config)?, read(&out.join("config.json"))?);
     if no_pb {
         want.weights.ephys = 0.0;
         want.weights.mphys = 0.0;
     }
-    let Ok(p) = serde_json::from_str::<weft_nn::embed_training::Progress>(&progress) else {
-        return false;
-    };
-    let last = *stages.iter().max().unwrap_or(&3);
-    want == have && (p.stage > last || (p.stage == last && p.epoch >= have.epochs[last as usize - 1]))
+    Some((want, have))
+}
+
+/// Whether `out` holds a model trained under another configuration than `config`: one
+/// from an older version of the experiment.
+fn stale(config: &Path, out: &Path, no_pb: bool) -> bool {
+    configs(config, out, no_pb).is_some_and(|(want, have)| !want.trains_like(&have))
+}
+
+/// Deletes the models in `dirs` if the first was trained under another configuration, so
+/// that they are retrained instead of failing to resume. They are the experiment's own
+/// outputs, rebuilt by the same command.
+fn discard_if_stale(config: &Path, dirs: &[&Path], no_pb: bool) -> anyhow::Result<()> {
+    if dirs.first().is_some_and(|d| stale(config, d, no_pb)) {
+        for d in dirs.iter().filter(|d| d.exists()) {
+            eprintln!(
+                "embed: {} was trained under another configuration; retraining it",
+                d.display()
+            );
+            std::fs::remove_dir_all(d).with_context(|| format!("removing {}", d.display()))?;
+        }
+    }
+    Ok(())
 }
 
 /// Trains (or resumes) one model of the experiment into `out`.
@@ -149,6 +173,7 @@ fn train(
     if trained(config, out, no_pb, stages) {
         return Ok(());
     }
+    discard_if_stale(config, &[out], no_pb)?;
     crate::train::run(TrainCommand::Embed(EmbedArgs {
         data: data_dir.to_path_buf(),
         config: Some(config.to_path_buf()),
@@ -190,6 +215,7 @@ fn train_ours(
         "{}-stage2",
         dir.file_name().and_then(|n| n.to_str()).unwrap_or("ours")
     ));
+    discard_if_stale(config_path, &[dir, &snapshot], false)?;
     train(ctx, data_dir, config_path, dir, false, &[1, 2])?;
     if !snapshot.join("checkpoint").exists() {
         let progress: weft_nn::embed_training::Progress =
@@ -859,6 +885,37 @@ mod tests {
         other.adam.learning_rate *= 2.0;
         std::fs::write(&config_path, serde_json::to_string(&other).unwrap()).unwrap();
         assert!(!trained(&config_path, &model, true, &[1, 2]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_model_trained_before_the_curvature_scale_is_stale_unless_it_has_no_physics() {
+        let dir = std::env::temp_dir().join(format!("weft-embed-stale-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let (ours, baseline) = (dir.join("ours"), dir.join("no-pb"));
+        std::fs::create_dir_all(&ours).unwrap();
+        std::fs::create_dir_all(&baseline).unwrap();
+        let config = training_config(Size::Quick);
+        assert_eq!(config.phys_scale, weft_nn::embed_training::PhysScale::Curvature);
+        let config_path = dir.join("config.json");
+        std::fs::write(&config_path, serde_json::to_string(&config).unwrap()).unwrap();
+        // A configuration as stored before the field existed.
+        let legacy = |c: &EmbedTrainingConfig| {
+            let mut v = serde_json::to_value(c).unwrap();
+            v.as_object_mut().unwrap().remove("phys_scale");
+            v.to_string()
+        };
+        std::fs::write(ours.join("config.json"), legacy(&config)).unwrap();
+        let mut zeroed = config.clone();
+        zeroed.weights.ephys = 0.0;
+        zeroed.weights.mphys = 0.0;
+        std::fs::write(baseline.join("config.json"), legacy(&zeroed)).unwrap();
+        assert!(stale(&config_path, &ours, false));
+        // The baseline never evaluates L_phys: its scale does not matter.
+        assert!(!stale(&config_path, &baseline, true));
+        discard_if_stale(&config_path, &[&ours], false).unwrap();
+        discard_if_stale(&config_path, &[&baseline], true).unwrap();
+        assert!(!ours.exists() && baseline.exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -23,7 +23,7 @@ use clap::Args;
 
 use crate::dataset::Size;
 use crate::output::write_json;
-pub use results::{Curve, EnergyBar, ExperimentOutput, Scatter};
+pub use results::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
 
 /// Experiments `evaluate` runs, in order.
 pub const EXPERIMENTS: [&str; 4] = ["sim", "proj", "embed", "nnwarp"];

@@ -5,10 +5,15 @@
 //! `OUT/nnwarp/` (both resumed). Each shape is clamped (beams at their −x end, the limb at
 //! its bones) and loaded by one directional field the networks never saw, at loads whose
 //! static linear answer moves some node by 0.5, 1 and 1.5 in unit-sphere units (the
-//! training range ends at 2). At each load the methods warp the static linear solution; the
-//! reference is the material's static nonlinear equilibrium under the same load, reached
-//! by load stepping from the previous one. `rel-error` is averaged over the loads.
+//! training range ends at 2). At each load the warps correct the stiffness-warped static
+//! linear solution (the load rotated into each node's rest frame, iterated to its fixed
+//! point) and `linear` is the plain one; the reference is the material's static nonlinear
+//! equilibrium under the same load, continued from the previous one. `rel-error` is
+//! averaged over the loads. Beside the records: error against load past the trained range
+//! and against field direction (NNWarp Figs. 18–19), and the beam tip's trajectory at two
+//! time steps (Fig. 15).
 
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -16,13 +21,15 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use weft_mesh::TetMesh;
 use weft_mesh::generators::{BeamParams, beam, bent_beam, t_beam, tapered_beam};
-use weft_nn::nnwarp::{NnWarp, WarpContext, WarpTrainingConfig, load_model, rel_error};
+use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, WarpContext, WarpTrainingConfig, load_model, rel_error};
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
-use weft_sim::warp::{FieldDirection, NodalGradients, RotationStrainWarp, modal_warp, unit_sphere_normalization};
+use weft_sim::warp::{
+    FieldDirection, NodalGradients, RotationStrainWarp, modal_warp, unit_sphere_normalization, warped_static_solve,
+};
 use weft_sim::{LinearSolve, PrefactorizedLinear, Quasistatic};
 
 use super::EvalContext;
-use super::results::{ExperimentOutput, Timing};
+use super::results::{ExperimentOutput, LinePlot, Series, Timing};
 use crate::dataset::Size;
 use crate::train::{NnwarpArgs, TrainCommand, WarpMaterial};
 
@@ -31,6 +38,18 @@ const LEVELS: [f64; 3] = [0.5, 1.0, 1.5];
 /// The evaluation field: `hemisphere_direction(α = 1.2, β = 0.6)`, inside the trained
 /// octant but drawn by no training sequence's seed.
 const FIELD_ANGLES: (f64, f64) = (1.2, 0.6);
+/// The warped linear solve's fixed point: relative change between solves, and the most
+/// solves allowed.
+const WARP_TOLERANCE: f64 = 1e-4;
+const WARP_SOLVES: usize = 100;
+/// Newton load increments of the nonlinear reference from one load to the next.
+const REFERENCE_STEPS: usize = 4;
+/// Newton iterations per increment, and halvings of an increment, before the reference
+/// gives up on a load (reported under failures).
+const REFERENCE_NEWTON_ITERATIONS: usize = 50;
+const REFERENCE_SUBDIVISIONS: usize = 3;
+/// The time steps of the trajectory figure (NNWarp Fig. 15 shows two).
+const TRAJECTORY_STEPS: [f64; 2] = [0.01, 0.04];
 const YOUNG: f64 = 1e5;
 const POISSON: f64 = 0.3;
 const DENSITY: f64 = 1000.0;
@@ -109,6 +128,423 @@ fn material_of(m: WarpMaterial) -> Material {
 struct Tally {
     error: f64,
     seconds: f64,
+}
+
+/// The methods scored, in the records' order.
+const METHODS: [&str; 4] = ["nnwarp", "modal-warping", "rotation-strain-warping", "linear"];
+
+/// One shape prepared for one field direction: the pre-factorised linear system, the
+/// warps' shared gradient fit, rotation-strain warping's factorised Poisson system, and
+/// the unit load.
+struct Bench<'a> {
+    shape: &'a Shape,
+    rest: Vec<f64>,
+    fixed: Vec<bool>,
+    /// The directional field at 1 m/s² (N, flat).
+    unit_force: Vec<f64>,
+    linear: PrefactorizedLinear,
+    gradients: Arc<NodalGradients>,
+    rsw: RotationStrainWarp,
+    /// Unit-sphere scale of the shape (1/m).
+    scale: f64,
+    /// The largest node displacement of the linear answer to `unit_force` (m).
+    reach: f64,
+}
+
+impl<'a> Bench<'a> {
+    fn new(shape: &'a Shape, direction: Vector3<f64>, lame: LameParameters) -> anyhow::Result<Self> {
+        anyhow::ensure!(!shape.anchors.is_empty(), "{} has no anchored node", shape.name);
+        let mesh = &shape.mesh;
+        let n = 3 * mesh.num_vertices();
+        let rest = mesh.flat_positions();
+        let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), DENSITY);
+        let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), &shape.anchors)?;
+        let unit_force = weft_sim::energies::ConstantForce::directional(&masses, direction.into(), 1.0)?
+            .forces()
+            .to_vec();
+        let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
+        let mut linear =
+            PrefactorizedLinear::new(&rest, &[&linear_energy], masses, fixed.clone(), LinearSolve::Static)?;
+        let (_, scale) = unit_sphere_normalization(mesh.positions());
+        linear.step(&unit_force, &[])?;
+        let reach = max_node_displacement(linear.displacements());
+        anyhow::ensure!(reach > 0.0, "{}: the field moves no node", shape.name);
+        let gradients = Arc::new(NodalGradients::new(mesh)?);
+        let mut anchored = vec![false; n / 3];
+        shape.anchors.iter().for_each(|&i| anchored[i] = true);
+        let rsw = RotationStrainWarp::new(mesh, gradients.clone(), anchored)?;
+        Ok(Self {
+            shape,
+            rest,
+            fixed,
+            unit_force,
+            linear,
+            gradients,
+            rsw,
+            scale,
+            reach,
+        })
+    }
+
+    /// The load whose linear answer moves some node by `level` in unit-sphere units.
+    fn load(&self, level: f64) -> Vec<f64> {
+        let a = level / (self.reach * self.scale);
+        self.unit_force.iter().map(|f| f * a).collect()
+    }
+
+    fn nnwarp(&self, root: &Path, m: WarpMaterial, field: FieldDirection) -> anyhow::Result<NnWarp> {
+        let (_, mlp) = load_model(&root.join("models").join(m.key()))?;
+        let context = WarpContext::with_gradients(
+            &self.shape.mesh,
+            self.gradients.clone(),
+            &self.shape.anchors,
+            field,
+            POISSON,
+            self.scale,
+        )?;
+        Ok(NnWarp::new(context, mlp))
+    }
+
+    /// Every method's `rel-error` at `level` against `reference`, advanced to that load.
+    /// The warps correct the stiffness-warped linear answer `K ũ = 𝓡(ũ)ᵀ f`: NNWarp's
+    /// runtime (§4) and modal warping (Choi & Ko) both see the load in each node's rest
+    /// frame, and only then is the registration target `f_int(u) = 𝓡 K ũ` the equilibrium
+    /// under `f` (docs/NNWARP.md). `linear` is the plain solve.
+    fn score(&mut self, nnwarp: &NnWarp, reference: &mut Reference, level: f64) -> anyhow::Result<Scored> {
+        let load = self.load(level);
+        let truth = reference.advance(level, &load, &self.rest)?;
+        let t = Instant::now();
+        self.linear.step(&load, &[])?;
+        let linear_seconds = t.elapsed().as_secs_f64();
+        let u = self.linear.displacements().to_vec();
+        let t = Instant::now();
+        let report = warped_static_solve(&mut self.linear, &self.gradients, &load, WARP_TOLERANCE, WARP_SOLVES)?;
+        let warped_seconds = t.elapsed().as_secs_f64();
+        let uw = self.linear.displacements().to_vec();
+        let mut errors = [0.0; 4];
+        let mut seconds = [0.0; 4];
+        for (k, name) in METHODS.iter().enumerate() {
+            let t = Instant::now();
+            let predicted = match *name {
+                "nnwarp" => nnwarp.warp(&uw)?,
+                "modal-warping" => modal_warp(&self.gradients, &uw)?,
+                "rotation-strain-warping" => self.rsw.warp(&uw)?,
+                _ => u.clone(),
+            };
+            let solve = if *name == "linear" {
+                linear_seconds
+            } else {
+                warped_seconds
+            };
+            seconds[k] = solve + t.elapsed().as_secs_f64();
+            errors[k] = rel_error(&predicted, &truth);
+        }
+        Ok(Scored {
+            errors,
+            seconds,
+            solves: report.solves,
+        })
+    }
+}
+
+/// One load's scores, in [`METHODS`] order.
+struct Scored {
+    errors: [f64; 4],
+    seconds: [f64; 4],
+    /// Linear solves the warped fixed point took.
+    solves: usize,
+}
+
+/// A material's static nonlinear equilibrium, continued from load to load, each one
+/// cached on disk: the limb's take minutes, and an interrupted evaluation resumes from
+/// them.
+struct Reference {
+    elastic: TetElasticity,
+    quasistatic: Quasistatic,
+    x: Vec<f64>,
+    load: Option<Vec<f64>>,
+    /// Wall time of every advance so far (a cached one counts its recorded time).
+    seconds: f64,
+    /// `OUT/nnwarp/references/<shape>/<material>/<field>`.
+    cache: std::path::PathBuf,
+}
+
+impl Reference {
+    /// `field` names the load's direction in the cache.
+    fn new(root: &Path, bench: &Bench, m: WarpMaterial, lame: LameParameters, field: &str) -> anyhow::Result<Self> {
+        let elastic = TetElasticity::new(&bench.shape.mesh, material_of(m), lame)?;
+        let mut quasistatic = Quasistatic::new(bench.rest.len(), &[&elastic], bench.fixed.clone())?;
+        // A load the material cannot follow (StVK's collapse, an inverted element) should
+        // end its scene in minutes, not retry for an hour on the 50 k-tet limb: each
+        // failed attempt costs up to `max_iterations` Newton steps of about a second.
+        quasistatic.settings.max_iterations = REFERENCE_NEWTON_ITERATIONS;
+        quasistatic.max_subdivisions = REFERENCE_SUBDIVISIONS;
+        Ok(Self {
+            elastic,
+            quasistatic,
+            x: bench.rest.clone(),
+            load: None,
+            seconds: 0.0,
+            cache: root.join("references").join(bench.shape.name).join(m.key()).join(field),
+        })
+    }
+
+    /// Moves to the equilibrium under `load` (the one whose linear answer reaches `level`)
+    /// in `REFERENCE_STEPS` increments from the last one, or reads it from the cache, and
+    /// returns its displacements from `rest`.
+    fn advance(&mut self, level: f64, load: &[f64], rest: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let path = self.cache.join(format!("level-{level:.4}.safetensors"));
+        if let Some((x, seconds)) = read_reference(&path, self.x.len()) {
+            self.x = x;
+            self.seconds += seconds;
+        } else {
+            let t = Instant::now();
+            self.quasistatic
+                .solve_from(
+                    &[&self.elastic],
+                    self.load.as_deref(),
+                    load,
+                    &mut self.x,
+                    REFERENCE_STEPS,
+                )
+                .context("nonlinear reference")?;
+            let seconds = t.elapsed().as_secs_f64();
+            self.seconds += seconds;
+            std::fs::create_dir_all(&self.cache)?;
+            crate::output::write_safetensors(
+                &path,
+                &[crate::output::Array::f64("positions", vec![self.x.len()], &self.x)],
+                [("seconds".to_string(), seconds.to_string())].into(),
+            )?;
+        }
+        self.load = Some(load.to_vec());
+        Ok(self.x.iter().zip(rest).map(|(x, r)| x - r).collect())
+    }
+}
+
+/// A cached equilibrium of `len` DOFs and the seconds it took; `None` if absent or not
+/// readable as one (then it is recomputed and overwritten).
+fn read_reference(path: &Path, len: usize) -> Option<(Vec<f64>, f64)> {
+    let bytes = std::fs::read(path).ok()?;
+    let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).ok()?;
+    let seconds = header.metadata().as_ref()?.get("seconds")?.parse().ok()?;
+    let st = safetensors::SafeTensors::deserialize(&bytes).ok()?;
+    let t = st.tensor("positions").ok()?;
+    if t.dtype() != safetensors::Dtype::F64 || t.shape() != [len] {
+        return None;
+    }
+    let x: Vec<f64> = t
+        .data()
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+        .collect();
+    x.iter().all(|v| v.is_finite()).then_some((x, seconds))
+}
+
+/// The cache name of the field `hemisphere_direction(alpha, FIELD_ANGLES.1)`.
+fn field_tag(alpha: f64) -> String {
+    format!("E{YOUNG}-nu{POISSON}-alpha-{alpha:.3}-beta-{:.3}", FIELD_ANGLES.1)
+}
+
+/// The largest node displacement of flat displacements `u`.
+fn max_node_displacement(u: &[f64]) -> f64 {
+    u.chunks_exact(3)
+        .map(|c| Vector3::new(c[0], c[1], c[2]).norm())
+        .fold(0.0, f64::max)
+}
+
+/// One empty line per method, in [`METHODS`] order.
+fn method_series() -> Vec<Series> {
+    METHODS
+        .iter()
+        .map(|m| Series {
+            label: m.to_string(),
+            x: Vec::new(),
+            y: Vec::new(),
+        })
+        .collect()
+}
+
+/// Adds every method's error at `x`.
+fn push_point(series: &mut [Series], x: f64, scored: &Scored) {
+    for (s, e) in series.iter_mut().zip(scored.errors) {
+        s.x.push(x);
+        s.y.push(e);
+    }
+}
+
+/// NNWarp Fig. 18: `rel-error` of every method as the load grows past the trained range
+/// (which ends where the linear answer moves a node by 2), Neo-Hookean.
+fn load_extrapolation(
+    root: &Path,
+    shape: &Shape,
+    direction: Vector3<f64>,
+    field: FieldDirection,
+    lame: LameParameters,
+    size: Size,
+) -> anyhow::Result<LinePlot> {
+    let mut bench = Bench::new(shape, direction, lame)?;
+    let nnwarp = bench.nnwarp(root, WarpMaterial::NeoHookean, field)?;
+    let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(FIELD_ANGLES.0))?;
+    let levels: Vec<f64> = if size == Size::Quick {
+        vec![0.5, 1.5, 2.5]
+    } else {
+        (1..=12).map(|k| 0.25 * k as f64).collect()
+    };
+    let mut series = method_series();
+    for level in levels {
+        // Past the reach of the nonlinear reference the curve ends.
+        let Ok(scored) = bench.score(&nnwarp, &mut reference, level) else {
+            break;
+        };
+        push_point(&mut series, level, &scored);
+    }
+    anyhow::ensure!(!series[0].x.is_empty(), "no load could be scored");
+    Ok(LinePlot {
+        name: format!("extrapolation-load-{}", shape.name),
+        title: format!(
+            "nnwarp / {}/neo-hookean: error as the load leaves the trained range (ends at 2)",
+            shape.name
+        ),
+        x_label: "largest linear node displacement (unit-sphere units)".into(),
+        y_label: "rel-error".into(),
+        log_y: true,
+        series,
+    })
+}
+
+/// NNWarp Fig. 19: `rel-error` as the field's azimuth α leaves the trained quarter
+/// hemisphere (α ∈ [0, π/2]; β fixed), at the middle load, Neo-Hookean. Each direction is
+/// a fresh body: its contextual features and its reference depend on the field.
+fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, size: Size) -> anyhow::Result<LinePlot> {
+    let alphas: Vec<f64> = if size == Size::Quick {
+        vec![0.4, 1.2, 2.4]
+    } else {
+        (0..8).map(|k| 0.4 * k as f64).collect()
+    };
+    let mut series = method_series();
+    for alpha in alphas {
+        let direction = Vector3::from(weft_sim::energies::hemisphere_direction(alpha, FIELD_ANGLES.1));
+        let mut bench = Bench::new(shape, direction, lame)?;
+        let nnwarp = bench.nnwarp(root, WarpMaterial::NeoHookean, FieldDirection::Directional(direction))?;
+        let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(alpha))?;
+        let Ok(scored) = bench.score(&nnwarp, &mut reference, 1.0) else {
+            continue;
+        };
+        push_point(&mut series, alpha, &scored);
+    }
+    anyhow::ensure!(!series[0].x.is_empty(), "no direction could be scored");
+    Ok(LinePlot {
+        name: format!("extrapolation-direction-{}", shape.name),
+        title: format!(
+            "nnwarp / {}/neo-hookean: error as the field's azimuth α leaves [0, π/2] (β = {})",
+            shape.name, FIELD_ANGLES.1
+        ),
+        x_label: "field azimuth α (rad)".into(),
+        y_label: "rel-error".into(),
+        log_y: true,
+        series,
+    })
+}
+
+/// NNWarp Fig. 15: the beam's tip node over time under a suddenly applied field, full
+/// Neo-Hookean implicit Euler against NNWarp's runtime and linear FEM at time step `dt`.
+/// Returns the plot and a note with each method's mean `rel-error` over the frames.
+fn trajectory(root: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> anyhow::Result<(LinePlot, String)> {
+    use weft_sim::scenes::volume::{ForceField, VolumeSolve};
+    let quick = size == Size::Quick;
+    let mut scene = weft_sim::VolumeScene::builtin("beam-neo-hookean-field", quick)?;
+    scene.young = YOUNG;
+    scene.poisson = POISSON;
+    scene.density = DENSITY;
+    scene.solve = VolumeSolve::ImplicitEuler { dt };
+    scene.frames = ((if quick { 0.3 } else { 1.5 }) / dt).round() as usize;
+    // The field's strength: the static linear answer at the middle load.
+    let probe = weft_sim::VolumeSimulation::new(scene.clone(), None)?;
+    let shape = Shape {
+        name: "beam",
+        mesh: probe.mesh().clone(),
+        anchors: probe.anchors().to_vec(),
+        split: "train-shape",
+    };
+    let lame = LameParameters::from_young_poisson(YOUNG, POISSON)?;
+    let bench = Bench::new(&shape, direction, lame)?;
+    let acceleration = 1.0 / (bench.reach * bench.scale);
+    scene.gravity = None;
+    scene.force_field = Some(ForceField::Directional {
+        direction: direction.into(),
+        acceleration,
+    });
+    let mut full = weft_sim::VolumeSimulation::new(scene.clone(), None)?;
+    let mut linear_scene = scene.clone();
+    linear_scene.material = Material::Linear;
+    let mut linear = weft_sim::VolumeSimulation::new(linear_scene, None)?;
+    let (_, mlp) = load_model(&root.join("models").join(WarpMaterial::NeoHookean.key()))?;
+    let mut runtime = NnWarpSimulation::new(&full, mlp)?;
+    // The tip node nearest the tip face's centre.
+    let mesh = full.mesh();
+    let x_max = mesh.positions().iter().map(|p| p.x).fold(f64::MIN, f64::max);
+    let centre = mesh
+        .positions()
+        .iter()
+        .filter(|p| (p.x - x_max).abs() < 1e-9)
+        .fold(Vector3::zeros(), |a, p| a + p)
+        / mesh
+            .positions()
+            .iter()
+            .filter(|p| (p.x - x_max).abs() < 1e-9)
+            .count()
+            .max(1) as f64;
+    let tip = (0..mesh.num_vertices())
+        .min_by(|&a, &b| {
+            (mesh.positions()[a] - centre)
+                .norm()
+                .total_cmp(&(mesh.positions()[b] - centre).norm())
+        })
+        .context("empty mesh")?;
+    let rest = mesh.flat_positions();
+    let along = |u: &[f64]| Vector3::new(u[3 * tip], u[3 * tip + 1], u[3 * tip + 2]).dot(&direction);
+    let labels = ["full FEM (neo-hookean)", "nnwarp", "linear"];
+    let mut series: Vec<Series> = labels
+        .iter()
+        .map(|l| Series {
+            label: l.to_string(),
+            x: vec![0.0],
+            y: vec![0.0],
+        })
+        .collect();
+    let (mut e_nnwarp, mut e_linear) = (0.0, 0.0);
+    for k in 1..=scene.frames {
+        let truth: Vec<f64> = full.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
+        let lin: Vec<f64> = linear.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
+        let warped = runtime.step()?.warped;
+        e_nnwarp += rel_error(&warped, &truth);
+        e_linear += rel_error(&lin, &truth);
+        for (s, u) in series.iter_mut().zip([&truth, &warped, &lin]) {
+            s.x.push(k as f64 * dt);
+            s.y.push(along(u));
+        }
+    }
+    let frames = scene.frames.max(1) as f64;
+    let note = format!(
+        "nnwarp/trajectory at Δt = {dt} s: beam tip node {tip}, {} frames under a field of {acceleration:.3} m/s² \
+         applied at t = 0 (static linear answer 1 unit-sphere unit); mean rel-error over the frames: nnwarp {:.4}, \
+         linear {:.4}",
+        scene.frames,
+        e_nnwarp / frames,
+        e_linear / frames
+    );
+    Ok((
+        LinePlot {
+            name: format!("trajectory-dt-{}ms", (dt * 1e3).round()),
+            title: format!("nnwarp / beam: tip node along the field over time, Δt = {dt} s"),
+            x_label: "time (s)".into(),
+            y_label: "tip displacement along the field (m)".into(),
+            log_y: false,
+            series,
+        },
+        note,
+    ))
 }
 
 /// NNWarp Table 1's columns for one body, all measured here: tets, factorisation, one
@@ -257,112 +693,66 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         .to_vec(),
         rows: timing_rows,
     });
-    for shape in shapes {
-        anyhow::ensure!(!shape.anchors.is_empty(), "{} has no anchored node", shape.name);
-        let mesh = &shape.mesh;
-        let n = 3 * mesh.num_vertices();
-        let rest = mesh.flat_positions();
-        let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), DENSITY);
-        let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), &shape.anchors)?;
-        let unit_force = weft_sim::energies::ConstantForce::directional(&masses, direction.into(), 1.0)?
-            .forces()
-            .to_vec();
-        let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
-        let mut linear =
-            PrefactorizedLinear::new(&rest, &[&linear_energy], masses, fixed.clone(), LinearSolve::Static)?;
-        let (_, scale) = unit_sphere_normalization(mesh.positions());
-        linear.step(&unit_force, &[])?;
-        let reach = (0..n / 3)
-            .map(|i| {
-                Vector3::new(
-                    linear.displacements()[3 * i],
-                    linear.displacements()[3 * i + 1],
-                    linear.displacements()[3 * i + 2],
-                )
-                .norm()
-            })
-            .fold(0.0f64, f64::max);
-        anyhow::ensure!(reach > 0.0, "{}: the field moves no node", shape.name);
-        let gradients = Arc::new(NodalGradients::new(mesh)?);
-        let rsw = RotationStrainWarp::new(mesh, gradients.clone(), {
-            let mut a = vec![false; n / 3];
-            shape.anchors.iter().for_each(|&i| a[i] = true);
-            a
-        })?;
+    // Scenes, then the three figures' runs: load (two beams), direction, trajectories.
+    let bar = crate::output::progress_bar(
+        ctx.quiet,
+        (shapes.len() * materials.len() + 3 + TRAJECTORY_STEPS.len()) as u64,
+        "nnwarp",
+        "runs",
+    )?;
+    for shape in &shapes {
+        let mut bench = Bench::new(shape, direction, lame)?;
         for m in materials {
             let scene = format!("{}/{}", shape.name, m.key());
-            let (_, mlp) = load_model(&root.join("models").join(m.key()))?;
-            let context = WarpContext::with_gradients(mesh, gradients.clone(), &shape.anchors, field, POISSON, scale)?;
-            let nnwarp = NnWarp::new(context, mlp);
-            let elastic = TetElasticity::new(mesh, material_of(m), lame)?;
-            let mut quasistatic = Quasistatic::new(n, &[&elastic], fixed.clone())?;
-            let mut x = rest.clone();
+            bar.set_message(scene.clone());
+            bar.inc(1);
+            let nnwarp = bench.nnwarp(&root, m, field)?;
+            let mut reference = Reference::new(&root, &bench, m, lame, &field_tag(FIELD_ANGLES.0))?;
             let mut tallies = [Tally::default(); 4];
-            let mut truth_seconds = 0.0;
             let mut per_level = Vec::new();
+            let mut solves = Vec::new();
             for level in LEVELS {
-                let a = level / (reach * scale);
-                let load: Vec<f64> = unit_force.iter().map(|f| f * a).collect();
-                let t = Instant::now();
-                // A load the reference cannot reach ends the scene's loads (each starts
-                // from the last equilibrium); the failure is reported, the loads before
-                // it are scored.
-                if let Err(e) = quasistatic.solve(&[&elastic], &load, &mut x, 8) {
-                    out.failures
-                        .push(format!("nnwarp/{scene}: nonlinear reference at load {level}: {e}"));
-                    break;
+                // A load the reference or the warped solve cannot reach ends the scene's
+                // loads (each continues from the last); the failure is reported, the loads
+                // before it are scored.
+                let scored = match bench.score(&nnwarp, &mut reference, level) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        out.failures.push(format!("nnwarp/{scene}: load {level}: {e:#}"));
+                        break;
+                    }
+                };
+                for (t, (e, sec)) in tallies.iter_mut().zip(scored.errors.iter().zip(&scored.seconds)) {
+                    t.error += e;
+                    t.seconds += sec;
                 }
-                truth_seconds += t.elapsed().as_secs_f64();
-                let reference: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
-                let t = Instant::now();
-                let lin = linear.step(&load, &[])?;
-                let lin_seconds = t.elapsed().as_secs_f64();
-                debug_assert!(lin.seconds >= 0.0);
-                let u = linear.displacements().to_vec();
-                let methods: [(&str, Box<dyn Fn() -> anyhow::Result<Vec<f64>>>); 4] = [
-                    ("nnwarp", Box::new(|| Ok(nnwarp.warp(&u)?))),
-                    ("modal-warping", Box::new(|| Ok(modal_warp(&gradients, &u)?))),
-                    ("rotation-strain-warping", Box::new(|| Ok(rsw.warp(&u)?))),
-                    ("linear", Box::new(|| Ok(u.clone()))),
-                ];
-                let mut errors = Vec::new();
-                for (k, (_, method)) in methods.iter().enumerate() {
-                    let t = Instant::now();
-                    let predicted = method()?;
-                    let seconds = lin_seconds + t.elapsed().as_secs_f64();
-                    let e = rel_error(&predicted, &reference);
-                    tallies[k].error += e;
-                    tallies[k].seconds += seconds;
-                    errors.push(e);
-                }
-                per_level.push((level, errors));
+                solves.push(scored.solves);
+                per_level.push((level, scored.errors));
             }
             if per_level.is_empty() {
                 continue;
             }
             let levels = per_level.len() as f64;
-            for (k, name) in ["nnwarp", "modal-warping", "rotation-strain-warping", "linear"]
-                .iter()
-                .enumerate()
-            {
+            for (k, name) in METHODS.iter().enumerate() {
                 out.record(
                     &scene,
                     name,
                     "rel-error",
                     tallies[k].error / levels,
                     "1",
-                    Timing::new(tallies[k].seconds / levels, truth_seconds / levels),
+                    Timing::new(tallies[k].seconds / levels, reference.seconds / levels),
                 );
                 if let Some(r) = out.records.last_mut() {
                     r.split = Some(shape.split.into());
                 }
             }
             out.notes.push(format!(
-                "nnwarp/{scene}: {} nodes, {} tets, {} anchored; rel-error per load (nnwarp, modal-warping, \
-                 rotation-strain-warping, linear): {}",
-                mesh.num_vertices(),
-                mesh.num_tets(),
+                "nnwarp/{scene}: {} nodes, {} tets, {} anchored; warped linear solves per load {:?}; rel-error per \
+                 load (nnwarp, modal-warping, rotation-strain-warping, linear): {}",
+                shape.mesh.num_vertices(),
+                shape.mesh.num_tets(),
                 shape.anchors.len(),
+                solves,
                 per_level
                     .iter()
                     .map(|(l, e)| format!(
@@ -374,5 +764,38 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             ));
         }
     }
+    let beams: Vec<&Shape> = shapes.iter().filter(|s| matches!(s.name, "beam" | "t-beam")).collect();
+    for shape in &beams {
+        bar.set_message(format!("{}: error against load", shape.name));
+        bar.inc(1);
+        match load_extrapolation(&root, shape, direction, field, lame, ctx.size) {
+            Ok(plot) => out.lines.push(plot),
+            Err(e) => out
+                .failures
+                .push(format!("nnwarp/{}: load extrapolation: {e:#}", shape.name)),
+        }
+    }
+    if let Some(beam) = beams.first() {
+        bar.set_message("beam: error against direction");
+        bar.inc(1);
+        match direction_extrapolation(&root, beam, lame, ctx.size) {
+            Ok(plot) => out.lines.push(plot),
+            Err(e) => out
+                .failures
+                .push(format!("nnwarp/beam: direction extrapolation: {e:#}")),
+        }
+    }
+    for dt in TRAJECTORY_STEPS {
+        bar.set_message(format!("trajectory at Δt = {dt} s"));
+        bar.inc(1);
+        match trajectory(&root, direction, dt, ctx.size) {
+            Ok((plot, note)) => {
+                out.lines.push(plot);
+                out.notes.push(note);
+            }
+            Err(e) => out.failures.push(format!("nnwarp/trajectory at Δt = {dt} s: {e:#}")),
+        }
+    }
+    bar.finish_and_clear();
     Ok(out)
 }

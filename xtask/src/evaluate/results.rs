@@ -61,6 +61,29 @@ pub struct Scatter {
     pub labels: Vec<String>,
 }
 
+/// A line chart of quantities other than a roll-out's error against frame (NNWarp
+/// Figs. 15, 18 and 19: a node's trajectory, error against load), one line per series.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinePlot {
+    /// File-name stem under `plots/` (`<experiment>-<name>`).
+    pub name: String,
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    /// Logarithmic y axis (errors spanning decades).
+    pub log_y: bool,
+    pub series: Vec<Series>,
+}
+
+/// One line of a [`LinePlot`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Series {
+    /// The method (or reference) the line belongs to.
+    pub label: String,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+}
+
 /// Everything one experiment measured.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ExperimentOutput {
@@ -81,6 +104,8 @@ pub struct ExperimentOutput {
     pub tables: Vec<Table>,
     #[serde(default)]
     pub scatters: Vec<Scatter>,
+    #[serde(default)]
+    pub lines: Vec<LinePlot>,
     pub wall_seconds: f64,
     /// The command line and code version that produced this output (empty in outputs
     /// cached before they were recorded).
@@ -103,6 +128,7 @@ impl ExperimentOutput {
             notes: Vec::new(),
             tables: Vec::new(),
             scatters: Vec::new(),
+            lines: Vec::new(),
             wall_seconds: 0.0,
             command: String::new(),
             code_version: String::new(),

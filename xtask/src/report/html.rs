@@ -126,6 +126,12 @@ pub fn page(
                 body.push_str(&svg_inline(dir, stem)?);
             }
         }
+        if !c.lines.is_empty() {
+            body.push_str("<h3>Trajectories and extrapolation</h3>\n");
+            for (_, stem) in &c.lines {
+                body.push_str(&svg_inline(dir, stem)?);
+            }
+        }
         if !o.renders.is_empty() {
             body.push_str("<h3>Per-vertex error (one colour scale per scene)</h3>\n<div class=\"renders\">\n");
             for r in &o.renders {

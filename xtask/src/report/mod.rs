@@ -50,6 +50,7 @@ pub struct Charts {
     pub rollout: Vec<(String, String)>,
     pub energy: Vec<(String, String)>,
     pub scatter: Vec<(String, String)>,
+    pub lines: Vec<(String, String)>,
 }
 
 pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> anyhow::Result<()> {
@@ -65,6 +66,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             rollout: Vec::new(),
             energy: Vec::new(),
             scatter: Vec::new(),
+            lines: Vec::new(),
         };
         let (metric, label) = pareto_metric(&o.experiment);
         for scene in distinct(
@@ -113,6 +115,11 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             );
             plots::scatter(&out.join(&stem), sc)?;
             c.scatter.push((sc.title.clone(), stem));
+        }
+        for l in &o.lines {
+            let stem = format!("plots/{}-{}", o.experiment, slug(&l.name));
+            plots::lines(&out.join(&stem), l)?;
+            c.lines.push((l.title.clone(), stem));
         }
         charts.push(c);
     }

@@ -7,7 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::fonts;
-use crate::evaluate::{Curve, EnergyBar, Scatter};
+use crate::evaluate::{Curve, EnergyBar, LinePlot, Scatter};
 
 /// One method's point on a Pareto plot.
 #[derive(Debug, Clone)]
@@ -316,6 +316,76 @@ where
 /// A labelled 2-D scatter, one colour per label.
 pub fn scatter(stem: &Path, s: &Scatter) -> anyhow::Result<()> {
     both(stem, |r| scatter_on(r, s), |r| scatter_on(r, s))
+}
+
+fn lines_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &LinePlot) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let finite = |v: &&f64| v.is_finite();
+    let (xlo, xhi) = p
+        .series
+        .iter()
+        .flat_map(|s| s.x.iter().filter(finite).copied())
+        .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    let (xlo, xhi) = if xlo < xhi { (xlo, xhi) } else { (0.0, 1.0) };
+    let ys = || p.series.iter().flat_map(|s| s.y.iter().filter(finite).copied());
+    let e = |e| anyhow::anyhow!("{e:?}");
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .caption(&p.title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70);
+    // The two axis kinds are different types; draw the same series on either.
+    macro_rules! draw {
+        ($chart:expr, $floor:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(p.x_label.as_str())
+                .y_desc(p.y_label.as_str())
+                .y_label_formatter(&|v| format!("{v:.2e}"))
+                .draw()
+                .map_err(e)?;
+            for (i, s) in p.series.iter().enumerate() {
+                let colour = palette(i);
+                chart
+                    .draw_series(LineSeries::new(
+                        s.x.iter()
+                            .zip(&s.y)
+                            .filter(|(x, y)| x.is_finite() && y.is_finite())
+                            .map(|(x, y)| (*x, y.max($floor))),
+                        ShapeStyle::from(&colour).stroke_width(2),
+                    ))
+                    .map_err(e)?
+                    .label(s.label.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+            }
+            finish(&root, &mut chart, SeriesLabelPosition::UpperLeft)
+        }};
+    }
+    if p.log_y {
+        let (lo, hi) = log_range(ys());
+        draw!(
+            builder.build_cartesian_2d(xlo..xhi, (lo..hi).log_scale()).map_err(e)?,
+            lo
+        )
+    } else {
+        let (lo, hi) = ys().fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+        let (lo, hi) = if lo < hi { (lo, hi) } else { (lo - 1.0, lo + 1.0) };
+        let pad = 0.06 * (hi - lo);
+        draw!(
+            builder.build_cartesian_2d(xlo..xhi, lo - pad..hi + pad).map_err(e)?,
+            f64::MIN
+        )
+    }
+}
+
+/// A line chart of several series (NNWarp's trajectory and extrapolation figures).
+pub fn lines(stem: &Path, p: &LinePlot) -> anyhow::Result<()> {
+    both(stem, |r| lines_on(r, p), |r| lines_on(r, p))
 }
 
 fn heat_map_on<DB: DrawingBackend>(

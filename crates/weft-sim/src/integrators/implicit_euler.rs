@@ -211,6 +211,16 @@ impl ImplicitEuler {
         Ok(())
     }
 
+    /// The diagonal of `∂²L_phys/∂p_m²` at `p` (N/m), per-element blocks projected to
+    /// positive semi-definite: `M/Δt²` plus the potential's stiffness. Its mean over the
+    /// free DOFs is the curvature a loss built on `L_phys` must be normalised by to weigh
+    /// the same on a soft sheet and a stiff FEM ball (`docs/EMBEDDING.md`).
+    pub fn l_phys_hessian_diagonal(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Vec<f64>> {
+        let inertia = self.history_inertia(prev2, prev1, p)?;
+        let all = crate::energy::with_extra(&self.terms, &[&inertia]);
+        crate::energy::total_hessian_diagonal(p.len(), &all, p, true)
+    }
+
     /// Tan et al.'s `M_phys = ‖∂L_phys/∂p_m‖²` over free DOFs (grasped DOFs carry the
     /// reaction force and are excluded, weft's convention, `docs/CLOTH.md`); N².
     pub fn m_phys(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<f64> {

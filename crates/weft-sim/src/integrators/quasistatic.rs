@@ -63,7 +63,34 @@ impl Quasistatic {
         x: &mut [f64],
         load_steps: usize,
     ) -> Result<QuasistaticReport> {
+        self.solve_from(internal, None, load, x, load_steps)
+    }
+
+    /// As [`Quasistatic::solve`], continuing from an equilibrium `x` under `from` (N,
+    /// flat): the increments go from `from` to `load`, not from zero, so a sequence of
+    /// growing loads costs one ramp in all, not one per load. `None` is the unloaded body.
+    pub fn solve_from(
+        &mut self,
+        internal: &[&dyn Energy],
+        from: Option<&[f64]>,
+        load: &[f64],
+        x: &mut [f64],
+        load_steps: usize,
+    ) -> Result<QuasistaticReport> {
         let start = Instant::now();
+        if let Some(f) = from {
+            if f.len() != load.len() {
+                return Err(Error::LengthMismatch {
+                    what: "starting load",
+                    expected: load.len(),
+                    got: f.len(),
+                });
+            }
+        }
+        let at = |t: f64, k: usize| match from {
+            Some(f) => f[k] + t * (load[k] - f[k]),
+            None => t * load[k],
+        };
         if load_steps == 0 {
             return Err(Error::InvalidParameter {
                 name: "load steps",
@@ -95,7 +122,7 @@ impl Quasistatic {
         let mut last_good = x.to_vec();
         while reached < 1.0 {
             let target = (reached + increment).min(1.0);
-            let force = ConstantForce::new("load", load.iter().map(|f| target * f).collect())?;
+            let force = ConstantForce::new("load", (0..load.len()).map(|k| at(target, k)).collect())?;
             let mut all: Vec<&dyn Energy> = internal.to_vec();
             all.push(&force);
             match self.solver.minimize(&all, x, &settings) {
