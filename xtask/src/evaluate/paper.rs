@@ -179,7 +179,7 @@ fn nnwarp_table_1(records: &[Record]) -> Table {
         title: "NNWarp (Luo et al.) Table 1 — time performance, paper / ours".into(),
         caption: "Pre-factorised linear FEM: factorisation of the system matrix, then one solve per frame (paper: \
                   Eigen SimplicialLLT on an 8-core i7 at 3.0 GHz; ours: weft-linalg's Cholesky on the 2-core machine \
-                  of this run). The NNWarp correction columns need the trained network (experiment `nnwarp`). The \
+                  of this run). The NNWarp correction columns are in experiment `nnwarp`'s own Table 1, with the trained network. The \
                   last column, ours only, is one full Neo-Hookean implicit-Euler frame on the same body."
             .into(),
         header: [
@@ -340,7 +340,7 @@ const PENDING: [(&str, &str, bool); 6] = [
     (
         "NNWarp Table 1 correction columns and the error curves (Figs. 13, 15, 18–19)",
         "nnwarp",
-        false,
+        true,
     ),
     (
         "Geng et al. Tables 1–3 (SqrtMSE, MaxDist of network, postprocess and trained postprocess)",
