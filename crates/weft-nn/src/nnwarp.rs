@@ -51,6 +51,9 @@ pub struct WarpContext {
 pub struct NodeInputs {
     pub rotations: Vec<Rotation3<f64>>,
     pub features: Vec<[f64; INPUTS]>,
+    /// Each free node's local rotation vector `w_i` (what the kinematic inputs were
+    /// computed from).
+    pub rotation_vectors: Vec<Vector3<f64>>,
 }
 
 impl WarpContext {
@@ -114,7 +117,7 @@ impl WarpContext {
                 index,
             });
         }
-        let (rotations, features) = self
+        let (rotations, (features, rotation_vectors)) = self
             .free
             .par_iter()
             .with_min_len(256)
@@ -124,10 +127,14 @@ impl WarpContext {
                 let u = Vector3::new(linear[3 * i], linear[3 * i + 1], linear[3 * i + 2]) * self.scale;
                 let (q, k) = aligned_kinematics(&u, &w);
                 let c = self.context[i];
-                (q, [k[0], k[1], k[2], c[0], c[1], c[2], self.poisson])
+                (q, ([k[0], k[1], k[2], c[0], c[1], c[2], self.poisson], w))
             })
             .unzip();
-        Ok(NodeInputs { rotations, features })
+        Ok(NodeInputs {
+            rotations,
+            features,
+            rotation_vectors,
+        })
     }
 
     /// Training pairs of one frame: inputs and the aligned correction `Q_i (u_i − ũ_i)`
@@ -428,6 +435,13 @@ impl NnWarp {
 
     /// `u = ũ + Qᵀ δu` at every free node (anchored nodes keep their linear value).
     pub fn warp(&self, linear: &[f64]) -> Result<Vec<f64>> {
+        Ok(self.warp_with_rotations(linear)?.0)
+    }
+
+    /// [`NnWarp::warp`], also returning every node's local rotation vector `w_i` of
+    /// `linear` (zero at the anchors, which no load moves), for the next frame's
+    /// [`weft_sim::warp::rotate_loads_to_rest`].
+    pub fn warp_with_rotations(&self, linear: &[f64]) -> Result<(Vec<f64>, Vec<Vector3<f64>>)> {
         let inputs = self.context.inputs(linear)?;
         let corrections: Vec<Vector3<f64>> = inputs
             .features
@@ -452,7 +466,11 @@ impl NnWarp {
                 index,
             });
         }
-        Ok(out)
+        let mut w = vec![Vector3::zeros(); self.context.num_nodes()];
+        for (&i, wi) in self.context.free.iter().zip(&inputs.rotation_vectors) {
+            w[i] = *wi;
+        }
+        Ok((out, w))
     }
 }
 
@@ -481,11 +499,12 @@ pub struct NnWarpFrame {
 #[derive(Debug)]
 pub struct NnWarpSimulation {
     linear: weft_sim::PrefactorizedLinear,
-    gradients: Arc<NodalGradients>,
     warp: NnWarp,
     forces: Vec<f64>,
     frames: usize,
     frame: usize,
+    /// The last frame's local rotation vectors (zero at rest), from its correction.
+    rotations: Vec<Vector3<f64>>,
 }
 
 /// A body for [`NnWarpSimulation::from_body`]: everything NNWarp's runtime needs, without
@@ -573,15 +592,14 @@ impl NnWarpSimulation {
         }
         let gradients = Arc::new(NodalGradients::new(mesh)?);
         let (_, scale) = weft_sim::warp::unit_sphere_normalization(mesh.positions());
-        let context =
-            WarpContext::with_gradients(mesh, gradients.clone(), body.anchors, body.field, body.poisson, scale)?;
+        let context = WarpContext::with_gradients(mesh, gradients, body.anchors, body.field, body.poisson, scale)?;
         Ok(Self {
             linear,
-            gradients,
             warp: NnWarp::new(context, mlp),
             forces: body.forces.to_vec(),
             frames: body.frames.max(1),
             frame: 0,
+            rotations: vec![Vector3::zeros(); mesh.num_vertices()],
         })
     }
 
@@ -604,12 +622,15 @@ impl NnWarpSimulation {
             }
             weft_sim::LinearSolve::Dynamic { .. } => self.forces.clone(),
         };
-        let load = weft_sim::warp::loads_in_rest_frames(&self.gradients, self.linear.displacements(), &load)?;
+        // The rotations of the previous frame's linear displacement, which its correction
+        // fitted: the same as `loads_in_rest_frames` on it, without a second fit.
+        let load = weft_sim::warp::rotate_loads_to_rest(&self.rotations, &load)?;
         self.linear.step(&load, &[])?;
         let solve_seconds = t.elapsed().as_secs_f64();
         let linear = self.linear.displacements().to_vec();
         let t = std::time::Instant::now();
-        let warped = self.warp.warp(&linear)?;
+        let (warped, rotations) = self.warp.warp_with_rotations(&linear)?;
+        self.rotations = rotations;
         Ok(NnWarpFrame {
             linear,
             warped,

@@ -654,3 +654,93 @@ fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
     assert_eq!(legacy.phys_scale, PhysScale::Inertial);
     assert_eq!(legacy.ephys_warmup, 0);
 }
+
+#[test]
+fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
+    use weft_nn::nnwarp::{
+        INPUTS, NnWarp, NnWarpSimulation, Standardization, WarpBody, WarpContext, WarpMlp, hidden_layers,
+    };
+    use weft_sim::warp::{FieldDirection, loads_in_rest_frames};
+    let mut rng = TestRng::new(5);
+    let rows: Vec<[f64; INPUTS]> = (0..30)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
+        .collect();
+    let outs: Vec<[f64; 3]> = (0..30)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
+        .collect();
+    let standardization = Standardization::fit(&rows, &outs).unwrap();
+    let mut params = Params::new(&cpu(), 9);
+    let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
+    let node = || mlp.to_node_mlp(standardization.clone()).unwrap();
+    let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+        cells: [4, 2, 2],
+        size: [1.0, 0.4, 0.4],
+    })
+    .unwrap();
+    let anchors: Vec<usize> = (0..beam.num_vertices())
+        .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
+        .collect();
+    let field = FieldDirection::Directional(nalgebra::Vector3::new(0.0, 1.0, 0.5));
+    let forces: Vec<f64> = (0..beam.num_vertices()).flat_map(|_| [0.0, 40.0, 20.0]).collect();
+    let solve = weft_sim::LinearSolve::Static;
+    let mut runtime = NnWarpSimulation::from_body(
+        WarpBody {
+            mesh: &beam,
+            anchors: &anchors,
+            young: 1e5,
+            poisson: 0.3,
+            density: 1000.0,
+            forces: &forces,
+            solve,
+            field,
+            frames: 3,
+        },
+        node(),
+    )
+    .unwrap();
+    // The same frames composed by hand: load ramp k/3, rotated by the previous linear
+    // displacement's own gradient fit (all nodes), solved, corrected.
+    let lame = weft_sim::energies::LameParameters::from_young_poisson(1e5, 0.3).unwrap();
+    let energy = weft_sim::energies::TetElasticity::new(&beam, weft_sim::energies::Material::Linear, lame).unwrap();
+    let masses = weft_mesh::geometry::lumped_masses_tet(beam.positions(), beam.tets(), 1000.0);
+    let fixed = weft_sim::anchors::fixed_dofs(beam.num_vertices(), &anchors).unwrap();
+    let mut linear =
+        weft_sim::PrefactorizedLinear::new(&beam.flat_positions(), &[&energy], masses, fixed, solve).unwrap();
+    let warp = NnWarp::new(WarpContext::new(&beam, &anchors, field, 0.3).unwrap(), node());
+    let gradients = weft_sim::warp::NodalGradients::new(&beam).unwrap();
+    let mut rotated_any = false;
+    for k in 1..=3 {
+        let load: Vec<f64> = forces.iter().map(|f| f * k as f64 / 3.0).collect();
+        let rotated = loads_in_rest_frames(&gradients, linear.displacements(), &load).unwrap();
+        rotated_any |= rotated.iter().zip(&load).any(|(a, b)| (a - b).abs() > 1e-6);
+        linear.step(&rotated, &[]).unwrap();
+        let want = warp.warp(linear.displacements()).unwrap();
+        let frame = runtime.step().unwrap();
+        assert_eq!(frame.linear.len(), want.len());
+        for (a, b) in frame.linear.iter().zip(linear.displacements()) {
+            assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "frame {k}: linear {a} vs {b}");
+        }
+        for (a, b) in frame.warped.iter().zip(&want) {
+            assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "frame {k}: warped {a} vs {b}");
+        }
+    }
+    assert!(rotated_any, "the load should be large enough to rotate");
+    // A body whose forces do not match its mesh is refused.
+    assert!(
+        NnWarpSimulation::from_body(
+            WarpBody {
+                mesh: &beam,
+                anchors: &anchors,
+                young: 1e5,
+                poisson: 0.3,
+                density: 1000.0,
+                forces: &forces[3..],
+                solve,
+                field,
+                frames: 3,
+            },
+            node(),
+        )
+        .is_err()
+    );
+}

@@ -159,10 +159,24 @@ pub fn loads_in_rest_frames(gradients: &NodalGradients, u: &[f64], forces: &[f64
             got: forces.len(),
         });
     }
-    let g = gradients.gradients(u)?;
+    let w: Vec<Vector3<f64>> = gradients.gradients(u)?.iter().map(rotation_vector).collect();
+    rotate_loads_to_rest(&w, forces)
+}
+
+/// [`loads_in_rest_frames`] with each node's rotation vector `w_i` already known (NNWarp's
+/// correction fits the same gradients; its runtime passes them on instead of fitting
+/// them twice).
+pub fn rotate_loads_to_rest(rotation_vectors: &[Vector3<f64>], forces: &[f64]) -> Result<Vec<f64>> {
+    if forces.len() != 3 * rotation_vectors.len() {
+        return Err(Error::LengthMismatch {
+            what: "forces (3 per rotation vector)",
+            expected: 3 * rotation_vectors.len(),
+            got: forces.len(),
+        });
+    }
     let mut out = forces.to_vec();
-    for (i, g) in g.iter().enumerate() {
-        let local = Rotation3::from_scaled_axis(rotation_vector(g)).inverse() * node(forces, i);
+    for (i, w) in rotation_vectors.iter().enumerate() {
+        let local = Rotation3::from_scaled_axis(*w).inverse() * node(forces, i);
         out[3 * i..3 * i + 3].copy_from_slice(local.as_slice());
     }
     Ok(out)
