@@ -552,19 +552,25 @@ fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
     ));
 }
 
+/// `n` seeded NNWarp input rows and outputs in plausible ranges.
+fn random_pairs(seed: u64, n: usize) -> (Vec<[f64; weft_nn::nnwarp::INPUTS]>, Vec<[f64; 3]>) {
+    let mut rng = TestRng::new(seed);
+    let rows = (0..n)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
+        .collect();
+    let outs = (0..n)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
+        .collect();
+    (rows, outs)
+}
+
 #[test]
 fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
     use nalgebra::Rotation3;
-    use weft_nn::nnwarp::{INPUTS, NnWarp, Standardization, WarpContext, WarpMlp, hidden_layers};
+    use weft_nn::nnwarp::{NnWarp, Standardization, WarpContext, WarpMlp, hidden_layers};
     use weft_sim::warp::FieldDirection;
-    let mut rng = TestRng::new(17);
     let mut params = Params::new(&cpu(), 3);
-    let rows: Vec<[f64; INPUTS]> = (0..40)
-        .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
-        .collect();
-    let outs: Vec<[f64; 3]> = (0..40)
-        .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
-        .collect();
+    let (rows, outs) = random_pairs(17, 40);
     let standardization = Standardization::fit(&rows, &outs).unwrap();
     let mlp = WarpMlp::new(&mut params, &hidden_layers("stvk"), &standardization).unwrap();
     let (x, _) = weft_nn::nnwarp::pair_tensors(&rows, &outs, &standardization, &cpu()).unwrap();
@@ -657,17 +663,9 @@ fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
 
 #[test]
 fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
-    use weft_nn::nnwarp::{
-        INPUTS, NnWarp, NnWarpSimulation, Standardization, WarpBody, WarpContext, WarpMlp, hidden_layers,
-    };
+    use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, Standardization, WarpBody, WarpContext, WarpMlp, hidden_layers};
     use weft_sim::warp::{FieldDirection, loads_in_rest_frames};
-    let mut rng = TestRng::new(5);
-    let rows: Vec<[f64; INPUTS]> = (0..30)
-        .map(|_| std::array::from_fn(|_| rng.uniform(-2.0, 2.0)))
-        .collect();
-    let outs: Vec<[f64; 3]> = (0..30)
-        .map(|_| std::array::from_fn(|_| rng.uniform(-0.3, 0.3)))
-        .collect();
+    let (rows, outs) = random_pairs(5, 30);
     let standardization = Standardization::fit(&rows, &outs).unwrap();
     let mut params = Params::new(&cpu(), 9);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
