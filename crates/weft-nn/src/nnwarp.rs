@@ -102,8 +102,8 @@ impl WarpContext {
         self.context.len()
     }
 
-    /// The network's inputs for the linear displacements `linear` (flat, the body's units).
-    pub fn inputs(&self, linear: &[f64]) -> Result<NodeInputs> {
+    /// Refuses displacements of the wrong length or with a non-finite entry.
+    fn check(&self, linear: &[f64]) -> Result<()> {
         if linear.len() != 3 * self.num_nodes() {
             return Err(Error::Shape {
                 what: "linear displacements",
@@ -117,17 +117,29 @@ impl WarpContext {
                 index,
             });
         }
+        Ok(())
+    }
+
+    /// Node `i`'s aligning rotation `Q_i`, its seven inputs and its rotation vector `w_i`.
+    fn node_input(&self, linear: &[f64], i: usize) -> (Rotation3<f64>, [f64; INPUTS], Vector3<f64>) {
+        // The displacement gradient is dimensionless: the same at any scale.
+        let w = rotation_vector(&self.gradients.gradient(linear, i));
+        let u = Vector3::new(linear[3 * i], linear[3 * i + 1], linear[3 * i + 2]) * self.scale;
+        let (q, k) = aligned_kinematics(&u, &w);
+        let c = self.context[i];
+        (q, [k[0], k[1], k[2], c[0], c[1], c[2], self.poisson], w)
+    }
+
+    /// The network's inputs for the linear displacements `linear` (flat, the body's units).
+    pub fn inputs(&self, linear: &[f64]) -> Result<NodeInputs> {
+        self.check(linear)?;
         let (rotations, (features, rotation_vectors)) = self
             .free
             .par_iter()
             .with_min_len(256)
             .map(|&i| {
-                // The displacement gradient is dimensionless: the same at any scale.
-                let w = rotation_vector(&self.gradients.gradient(linear, i));
-                let u = Vector3::new(linear[3 * i], linear[3 * i + 1], linear[3 * i + 2]) * self.scale;
-                let (q, k) = aligned_kinematics(&u, &w);
-                let c = self.context[i];
-                (q, ([k[0], k[1], k[2], c[0], c[1], c[2], self.poisson], w))
+                let (q, x, w) = self.node_input(linear, i);
+                (q, (x, w))
             })
             .unzip();
         Ok(NodeInputs {
@@ -348,13 +360,21 @@ struct DenseLayer {
     bias: Vec<f64>,
 }
 
-/// `tanh` through one `exp`: `(1 − e)/(1 + e)` with `e = exp(−2|x|)`, signed. Within
-/// 2.3e-16 of `f64::tanh` over [−3.4, 3.4] and about twice as fast on this machine, where
-/// the activations were most of the runtime correction's time (docs/NNWARP.md).
+/// `tanh` for the runtime's activations. Where |x| ≤ 2, the [7/6] Padé approximant
+/// (Lambert's continued fraction), within 1.2e-8 of `f64::tanh`: no transcendental call,
+/// and most standardised pre-activations fall there. Beyond, `(1 − e)/(1 + e)` with
+/// `e = exp(−2|x|)`, signed, within 2.3e-16. Both are far below the f32 precision the
+/// network was trained in; the activations were most of the correction's time
+/// (docs/BENCHMARKS.md).
 #[inline]
 fn tanh(x: f64) -> f64 {
-    let e = (-2.0 * x.abs()).exp();
-    ((1.0 - e) / (1.0 + e)).copysign(x)
+    if x.abs() <= 2.0 {
+        let x2 = x * x;
+        x * (135135.0 + x2 * (17325.0 + x2 * (378.0 + x2))) / (135135.0 + x2 * (62370.0 + x2 * (3150.0 + 28.0 * x2)))
+    } else {
+        let e = (-2.0 * x.abs()).exp();
+        ((1.0 - e) / (1.0 + e)).copysign(x)
+    }
 }
 
 /// The trained network as plain Rust: one node at a time, on stack buffers.
@@ -442,33 +462,33 @@ impl NnWarp {
     /// `linear` (zero at the anchors, which no load moves), for the next frame's
     /// [`weft_sim::warp::rotate_loads_to_rest`].
     pub fn warp_with_rotations(&self, linear: &[f64]) -> Result<(Vec<f64>, Vec<Vector3<f64>>)> {
-        let inputs = self.context.inputs(linear)?;
-        let corrections: Vec<Vector3<f64>> = inputs
-            .features
+        self.context.check(linear)?;
+        // One parallel pass per node: inputs, network, back to the world frame.
+        let per_node: Vec<(Vector3<f64>, Vector3<f64>)> = self
+            .context
+            .free
             .par_iter()
-            .zip(&inputs.rotations)
             .zip(&self.rest)
             .with_min_len(256)
-            .map(|((x, q), rest)| {
-                let d = self.mlp.forward_from_rest(x, rest);
-                q.inverse() * Vector3::new(d[0], d[1], d[2]) / self.context.scale
+            .map(|(&i, rest)| {
+                let (q, x, w) = self.context.node_input(linear, i);
+                let d = self.mlp.forward_from_rest(&x, rest);
+                (q.inverse() * Vector3::new(d[0], d[1], d[2]) / self.context.scale, w)
             })
             .collect();
         let mut out = linear.to_vec();
-        for (&i, d) in self.context.free.iter().zip(&corrections) {
+        let mut w = vec![Vector3::zeros(); self.context.num_nodes()];
+        for (&i, (d, wi)) in self.context.free.iter().zip(&per_node) {
             for k in 0..3 {
                 out[3 * i + k] += d[k];
             }
+            w[i] = *wi;
         }
         if let Some(index) = out.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "NNWarp displacements",
                 index,
             });
-        }
-        let mut w = vec![Vector3::zeros(); self.context.num_nodes()];
-        for (&i, wi) in self.context.free.iter().zip(&inputs.rotation_vectors) {
-            w[i] = *wi;
         }
         Ok((out, w))
     }
@@ -839,8 +859,13 @@ mod tests {
     fn the_fast_tanh_is_tanh() {
         for k in -4000..=4000 {
             let x = k as f64 / 200.0;
-            assert!((super::tanh(x) - x.tanh()).abs() <= 4.5e-16, "{x}");
+            // The Padé branch (|x| ≤ 2) to its truncation error, the exp branch to
+            // round-off; odd, and continuous where they meet.
+            let tol = if x.abs() <= 2.0 { 1.2e-8 } else { 4.5e-16 };
+            assert!((super::tanh(x) - x.tanh()).abs() <= tol, "{x}");
+            assert_eq!(super::tanh(-x), -super::tanh(x));
         }
+        assert!((super::tanh(2.0) - super::tanh(2.0 + 1e-12)).abs() < 2e-8);
         assert_eq!(super::tanh(0.0), 0.0);
         assert_eq!(super::tanh(1e3), 1.0);
         assert_eq!(super::tanh(-1e3), -1.0);
