@@ -363,6 +363,21 @@ impl RotationStrainWarp {
 pub fn aligned_kinematics(u: &Vector3<f64>, w: &Vector3<f64>) -> (Rotation3<f64>, [f64; 3]) {
     let tiny = 1e-12;
     let un = u.norm();
+    if un > tiny {
+        // The common case, without trigonometry: a rotation is fixed by the images of two
+        // orthonormal vectors, û ↦ +y and p̂ ↦ −x (p = w's part orthogonal to û), so its
+        // rows are −p̂, û and −p̂ × û. The same rotation as the two-step construction below.
+        let uh = u / un;
+        let along = w.dot(&uh);
+        let p = w - uh * along;
+        let pn = p.norm();
+        if pn > tiny {
+            let r1 = -p / pn;
+            let r3 = r1.cross(&uh);
+            let m = nalgebra::Matrix3::from_rows(&[r1.transpose(), uh.transpose(), r3.transpose()]);
+            return (Rotation3::from_matrix_unchecked(m), [un, along, pn]);
+        }
+    }
     let first = if un > tiny {
         Rotation3::rotation_between(u, &Vector3::y()).unwrap_or_else(|| {
             // ũ along −y: half a turn about x.
