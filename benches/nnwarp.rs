@@ -13,7 +13,7 @@ use std::cell::RefCell;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_mesh::TetMesh;
-use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, Standardization, WarpBody, WarpContext, WarpMlp, hidden_layers};
+use weft_nn::nnwarp::{NnWarpSimulation, Standardization, WarpBody, WarpMlp, hidden_layers};
 use weft_nn::params::Params;
 use weft_sim::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use weft_sim::warp::FieldDirection;
@@ -51,14 +51,6 @@ fn body(c: &mut Criterion, name: &str, mesh: TetMesh, anchors: Vec<usize>) {
         )
         .unwrap(),
     );
-    let context = WarpContext::new(
-        &mesh,
-        &anchors,
-        FieldDirection::Directional(-nalgebra::Vector3::y()),
-        0.3,
-    )
-    .unwrap();
-    let warp = NnWarp::new(context, network());
     let runtime = RefCell::new(
         NnWarpSimulation::from_body(
             WarpBody {
@@ -93,7 +85,9 @@ fn body(c: &mut Criterion, name: &str, mesh: TetMesh, anchors: Vec<usize>) {
     });
     group.bench_function("NNWarp correction alone", |b| {
         let u = linear.borrow().displacements().to_vec();
-        b.iter(|| warp.warp(&u).unwrap())
+        // The runtime's own corrector, not a second one built beside it.
+        let runtime = runtime.borrow();
+        b.iter(|| runtime.warp().warp(&u).unwrap())
     });
     group.bench_function("full Neo-Hookean frame (implicit Euler)", |b| {
         b.iter(|| full.borrow_mut().step(&[]).unwrap())

@@ -552,6 +552,19 @@ fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
     ));
 }
 
+/// A 4 × 2 × 2-cell beam and its nodes at x = 0 (the clamped end).
+fn clamped_small_beam() -> (weft_mesh::TetMesh, Vec<usize>) {
+    let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+        cells: [4, 2, 2],
+        size: [1.0, 0.4, 0.4],
+    })
+    .unwrap();
+    let anchors = (0..beam.num_vertices())
+        .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
+        .collect();
+    (beam, anchors)
+}
+
 /// `n` seeded NNWarp input rows and outputs in plausible ranges.
 fn random_pairs(seed: u64, n: usize) -> (Vec<[f64; weft_nn::nnwarp::INPUTS]>, Vec<[f64; 3]>) {
     let mut rng = TestRng::new(seed);
@@ -588,14 +601,7 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
     }
     // Pairs: a registered shape equal to the linear one needs no correction; and the
     // runtime puts an aligned correction back in the world frame (u = ũ + Qᵀ δu).
-    let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
-        cells: [4, 2, 2],
-        size: [1.0, 0.4, 0.4],
-    })
-    .unwrap();
-    let anchors: Vec<usize> = (0..beam.num_vertices())
-        .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
-        .collect();
+    let (beam, anchors) = clamped_small_beam();
     let ctx = WarpContext::new(
         &beam,
         &anchors,
@@ -670,14 +676,7 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
     let mut params = Params::new(&cpu(), 9);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     let node = || mlp.to_node_mlp(standardization.clone()).unwrap();
-    let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
-        cells: [4, 2, 2],
-        size: [1.0, 0.4, 0.4],
-    })
-    .unwrap();
-    let anchors: Vec<usize> = (0..beam.num_vertices())
-        .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
-        .collect();
+    let (beam, anchors) = clamped_small_beam();
     let field = FieldDirection::Directional(nalgebra::Vector3::new(0.0, 1.0, 0.5));
     let forces: Vec<f64> = (0..beam.num_vertices()).flat_map(|_| [0.0, 40.0, 20.0]).collect();
     let solve = weft_sim::LinearSolve::Static;
