@@ -23,7 +23,7 @@ use candle_core::Tensor;
 use nalgebra::{Rotation3, Vector3};
 use rayon::prelude::*;
 use weft_mesh::TetMesh;
-use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics, contextual_features, rotation_vector};
+use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics, contextual_features};
 
 use crate::error::{Error, Result};
 use crate::params::{Init, Params};
@@ -123,7 +123,7 @@ impl WarpContext {
     /// Node `i`'s aligning rotation `Q_i`, its seven inputs and its rotation vector `w_i`.
     fn node_input(&self, linear: &[f64], i: usize) -> (Rotation3<f64>, [f64; INPUTS], Vector3<f64>) {
         // The displacement gradient is dimensionless: the same at any scale.
-        let w = rotation_vector(&self.gradients.gradient(linear, i));
+        let w = self.gradients.rotation_vector(linear, i);
         let u = Vector3::new(linear[3 * i], linear[3 * i + 1], linear[3 * i + 2]) * self.scale;
         let (q, k) = aligned_kinematics(&u, &w);
         let c = self.context[i];
@@ -336,8 +336,8 @@ impl WarpMlp {
                 Ok(DenseLayer {
                     n_in,
                     n_out,
-                    weight: crate::convert::tensor_to_f64("NNWarp weight", w)?,
-                    bias: crate::convert::tensor_to_f64("NNWarp bias", b)?,
+                    weight: w.flatten_all()?.to_vec1::<f32>()?,
+                    bias: b.to_vec1::<f32>()?,
                 })
             })
             .collect::<Result<_>>()?;
@@ -355,25 +355,50 @@ const MAX_WIDTH: usize = 64;
 struct DenseLayer {
     n_in: usize,
     n_out: usize,
-    /// Row-major `[n_in, n_out]`, as candle stores `W` of `x W + b`.
-    weight: Vec<f64>,
-    bias: Vec<f64>,
+    /// Row-major `[n_in, n_out]`, as candle stores `W` of `x W + b`; f32, as trained.
+    weight: Vec<f32>,
+    bias: Vec<f32>,
 }
 
-/// `tanh` for the runtime's activations. Where |x| ≤ 2, the [7/6] Padé approximant
-/// (Lambert's continued fraction), within 1.2e-8 of `f64::tanh`: no transcendental call,
-/// and most standardised pre-activations fall there. Beyond, `(1 − e)/(1 + e)` with
-/// `e = exp(−2|x|)`, signed, within 2.3e-16. Both are far below the f32 precision the
-/// network was trained in; the activations were most of the correction's time
-/// (docs/BENCHMARKS.md).
-#[inline]
-fn tanh(x: f64) -> f64 {
-    if x.abs() <= 2.0 {
-        let x2 = x * x;
-        x * (135135.0 + x2 * (17325.0 + x2 * (378.0 + x2))) / (135135.0 + x2 * (62370.0 + x2 * (3150.0 + 28.0 * x2)))
-    } else {
-        let e = (-2.0 * x.abs()).exp();
-        ((1.0 - e) / (1.0 + e)).copysign(x)
+/// `tanh` for the runtime's f32 activations, branch-free so that a pass over a
+/// buffer vectorises: the input clamped to ±7.905 (where f32 `tanh` is 1 to within rounding)
+/// and a [13/6] odd rational approximant there, the one Eigen uses for f32
+/// (`generic_fast_tanh_float`). Within 4e-7 of the exact value (tested), the network's own
+/// f32 precision. Activations were most of the correction's time (docs/BENCHMARKS.md).
+#[inline(always)]
+fn tanh_f32(x: f32) -> f32 {
+    const CLAMP: f32 = 7.905_311;
+    const ALPHA: [f32; 7] = [
+        4.893_524_6e-3,
+        6.372_619e-4,
+        1.485_722_4e-5,
+        5.122_297e-8,
+        -8.604_672e-11,
+        2.000_188e-13,
+        -2.760_768_5e-16,
+    ];
+    const BETA: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347_1e-4, 1.198_258_4e-6];
+    let x = x.clamp(-CLAMP, CLAMP);
+    let x2 = x * x;
+    // Fused multiply-adds where the dispatched instruction set has them (everywhere
+    // `pulp` picks its x86-64-v3 path).
+    let p = ALPHA.iter().rev().fold(0.0f32, |acc, &a| acc.mul_add(x2, a));
+    let q = BETA.iter().rev().fold(0.0f32, |acc, &b| acc.mul_add(x2, b));
+    x * p / q
+}
+
+/// [`tanh_f32`] over a buffer, compiled for the CPU's widest vectors (`pulp` dispatches
+/// at run time; the workspace targets baseline x86-64).
+struct TanhInPlace<'a>(&'a mut [f32]);
+
+impl pulp::WithSimd for TanhInPlace<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        for v in self.0.iter_mut() {
+            *v = tanh_f32(*v);
+        }
     }
 }
 
@@ -385,25 +410,41 @@ pub struct NodeMlp {
 }
 
 impl NodeMlp {
-    /// The network's raw output for standardised inputs `x`.
+    /// The network's raw output for standardised inputs `x` (one node: a batch of one
+    /// through [`NodeMlp::net_batch`], the runtime's only implementation of the layers).
     fn net(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
-        let mut h = [0.0; MAX_WIDTH];
-        let mut next = [0.0; MAX_WIDTH];
-        h[..INPUTS].copy_from_slice(x);
+        let a = self.net_batch(&x.map(|v| v as f32), 1);
+        std::array::from_fn(|d| a[d] as f64)
+    }
+
+    /// The network's raw outputs for `n` nodes at once: `x` holds their standardised
+    /// inputs column-major (`x[d * n + k]` is input `d` of node `k`), and so does the
+    /// answer. Each layer is one matrix product over all `n` nodes (faer, one thread) and
+    /// one pass of [`tanh_f32`] over a contiguous buffer, which vectorises; node by node,
+    /// 16-wide layers leave the arithmetic units mostly idle. In f32, as the network was
+    /// trained.
+    fn net_batch(&self, x: &[f32], n: usize) -> Vec<f32> {
+        use faer::{Accum, MatMut, MatRef, Par};
+        let mut h = x.to_vec();
         for (k, l) in self.layers.iter().enumerate() {
-            next[..l.n_out].copy_from_slice(&l.bias);
-            for (i, hi) in h[..l.n_in].iter().enumerate() {
-                let row = &l.weight[i * l.n_out..(i + 1) * l.n_out];
-                for (o, w) in next[..l.n_out].iter_mut().zip(row) {
-                    *o += hi * w;
-                }
+            let mut next = vec![0.0f32; n * l.n_out];
+            for (column, b) in next.chunks_mut(n).zip(&l.bias) {
+                column.fill(*b);
             }
+            faer::linalg::matmul::matmul(
+                MatMut::from_column_major_slice_mut(&mut next, n, l.n_out),
+                Accum::Add,
+                MatRef::from_column_major_slice(&h, n, l.n_in),
+                MatRef::from_row_major_slice(&l.weight, l.n_in, l.n_out),
+                1.0,
+                Par::Seq,
+            );
             if k + 1 < self.layers.len() {
-                next[..l.n_out].iter_mut().for_each(|v| *v = tanh(*v));
+                pulp::Arch::new().dispatch(TanhInPlace(&mut next));
             }
-            std::mem::swap(&mut h, &mut next);
+            h = next;
         }
-        [h[0], h[1], h[2]]
+        h
     }
 
     /// The raw output at rest, `net(x₀)`: it depends on the contextual inputs only, so a
@@ -463,19 +504,18 @@ impl NnWarp {
     /// [`weft_sim::warp::rotate_loads_to_rest`].
     pub fn warp_with_rotations(&self, linear: &[f64]) -> Result<(Vec<f64>, Vec<Vector3<f64>>)> {
         self.context.check(linear)?;
-        // One parallel pass per node: inputs, network, back to the world frame.
-        let per_node: Vec<(Vector3<f64>, Vector3<f64>)> = self
-            .context
-            .free
-            .par_iter()
-            .zip(&self.rest)
-            .with_min_len(256)
-            .map(|(&i, rest)| {
-                let (q, x, w) = self.context.node_input(linear, i);
-                let d = self.mlp.forward_from_rest(&x, rest);
-                (q.inverse() * Vector3::new(d[0], d[1], d[2]) / self.context.scale, w)
-            })
-            .collect();
+        // Inputs, the network as one matrix product per layer, back to the world frame:
+        // on the calling thread for a small body, in chunks on all threads for a large one.
+        let free = &self.context.free;
+        let mut per_node = vec![(Vector3::zeros(), Vector3::zeros()); free.len()];
+        if free.len() < PARALLEL_NODES {
+            self.correct_nodes(linear, 0, &mut per_node);
+        } else {
+            per_node
+                .par_chunks_mut(CHUNK_NODES)
+                .enumerate()
+                .for_each(|(c, out)| self.correct_nodes(linear, c * CHUNK_NODES, out));
+        }
         let mut out = linear.to_vec();
         let mut w = vec![Vector3::zeros(); self.context.num_nodes()];
         for (&i, (d, wi)) in self.context.free.iter().zip(&per_node) {
@@ -493,6 +533,40 @@ impl NnWarp {
         Ok((out, w))
     }
 }
+
+impl NnWarp {
+    /// The correction `Q_iᵀ δu_i` (the body's units) and the rotation vector `w_i` of the
+    /// free nodes `start..start + out.len()` (in [`WarpContext::free_nodes`] order): their
+    /// inputs, the network on all of them at once, and back to the world frame.
+    fn correct_nodes(&self, linear: &[f64], start: usize, out: &mut [(Vector3<f64>, Vector3<f64>)]) {
+        let n = out.len();
+        let free = &self.context.free[start..start + n];
+        let rest = &self.rest[start..start + n];
+        let standardization = &self.mlp.standardization;
+        let mut x = vec![0.0f32; n * INPUTS];
+        let mut q = Vec::with_capacity(n);
+        for (k, (slot, &i)) in out.iter_mut().zip(free).enumerate() {
+            let (qi, xi, wi) = self.context.node_input(linear, i);
+            for (d, v) in standardization.input(&xi).into_iter().enumerate() {
+                x[d * n + k] = v as f32;
+            }
+            q.push(qi);
+            slot.1 = wi;
+        }
+        let a = self.mlp.net_batch(&x, n);
+        for (k, ((slot, r), q)) in out.iter_mut().zip(rest).zip(&q).enumerate() {
+            // As `NodeMlp::forward_from_rest`, node by node.
+            let d = Vector3::from_fn(|c, _| (a[c * n + k] as f64 - r[c]) * standardization.output_std[c]);
+            slot.0 = q.inverse() * d / self.context.scale;
+        }
+    }
+}
+
+/// Free nodes below which the correction runs on the calling thread: on the 637-node beam
+/// waking a second thread costs more than it saves (docs/BENCHMARKS.md).
+const PARALLEL_NODES: usize = 2048;
+/// Free nodes per parallel task of the correction.
+const CHUNK_NODES: usize = 1024;
 
 /// One frame of [`NnWarpSimulation`].
 #[derive(Debug, Clone)]
@@ -857,17 +931,19 @@ pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
 mod tests {
     #[test]
     fn the_fast_tanh_is_tanh() {
-        for k in -4000..=4000 {
-            let x = k as f64 / 200.0;
-            // The Padé branch (|x| ≤ 2) to its truncation error, the exp branch to
-            // round-off; odd, and continuous where they meet.
-            let tol = if x.abs() <= 2.0 { 1.2e-8 } else { 4.5e-16 };
-            assert!((super::tanh(x) - x.tanh()).abs() <= tol, "{x}");
-            assert_eq!(super::tanh(-x), -super::tanh(x));
+        // Across and beyond the clamp: within 4e-7 of tanh, odd, saturating, monotone.
+        let mut last = -1.0f32;
+        for k in -20000..=20000 {
+            let x = k as f32 / 2000.0;
+            let t = super::tanh_f32(x);
+            assert!((t as f64 - (x as f64).tanh()).abs() <= 4e-7, "{x}: {t}");
+            assert_eq!(super::tanh_f32(-x), -t);
+            // Monotone to within the approximation error.
+            assert!(t >= last - 8e-7, "not monotone at {x}");
+            last = t;
         }
-        assert!((super::tanh(2.0) - super::tanh(2.0 + 1e-12)).abs() < 2e-8);
-        assert_eq!(super::tanh(0.0), 0.0);
-        assert_eq!(super::tanh(1e3), 1.0);
-        assert_eq!(super::tanh(-1e3), -1.0);
+        assert_eq!(super::tanh_f32(0.0), 0.0);
+        assert!((super::tanh_f32(1e30) - 1.0).abs() < 4e-7);
+        assert!(super::tanh_f32(f32::NAN).is_nan());
     }
 }

@@ -637,6 +637,56 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
 }
 
 #[test]
+fn the_batched_correction_is_the_node_by_node_network_on_small_and_large_bodies() {
+    use weft_nn::nnwarp::{NnWarp, Standardization, WarpContext, WarpMlp, hidden_layers};
+    use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics};
+    let (rows, outs) = random_pairs(29, 64);
+    let standardization = Standardization::fit(&rows, &outs).unwrap();
+    let mut params = Params::new(&cpu(), 5);
+    let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
+    let node = mlp.to_node_mlp(standardization).unwrap();
+    // 225 and 2 511 nodes: the second above the size where the runtime splits the
+    // correction into chunks on all threads.
+    for cells in [[8, 4, 4], [30, 8, 8]] {
+        let beam = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+            cells,
+            size: [1.0, 0.25, 0.25],
+        })
+        .unwrap();
+        let anchors: Vec<usize> = (0..beam.num_vertices())
+            .filter(|&i| beam.positions()[i].x.abs() < 1e-12)
+            .collect();
+        let field = FieldDirection::Directional(-Vector3::y());
+        let ctx = WarpContext::new(&beam, &anchors, field, 0.3).unwrap();
+        let lin: Vec<f64> = beam
+            .positions()
+            .iter()
+            .flat_map(|p| [0.02 * p.y, -0.3 * p.x * p.x, 0.1 * p.x * p.z])
+            .collect();
+        let (out, w) = NnWarp::new(ctx.clone(), node.clone())
+            .warp_with_rotations(&lin)
+            .unwrap();
+        let gradients = NodalGradients::new(&beam).unwrap();
+        let (_, scale) = weft_sim::warp::unit_sphere_normalization(beam.positions());
+        let inputs = ctx.inputs(&lin).unwrap();
+        for (k, &i) in ctx.free_nodes().iter().enumerate() {
+            let u = Vector3::new(lin[3 * i], lin[3 * i + 1], lin[3 * i + 2]);
+            let wi = weft_sim::warp::rotation_vector(&gradients.gradient(&lin, i));
+            assert!((w[i] - wi).norm() <= 1e-12 * (1.0 + wi.norm()), "node {i}: w");
+            let (q, _) = aligned_kinematics(&(u * scale), &wi);
+            let d = node.forward(&inputs.features[k]);
+            let want = u + q.inverse() * Vector3::new(d[0], d[1], d[2]) / scale;
+            let got = Vector3::new(out[3 * i], out[3 * i + 1], out[3 * i + 2]);
+            // The same f32 network; the batch's products may sum in another order.
+            assert!(
+                (got - want).norm() <= 1e-6 * (want - u).norm() + 1e-12,
+                "{cells:?} node {i}: {got} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
 fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
     use weft_nn::embed_training::{EmbedTrainingConfig, PhysScale, Progress};
     let mut c = EmbedTrainingConfig::default();

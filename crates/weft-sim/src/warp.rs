@@ -26,18 +26,25 @@ use weft_mesh::{TetMesh, TetTopology};
 
 use crate::error::{Error, Result};
 
+#[inline]
 fn node(x: &[f64], i: usize) -> Vector3<f64> {
     Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2])
 }
 
 /// Least-squares displacement gradients over each node's 1-ring (NNWarp Eq. 6).
+///
+/// The rings are stored flat (compressed rows): the correction of every frame reads them
+/// node after node, so one contiguous pass beats one allocation per node.
 #[derive(Debug, Clone)]
 pub struct NodalGradients {
-    /// `neighbors[i]`: the 1-ring of node `i`.
-    neighbors: Vec<Vec<usize>>,
-    /// `weights[i][k] = (P_i P_iᵀ)⁻¹ (x̄_j − x̄_i)` for the `k`-th neighbour `j`, so that
-    /// `G_i = Σ_k (u_j − u_i) weights[i][k]ᵀ`.
-    weights: Vec<Vec<Vector3<f64>>>,
+    /// Node `i`'s ring is `neighbors[offsets[i]..offsets[i + 1]]`.
+    offsets: Vec<usize>,
+    neighbors: Vec<usize>,
+    /// `weights[k] = (P_i P_iᵀ)⁻¹ (x̄_j − x̄_i)` for the ring entry `k` of node `i` with
+    /// neighbour `j`, so that `G_i = Σ_k (u_j − u_i) weights[k]ᵀ`.
+    weights: Vec<Vector3<f64>>,
+    /// `Σ_k weights[k]` over node `i`'s ring.
+    weight_sums: Vec<Vector3<f64>>,
 }
 
 impl NodalGradients {
@@ -46,10 +53,13 @@ impl NodalGradients {
     pub fn new(mesh: &TetMesh) -> Result<Self> {
         let topo = TetTopology::new(mesh);
         let rest = mesh.positions();
-        let mut neighbors = Vec::with_capacity(rest.len());
-        let mut weights = Vec::with_capacity(rest.len());
+        let mut offsets = Vec::with_capacity(rest.len() + 1);
+        offsets.push(0);
+        let mut neighbors = Vec::new();
+        let mut weights = Vec::new();
+        let mut weight_sums = Vec::with_capacity(rest.len());
         for (i, xi) in rest.iter().enumerate() {
-            let ring = topo.one_ring.neighbors(i).to_vec();
+            let ring = topo.one_ring.neighbors(i);
             let ppt: Matrix3<f64> = ring
                 .iter()
                 .map(|&j| {
@@ -65,24 +75,63 @@ impl NodalGradients {
                     value: i as f64,
                     reason: "spans fewer than three dimensions; no displacement gradient",
                 })?;
-            weights.push(ring.iter().map(|&j| inv * (rest[j] - xi)).collect());
-            neighbors.push(ring);
+            weights.extend(ring.iter().map(|&j| inv * (rest[j] - xi)));
+            weight_sums.push(weights[offsets[i]..].iter().sum());
+            neighbors.extend_from_slice(ring);
+            offsets.push(neighbors.len());
         }
-        Ok(Self { neighbors, weights })
+        Ok(Self {
+            offsets,
+            neighbors,
+            weights,
+            weight_sums,
+        })
     }
 
     pub fn num_nodes(&self) -> usize {
-        self.neighbors.len()
+        self.offsets.len() - 1
+    }
+
+    /// Node `i`'s 1-ring.
+    #[inline]
+    pub fn ring(&self, i: usize) -> &[usize] {
+        &self.neighbors[self.offsets[i]..self.offsets[i + 1]]
+    }
+
+    #[inline]
+    fn ring_weights(&self, i: usize) -> &[Vector3<f64>] {
+        &self.weights[self.offsets[i]..self.offsets[i + 1]]
     }
 
     /// `G_i` of the flat displacements `u` (3 per node).
     pub fn gradient(&self, u: &[f64], i: usize) -> Matrix3<f64> {
         let ui = node(u, i);
-        self.neighbors[i]
+        self.ring(i)
             .iter()
-            .zip(&self.weights[i])
+            .zip(self.ring_weights(i))
             .map(|(&j, c)| (node(u, j) - ui) * c.transpose())
             .sum()
+    }
+
+    /// `rotation_vector(&self.gradient(u, i))` without forming `G_i`: the skew part of
+    /// `Σ_k d_k c_kᵀ` (`d_k = u_j − u_i`) has rotation vector
+    /// `½ Σ_k c_k × d_k = ½ (Σ_k c_k × u_j − (Σ_k c_k) × u_i)`. NNWarp's runtime needs only
+    /// this, every frame at every node.
+    #[inline]
+    pub fn rotation_vector(&self, u: &[f64], i: usize) -> Vector3<f64> {
+        let ring: Vector3<f64> = self
+            .ring(i)
+            .iter()
+            .zip(self.ring_weights(i))
+            .map(|(&j, c)| c.cross(&node(u, j)))
+            .sum();
+        0.5 * (ring - self.weight_sums[i].cross(&node(u, i)))
+    }
+
+    /// Every node's rotation vector `w_i` (see [`NodalGradients::rotation_vector`]).
+    pub fn rotation_vectors(&self, u: &[f64]) -> Result<Vec<Vector3<f64>>> {
+        self.check(u)?;
+        Ok((0..self.num_nodes()).map(|i| self.rotation_vector(u, i)).collect())
     }
 
     /// Every node's `G_i`.
@@ -159,8 +208,7 @@ pub fn loads_in_rest_frames(gradients: &NodalGradients, u: &[f64], forces: &[f64
             got: forces.len(),
         });
     }
-    let w: Vec<Vector3<f64>> = gradients.gradients(u)?.iter().map(rotation_vector).collect();
-    rotate_loads_to_rest(&w, forces)
+    rotate_loads_to_rest(&gradients.rotation_vectors(u)?, forces)
 }
 
 /// [`loads_in_rest_frames`] with each node's rotation vector `w_i` already known (NNWarp's
@@ -176,7 +224,16 @@ pub fn rotate_loads_to_rest(rotation_vectors: &[Vector3<f64>], forces: &[f64]) -
     }
     let mut out = forces.to_vec();
     for (i, w) in rotation_vectors.iter().enumerate() {
-        let local = Rotation3::from_scaled_axis(*w).inverse() * node(forces, i);
+        let theta = w.norm();
+        if theta == 0.0 {
+            continue;
+        }
+        // Rodrigues for `exp([w]×)ᵀ f`, without forming the matrix (this runs at every
+        // node of every NNWarp frame).
+        let k = w / theta;
+        let (sin, cos) = theta.sin_cos();
+        let f = node(forces, i);
+        let local = cos * f - sin * k.cross(&f) + ((1.0 - cos) * k.dot(&f)) * k;
         out[3 * i..3 * i + 3].copy_from_slice(local.as_slice());
     }
     Ok(out)
@@ -285,7 +342,7 @@ impl RotationStrainWarp {
             });
         }
         let pairs: Vec<(usize, usize)> = (0..n)
-            .flat_map(|i| gradients.neighbors[i].iter().map(move |&j| (i, j)))
+            .flat_map(|i| gradients.ring(i).iter().map(move |&j| (i, j)))
             .collect();
         let pattern = Arc::new(SymmetricPattern::new(n, pairs.iter().copied()));
         let mut laplacian = SymmetricMatrix::zeros(pattern.clone());
@@ -331,7 +388,7 @@ impl RotationStrainWarp {
         // Column-major right-hand sides, one per coordinate.
         let mut rhs = vec![0.0; 3 * n];
         for i in 0..n {
-            for &j in &self.gradients.neighbors[i] {
+            for &j in self.gradients.ring(i) {
                 let e = transforms[i] * (self.rest[j] - self.rest[i]);
                 for d in 0..3 {
                     rhs[d * n + j] += e[d];
@@ -360,6 +417,7 @@ impl RotationStrainWarp {
 /// then, about y, the part of `w` orthogonal to `ũ` to the −x axis; and the three
 /// rotation-invariant scalars left, `(|ũ|, w·û, |w − (w·û)û|)`. Below `1e-12` of a
 /// unit the undefined directions are taken as the identity's.
+#[inline]
 pub fn aligned_kinematics(u: &Vector3<f64>, w: &Vector3<f64>) -> (Rotation3<f64>, [f64; 3]) {
     let tiny = 1e-12;
     let un = u.norm();

@@ -58,6 +58,50 @@ fn nodal_gradients_are_exact_for_affine_fields_at_every_node() {
 }
 
 #[test]
+fn the_direct_rotation_vector_is_the_skew_part_of_the_fitted_gradient() {
+    // A smooth nonlinear field, so every ring's gradient differs and has a skew part.
+    let mesh = small_beam();
+    let grads = NodalGradients::new(&mesh).unwrap();
+    let u = field(&mesh, |p| {
+        Vector3::new((2.0 * p.y).sin() * 0.3, p.x * p.x * 0.4 - p.z, 0.2 * p.x * p.y)
+    });
+    let direct = grads.rotation_vectors(&u).unwrap();
+    for (i, g) in grads.gradients(&u).unwrap().iter().enumerate() {
+        let w = rotation_vector(g);
+        assert!(w.norm() > 1e-3, "node {i}: the test field has no rotation there");
+        assert!(
+            (direct[i] - w).norm() < 1e-14 * (1.0 + w.norm()),
+            "node {i}: {} vs {w}",
+            direct[i]
+        );
+    }
+    assert!(grads.rotation_vectors(&u[..6]).is_err());
+}
+
+#[test]
+fn loads_are_rotated_back_by_the_inverse_of_each_nodes_rotation() {
+    use weft_sim::warp::rotate_loads_to_rest;
+    let mut rng = TestRng::new(21);
+    let mut w: Vec<Vector3<f64>> = (0..40)
+        .map(|_| Vector3::new(rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)))
+        .collect();
+    w[0] = Vector3::zeros();
+    w[1] = Vector3::new(1e-300, 0.0, 0.0);
+    w[2] = Vector3::new(0.0, 3e-9, -1e-9);
+    let forces: Vec<f64> = (0..3 * w.len()).map(|_| rng.uniform(-5.0, 5.0)).collect();
+    let rotated = rotate_loads_to_rest(&w, &forces).unwrap();
+    for (i, wi) in w.iter().enumerate() {
+        let f = Vector3::new(forces[3 * i], forces[3 * i + 1], forces[3 * i + 2]);
+        let want = Rotation3::from_scaled_axis(*wi).inverse() * f;
+        let got = Vector3::new(rotated[3 * i], rotated[3 * i + 1], rotated[3 * i + 2]);
+        assert!((got - want).norm() <= 1e-14 * f.norm(), "node {i}: {got} vs {want}");
+        // And rotating forward again gives the load back.
+        assert!((Rotation3::from_scaled_axis(*wi) * got - f).norm() <= 1e-14 * f.norm());
+    }
+    assert!(rotate_loads_to_rest(&w, &forces[1..]).is_err());
+}
+
+#[test]
 fn modal_warp_matrix_is_the_mean_of_the_rotation_along_the_path() {
     let mut rng = TestRng::new(8);
     for theta in [1e-7, 1e-5, 0.3, 1.7, 3.0] {
