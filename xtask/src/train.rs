@@ -26,6 +26,33 @@ pub enum TrainCommand {
     Embed(EmbedArgs),
     /// NNWarp's node-wise correction MLP for one material, on the `nnwarp` dataset (§5).
     Nnwarp(NnwarpArgs),
+    /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
+    Altconv(AltconvArgs),
+}
+
+#[derive(Args)]
+pub struct AltconvArgs {
+    /// A `limb` dataset directory written by `cargo xtask dataset limb`.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The model: alt (Alt-ConvLSTM), convlstm-cp-dy, convlstm-np-dy, convlstm-cp-y or
+    /// convlstm-np-y.
+    #[arg(long, default_value = "alt")]
+    pub model: String,
+    /// Training configuration (JSON; omitted fields keep their defaults): `hidden`
+    /// ([32, 64, 128, 64, 32]), `steps` (20 teacher-forced steps per sequence), `epochs`
+    /// (60), `batch` (2 sequences), `adam` (lr 1e-3), `lr_decay` (0.995 per epoch), `seed`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Where the model is written.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from the model directory's last checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// The nonlinear materials an NNWarp network is trained for.
@@ -101,6 +128,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Embed(args) => embed(args),
         TrainCommand::Nnwarp(args) => nnwarp(args),
+        TrainCommand::Altconv(args) => altconv(args),
     }
 }
 
@@ -280,6 +308,116 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
 
 /// `cargo xtask train nnwarp`: pairs from the dataset's train and validation splits,
 /// standardised on the training pairs, one checkpoint per epoch.
+fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
+    use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, SequenceTensors, Variant, mean_error, train_epoch};
+    let variant = Variant::from_name(&args.model)?;
+    let mut config: AltConvTrainingConfig = match &args.config {
+        Some(p) => {
+            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("parsing {}", p.display()))?
+        }
+        None => AltConvTrainingConfig::default(),
+    };
+    config.variant = variant;
+    if config.batch == 0 || config.epochs == 0 || config.steps == 0 {
+        bail!("batch, epochs and steps must be at least 1");
+    }
+    let ck = args.out.join("checkpoint");
+    let resuming = args.resume && ck.exists();
+    if ck.exists() && !args.resume {
+        bail!(
+            "{} already holds a model; pass --resume to continue it or choose another --out",
+            args.out.display()
+        );
+    }
+    let dataset =
+        weft_nn::data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+    let device = weft_nn::Device::Cpu;
+    let tensors = |split: &str| -> anyhow::Result<Vec<SequenceTensors>> {
+        dataset
+            .split(split)
+            .map(|s| {
+                anyhow::ensure!(
+                    s.skinned.len() > config.steps,
+                    "sequence {} has {} frames, fewer than the {} steps trained plus the initial one",
+                    s.index,
+                    s.skinned.len(),
+                    config.steps
+                );
+                Ok(SequenceTensors::new(s, config.steps + 1, &device)?)
+            })
+            .collect()
+    };
+    let train = tensors("train")?;
+    let validation = tensors("validation")?;
+    anyhow::ensure!(!train.is_empty(), "the dataset's train split holds no sequence");
+    let adj = weft_nn::graph::NormalizedAdjacency::new(&dataset.rest)?;
+    std::fs::create_dir_all(&args.out)?;
+    let config_path = args.out.join("config.json");
+    if resuming {
+        let stored: AltConvTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
+        if stored != config {
+            bail!(
+                "the configuration differs from the one {} was trained with; resume with the same --config",
+                args.out.display()
+            );
+        }
+    } else {
+        write_atomic(&config_path, &serde_json::to_string_pretty(&config)?)?;
+        let mut log = std::fs::File::create(args.out.join("log.csv"))?;
+        writeln!(log, "epoch,train,validation")?;
+    }
+    let mut params = weft_nn::params::Params::new(&device, config.seed);
+    let net = AltConvNet::new(&mut params, variant, &config.hidden)?;
+    let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
+    let mut first = 0;
+    if resuming {
+        let state = checkpoint::load(&ck, &params, &mut adam)?;
+        first = state["epoch"].as_u64().context("checkpoint lacks its epoch")? as usize;
+        eprintln!("resuming after epoch {first}");
+    }
+    eprintln!(
+        "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices, {} parameters",
+        variant.name(),
+        train.len(),
+        validation.len(),
+        config.steps,
+        dataset.rest.num_vertices(),
+        params.num_parameters()
+    );
+    let batches = train.len().div_ceil(config.batch) as u64;
+    let bar = progress_bar(
+        args.quiet,
+        (config.epochs.saturating_sub(first)) as u64 * batches,
+        "altconv",
+        "batches",
+    )?;
+    for epoch in first..config.epochs {
+        let loss = train_epoch(&net, &params, &mut adam, &adj, &train, &config, epoch, |l| {
+            bar.set_message(format!("epoch {epoch} loss {:.2} mm", 1e3 * l));
+            bar.inc(1);
+        })?;
+        let val = if validation.is_empty() {
+            f64::NAN
+        } else {
+            mean_error(&net, &adj, &validation, config.steps, true)?
+        };
+        let fresh = args.out.join("checkpoint.partial");
+        if fresh.exists() {
+            std::fs::remove_dir_all(&fresh)?;
+        }
+        checkpoint::save(&fresh, &params, &adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
+        swap_in(&fresh, &ck)?;
+        let mut log = std::fs::OpenOptions::new()
+            .append(true)
+            .open(args.out.join("log.csv"))?;
+        writeln!(log, "{epoch},{loss},{val}")?;
+    }
+    bar.finish_and_clear();
+    eprintln!("model → {}", args.out.display());
+    Ok(())
+}
+
 fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     use weft_nn::nnwarp::{
         Standardization, WarpMlp, WarpTrainingConfig, collect_pairs, hidden_layers, mean_loss, pair_tensors,

@@ -1,5 +1,5 @@
-//! Reading the pipeline's cloth datasets (`cargo xtask dataset`, layout in
-//! docs/DATASETS.md) into f64 frames, and Tan et al.'s frame split.
+//! Reading the pipeline's datasets (`cargo xtask dataset`, layout in docs/DATASETS.md)
+//! into f64 frames: the cloth scenes (with Tan et al.'s frame split), `nnwarp` and `limb`.
 //!
 //! A dataset directory holds `manifest.json`, `scene.toml`, `rest.obj` and one
 //! `seq-NNNNN.safetensors` per sequence with `positions` `[F, V, 3]`, `controls`
@@ -322,5 +322,78 @@ impl WarpDataset {
             material: material.to_string(),
             sequences,
         })
+    }
+}
+
+/// One sequence of the `limb` soft-tissue dataset (design §6): per frame the skinned
+/// surface `X_t` and the simulated tissue surface `Y_t`, flat `3V` (metres).
+#[derive(Debug, Clone)]
+pub struct LimbSequence {
+    pub index: usize,
+    /// `train`, `validation` or `test` (the manifest's split of whole sequences).
+    pub split: String,
+    pub skinned: Vec<Vec<f64>>,
+    pub simulated: Vec<Vec<f64>>,
+}
+
+/// The `limb` dataset: the rest surface and every sequence (docs/DATASETS.md).
+#[derive(Debug, Clone)]
+pub struct LimbDataset {
+    pub dir: PathBuf,
+    /// The body's surface at rest (`rest.obj`); all frames are in its vertex order.
+    pub rest: TriMesh,
+    pub sequences: Vec<LimbSequence>,
+}
+
+impl LimbDataset {
+    /// Reads every sequence of the `limb` dataset in `dir`.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let manifest_path = dir.join("manifest.json");
+        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
+        let manifest: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "limb" {
+            return Err(data_error(&manifest_path, "not a weft-dataset/1 limb manifest"));
+        }
+        let rest_path = dir.join("rest.obj");
+        let rest = weft_mesh::io::read_obj(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
+        let v = rest.num_vertices();
+        let listed = manifest["sequences"]
+            .as_array()
+            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
+        let mut sequences = Vec::with_capacity(listed.len());
+        for entry in listed {
+            let path = dir.join(entry["path"].as_str().unwrap_or_default());
+            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let (f, skinned) = f64_array(&path, &st, "skinned", &[v, 3])?;
+            let (fs, simulated) = f64_array(&path, &st, "simulated", &[v, 3])?;
+            if f != fs || f < 2 {
+                return Err(data_error(
+                    &path,
+                    "skinned and simulated frames disagree, or fewer than two",
+                ));
+            }
+            let frames = |x: Vec<f64>| x.chunks_exact(3 * v).map(<[f64]>::to_vec).collect::<Vec<_>>();
+            sequences.push(LimbSequence {
+                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
+                split: entry["split"].as_str().unwrap_or("train").to_string(),
+                skinned: frames(skinned),
+                simulated: frames(simulated),
+            });
+        }
+        if sequences.is_empty() {
+            return Err(data_error(&manifest_path, "the dataset has no sequence"));
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            rest,
+            sequences,
+        })
+    }
+
+    /// The sequences of one split.
+    pub fn split<'a>(&'a self, name: &'a str) -> impl Iterator<Item = &'a LimbSequence> + 'a {
+        self.sequences.iter().filter(move |s| s.split == name)
     }
 }

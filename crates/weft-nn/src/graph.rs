@@ -1,7 +1,11 @@
-//! A mesh's 1-ring graph as tensors, built once per mesh, and the neighbour mean of Tan et
-//! al.'s graph convolution as three large tensor operations.
+//! A mesh's 1-ring graph as tensors, built once per mesh: the neighbour mean of Tan et
+//! al.'s graph convolution as three large tensor operations, and the Kipf–Welling
+//! normalised adjacency of Alt-ConvLSTM's graph convolution as one custom op.
+
+use std::sync::Arc;
 
 use candle_core::{DType, Device, Tensor};
+use rayon::prelude::*;
 use weft_mesh::{Topology, TriMesh};
 
 use crate::error::{Error, Result};
@@ -79,5 +83,148 @@ impl MeshGraph {
     /// The inverse degrees as f32, for tests and custom kernels.
     pub fn inverse_degrees(&self) -> Result<Vec<f32>> {
         Ok(self.inv_degree.to_dtype(DType::F32)?.flatten_all()?.to_vec1()?)
+    }
+}
+
+/// Kipf & Welling's normalised adjacency `Â_n = D̂^{−1/2} (A + I) D̂^{−1/2}` of a mesh's
+/// 1-ring graph (Alt-ConvLSTM Eq. 9: `Conv(X, Θ) = Â_n X Θ`), built once per mesh and
+/// stored in compressed rows.
+///
+/// [`NormalizedAdjacency::apply`] multiplies a `[..., V, C]` tensor by it as one candle
+/// custom op, parallel over rows; the matrix is symmetric, so the backward pass is the
+/// same product applied to the incoming gradient. [`NormalizedAdjacency::multiply`] is
+/// the same product on plain row-major slices, for a runtime outside candle.
+#[derive(Debug, Clone)]
+pub struct NormalizedAdjacency {
+    /// Row `i` is `columns[offsets[i]..offsets[i + 1]]` (sorted, the diagonal included).
+    offsets: Arc<Vec<usize>>,
+    columns: Arc<Vec<u32>>,
+    values: Arc<Vec<f32>>,
+}
+
+impl NormalizedAdjacency {
+    /// The normalised adjacency of `mesh`'s edge graph.
+    pub fn new(mesh: &TriMesh) -> Result<Self> {
+        let topo = Topology::new(mesh);
+        Self::from_edges(mesh.num_vertices(), &topo.edges)
+    }
+
+    /// The normalised adjacency of undirected `edges` over `num_vertices` vertices
+    /// (repeated edges count once).
+    pub fn from_edges(num_vertices: usize, edges: &[[usize; 2]]) -> Result<Self> {
+        let mut rows: Vec<Vec<u32>> = (0..num_vertices).map(|i| vec![i as u32]).collect();
+        for &[a, b] in edges {
+            if a >= num_vertices || b >= num_vertices || a == b {
+                return Err(Error::InvalidParameter {
+                    name: "graph edge",
+                    value: format!("[{a}, {b}]"),
+                    reason: "needs two distinct vertices below the vertex count",
+                });
+            }
+            rows[a].push(b as u32);
+            rows[b].push(a as u32);
+        }
+        for r in &mut rows {
+            r.sort_unstable();
+            r.dedup();
+        }
+        // D̂_ii = Σ_j Â_ij: the row's length, self-loop included (never zero).
+        let inv_sqrt: Vec<f64> = rows.iter().map(|r| 1.0 / (r.len() as f64).sqrt()).collect();
+        let mut offsets = Vec::with_capacity(num_vertices + 1);
+        offsets.push(0);
+        let mut columns = Vec::new();
+        let mut values = Vec::new();
+        for (i, r) in rows.iter().enumerate() {
+            for &j in r {
+                columns.push(j);
+                values.push((inv_sqrt[i] * inv_sqrt[j as usize]) as f32);
+            }
+            offsets.push(columns.len());
+        }
+        Ok(Self {
+            offsets: Arc::new(offsets),
+            columns: Arc::new(columns),
+            values: Arc::new(values),
+        })
+    }
+
+    pub fn num_vertices(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Stored entries (self-loops included).
+    pub fn num_entries(&self) -> usize {
+        self.columns.len()
+    }
+
+    /// Row `i`'s columns and values.
+    pub fn row(&self, i: usize) -> (&[u32], &[f32]) {
+        let r = self.offsets[i]..self.offsets[i + 1];
+        (&self.columns[r.clone()], &self.values[r])
+    }
+
+    /// `Â_n x` for `x` of shape `[..., V, C]` (f32), differentiable.
+    pub fn apply(&self, x: &Tensor) -> Result<Tensor> {
+        let dims = x.dims();
+        if dims.len() < 2 || dims[dims.len() - 2] != self.num_vertices() {
+            return Err(Error::Shape {
+                what: "normalised-adjacency input",
+                expected: format!("[..., {}, C]", self.num_vertices()),
+                got: format!("{dims:?}"),
+            });
+        }
+        Ok(x.contiguous()?.apply_op1(self.clone())?)
+    }
+
+    /// `out = Â_n x` for row-major `[V, channels]` slices (every block of `V` rows of a
+    /// longer `x` in turn), rows in parallel.
+    pub fn multiply(&self, x: &[f32], channels: usize, out: &mut [f32]) {
+        let v = self.num_vertices();
+        let block = v * channels;
+        debug_assert_eq!(x.len(), out.len());
+        for (xb, ob) in x.chunks(block).zip(out.chunks_mut(block)) {
+            ob.par_chunks_mut(channels)
+                .with_min_len(64)
+                .enumerate()
+                .for_each(|(i, o)| {
+                    o.fill(0.0);
+                    let (cols, vals) = self.row(i);
+                    for (&j, &a) in cols.iter().zip(vals) {
+                        let xj = &xb[j as usize * channels..(j as usize + 1) * channels];
+                        for (oc, xc) in o.iter_mut().zip(xj) {
+                            *oc += a * xc;
+                        }
+                    }
+                });
+        }
+    }
+}
+
+impl candle_core::CustomOp1 for NormalizedAdjacency {
+    fn name(&self) -> &'static str {
+        "normalized-adjacency"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s: &candle_core::CpuStorage,
+        l: &candle_core::Layout,
+    ) -> candle_core::Result<(candle_core::CpuStorage, candle_core::Shape)> {
+        let all = s
+            .as_slice::<f32>()
+            .map_err(|_| candle_core::Error::Msg("normalized-adjacency: expects f32".into()))?;
+        let (a, b) = l
+            .contiguous_offsets()
+            .ok_or_else(|| candle_core::Error::Msg("normalized-adjacency: expects a contiguous input".into()))?;
+        let x = &all[a..b];
+        let channels = *l.shape().dims().last().unwrap_or(&1);
+        let mut out = vec![0.0f32; x.len()];
+        self.multiply(x, channels, &mut out);
+        Ok((candle_core::CpuStorage::F32(out), l.shape().clone()))
+    }
+
+    fn bwd(&self, _arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        // Â_n is symmetric: the vector–Jacobian product is the same product.
+        Ok(Some(grad_res.contiguous()?.apply_op1(self.clone())?))
     }
 }

@@ -42,6 +42,7 @@
 //! ```
 
 pub mod adam;
+pub mod altconv;
 pub mod checkpoint;
 pub mod convert;
 pub mod data;

@@ -1,0 +1,589 @@
+//! Alt-ConvLSTM (seed 001, §4) and the vanilla graph ConvLSTM baselines it is compared
+//! with (§5.2), on a surface mesh in vertex correspondence over time.
+//!
+//! Every convolution is the graph convolution of Eq. 9, `Â_n X Θ` with the Kipf–Welling
+//! normalised adjacency ([`NormalizedAdjacency`]). Because `Â_n (X Θ) = (Â_n X) Θ`, a cell
+//! multiplies each of its inputs by `Â_n` once and then runs one dense product per input
+//! for all four gates together: a few large operations per layer, and weights whose size
+//! depends only on the channel counts, never on the vertex count.
+//!
+//! The Alt-ConvLSTM cell is Eq. 5:
+//! ```text
+//! i_t = σ(W_xi∗X_t + W_hi∗H_{t−1} + W_ci∗Y_{t−1} + b_i)
+//! f_t = σ(W_xf∗X_t + W_hf∗H_{t−1} + W_cf∗Y_{t−1} + b_f)
+//! C_t = f_t∘C_{t−1} + i_t∘tanh(W_xc∗X_t + W_hc∗H_{t−1} + b_c)
+//! Y_t = Y_{t−1} + C_t                      (+ C_t^{l−m}, the skip of Eq. 10)
+//! o_t = σ(W_xo∗X_t + W_ho∗H_{t−1} + W_co∗Y_t + b_o)
+//! H_t = o_t∘tanh(C_t)
+//! ```
+//! The vanilla ConvLSTM has no `Y`: its convolutional peepholes (CP) look at `C_{t−1}` and
+//! `C_t`, or it has none (NP).
+//!
+//! The network (§4.3, §5.1): five hidden cells of 32-64-128-64-32 channels and a
+//! 3-channel output cell, the input of cell `l` being the cell state `C^{l−1}` of the one
+//! below. The input of the first is `[X_t, X_t − X_{t−1}, Y₀ − X₀]` (9 channels).
+//! - **Alt-ConvLSTM**: Eq. 10's skips join equal-width layers across the bottleneck (the
+//!   second 64-channel cell takes the first's `C`, the second 32-channel cell the first's);
+//!   the output cell's accumulation is the prediction, `Ŷ_t = Y_{t−1}^out + C_t^out +
+//!   (X_t − X_{t−1})` (Eq. 11), started from `Y_0^out = Y_0`, `C_0^out = 0`.
+//! - **ConvLSTM-…-ΔY**: `C^out` is a velocity, `Ŷ_t = Ŷ_{t−1} + C_t^out + (X_t − X_{t−1})`.
+//! - **ConvLSTM-…-Y**: `C^out` is the position, read with the same input-to-output skip as
+//!   an offset from the pose: `Ŷ_t = X_t + C_t^out`, started from `C_0^out = Y_0 − X_0`.
+//!
+//! Teacher forcing (§5.1) replaces the previous prediction by the truth: `Y_{t−1}^out`
+//! (Alt-ConvLSTM), `Ŷ_{t−1}` (ΔY) or `C_{t−1}^out = Y_{t−1} − X_{t−1}` (Y). It is how the
+//! models train and what the single-step error measures; a roll-out feeds back its own
+//! predictions. The loss is Eq. 12, the mean Euclidean vertex error.
+//!
+//! Training and evaluation run in candle.
+
+use candle_core::{DType, Device, Tensor};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::graph::NormalizedAdjacency;
+use crate::params::{Init, Params};
+
+/// Channels of the first cell's input `[X_t, X_t − X_{t−1}, Y₀ − X₀]`.
+pub const INPUT_CHANNELS: usize = 9;
+/// The paper's hidden cells (§5.1).
+pub const HIDDEN: [usize; 5] = [32, 64, 128, 64, 32];
+/// Scale of the output cell's initial weights (see [`AltConvNet::new`]).
+const OUTPUT_INIT_GAIN: f64 = 0.01;
+
+/// The models of the comparison (Alt-ConvLSTM Tables 1–2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Variant {
+    #[serde(rename = "alt-convlstm")]
+    Alt,
+    #[serde(rename = "convlstm-cp-dy")]
+    CpDy,
+    #[serde(rename = "convlstm-np-dy")]
+    NpDy,
+    #[serde(rename = "convlstm-cp-y")]
+    CpY,
+    #[serde(rename = "convlstm-np-y")]
+    NpY,
+}
+
+/// What a cell's peepholes look at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Peephole {
+    /// Alt-ConvLSTM: the accumulation `Y`.
+    Accumulation,
+    /// Vanilla ConvLSTM-CP: the cell state `C`.
+    Cell,
+    /// Vanilla ConvLSTM-NP.
+    None,
+}
+
+impl Variant {
+    pub const ALL: [Variant; 5] = [Self::Alt, Self::CpDy, Self::NpDy, Self::CpY, Self::NpY];
+
+    /// The method's name in `results.json` and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Alt => "alt-convlstm",
+            Self::CpDy => "convlstm-cp-dy",
+            Self::NpDy => "convlstm-np-dy",
+            Self::CpY => "convlstm-cp-y",
+            Self::NpY => "convlstm-np-y",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|v| v.name() == name || (name == "alt" && *v == Self::Alt))
+            .ok_or_else(|| Error::InvalidParameter {
+                name: "Alt-ConvLSTM model",
+                value: name.to_string(),
+                reason: "must be alt (alt-convlstm), convlstm-cp-dy, convlstm-np-dy, convlstm-cp-y or convlstm-np-y",
+            })
+    }
+
+    fn peephole(self) -> Peephole {
+        match self {
+            Self::Alt => Peephole::Accumulation,
+            Self::CpDy | Self::CpY => Peephole::Cell,
+            Self::NpDy | Self::NpY => Peephole::None,
+        }
+    }
+
+    /// Whether the output cell's state is a position offset (the `-Y` baselines) rather
+    /// than a velocity.
+    fn outputs_position(self) -> bool {
+        matches!(self, Self::CpY | Self::NpY)
+    }
+}
+
+/// The learnable weights of one cell (`c_in` → `c` channels).
+#[derive(Debug, Clone)]
+struct Cell {
+    c: usize,
+    peephole: Peephole,
+    /// `[c_in, 4c]` and `[c, 4c]`: the input and hidden convolutions of the gates i, f, c̃,
+    /// o side by side.
+    w_x: Tensor,
+    w_h: Tensor,
+    /// `[4c]`.
+    bias: Tensor,
+    /// Peepholes: `[c, 2c]` for i and f (on the previous state), `[c, c]` for o (on the
+    /// new one).
+    w_if: Option<Tensor>,
+    w_o: Option<Tensor>,
+}
+
+/// One cell's recurrent state, each `[B, V, c]`. `y` is Alt-ConvLSTM's accumulation.
+#[derive(Debug, Clone)]
+struct CellState {
+    h: Tensor,
+    c: Tensor,
+    y: Option<Tensor>,
+}
+
+impl Cell {
+    /// A cell with Glorot-uniform weights scaled by `gain`.
+    fn new(params: &mut Params, name: &str, c_in: usize, c: usize, peephole: Peephole, gain: f64) -> Result<Self> {
+        // Glorot-uniform over the gate block, as for the other sigmoid/tanh networks here.
+        let glorot = |fan_in: usize, fan_out: usize| Init::Uniform(gain * (6.0 / (fan_in + fan_out) as f64).sqrt());
+        let mut bias = vec![0.0f32; 4 * c];
+        // The forget gate starts open (bias 1), the usual LSTM initialisation.
+        bias[c..2 * c].fill(1.0);
+        let bias_t = params.create(&format!("{name}.b"), &[4 * c], Init::Zeros)?;
+        let cell = Self {
+            c,
+            peephole,
+            w_x: params.create(&format!("{name}.wx"), &[c_in, 4 * c], glorot(c_in, c))?,
+            w_h: params.create(&format!("{name}.wh"), &[c, 4 * c], glorot(c, c))?,
+            bias: bias_t,
+            w_if: match peephole {
+                Peephole::None => None,
+                _ => Some(params.create(&format!("{name}.wif"), &[c, 2 * c], glorot(c, c))?),
+            },
+            w_o: match peephole {
+                Peephole::None => None,
+                _ => Some(params.create(&format!("{name}.wo"), &[c, c], glorot(c, c))?),
+            },
+        };
+        if let Some(var) = params.vars().get(&format!("{name}.b")) {
+            var.set(&Tensor::from_vec(bias, 4 * c, params.device())?)?;
+        }
+        Ok(cell)
+    }
+
+    fn zero_state(&self, b: usize, v: usize, device: &Device) -> Result<CellState> {
+        let z = Tensor::zeros((b, v, self.c), DType::F32, device)?;
+        Ok(CellState {
+            h: z.clone(),
+            c: z.clone(),
+            y: (self.peephole == Peephole::Accumulation).then_some(z),
+        })
+    }
+
+    /// One step of Eq. 5 (or the vanilla cell). `ax` is `Â_n X_t`; `skip` is added to the
+    /// accumulation (Eq. 10, Eq. 11).
+    fn step(&self, adj: &NormalizedAdjacency, ax: &Tensor, s: &CellState, skip: Option<&Tensor>) -> Result<CellState> {
+        let c = self.c;
+        let gates = (ax.broadcast_matmul(&self.w_x)? + adj.apply(&s.h)?.broadcast_matmul(&self.w_h)?)?
+            .broadcast_add(&self.bias)?;
+        let watched_before = match self.peephole {
+            Peephole::Accumulation => s.y.as_ref(),
+            Peephole::Cell => Some(&s.c),
+            Peephole::None => None,
+        };
+        let (mut i, mut f) = (gates.narrow(2, 0, c)?, gates.narrow(2, c, c)?);
+        if let (Some(w), Some(watched)) = (&self.w_if, watched_before) {
+            let p = adj.apply(watched)?.broadcast_matmul(w)?;
+            i = (i + p.narrow(2, 0, c)?)?;
+            f = (f + p.narrow(2, c, c)?)?;
+        }
+        let i = candle_nn::ops::sigmoid(&i)?;
+        let f = candle_nn::ops::sigmoid(&f)?;
+        let candidate = gates.narrow(2, 2 * c, c)?.tanh()?;
+        let cell = ((f * &s.c)? + (i * candidate)?)?;
+        let y = match &s.y {
+            Some(y) => {
+                let mut y = (y + &cell)?;
+                if let Some(k) = skip {
+                    y = (y + k)?;
+                }
+                Some(y)
+            }
+            None => None,
+        };
+        let mut o = gates.narrow(2, 3 * c, c)?;
+        let watched_after = match self.peephole {
+            Peephole::Accumulation => y.as_ref(),
+            Peephole::Cell => Some(&cell),
+            Peephole::None => None,
+        };
+        if let (Some(w), Some(watched)) = (&self.w_o, watched_after) {
+            o = (o + adj.apply(watched)?.broadcast_matmul(w)?)?;
+        }
+        let h = (candle_nn::ops::sigmoid(&o)? * cell.tanh()?)?;
+        Ok(CellState { h, c: cell, y })
+    }
+}
+
+/// A whole model: five hidden cells and the output cell.
+#[derive(Debug, Clone)]
+pub struct AltConvNet {
+    variant: Variant,
+    cells: Vec<Cell>,
+    /// Eq. 10's skips: `(layer, from)`, layer `layer`'s accumulation also adds `C^{from}`.
+    skips: Vec<(usize, usize)>,
+}
+
+/// Skips of Eq. 10 between equal-width hidden cells, mirrored across the widest one.
+fn mirrored_skips(hidden: &[usize]) -> Vec<(usize, usize)> {
+    let n = hidden.len();
+    (0..n / 2)
+        .map(|k| (n - 1 - k, k))
+        .filter(|&(l, k)| l > k + 1 && hidden[l] == hidden[k])
+        .collect()
+}
+
+/// A sequence's driving inputs: the skinned surfaces `X_0..X_T` and the initial tissue
+/// `Y_0`, as `[B, T + 1, V, 3]` and `[B, V, 3]` (metres).
+#[derive(Debug, Clone)]
+pub struct Drive {
+    pub skinned: Tensor,
+    pub initial: Tensor,
+}
+
+impl AltConvNet {
+    /// A model with `hidden` cells (the paper's is [`HIDDEN`]) in `params`.
+    pub fn new(params: &mut Params, variant: Variant, hidden: &[usize]) -> Result<Self> {
+        if hidden.is_empty() || hidden.contains(&0) {
+            return Err(Error::InvalidParameter {
+                name: "Alt-ConvLSTM hidden channels",
+                value: format!("{hidden:?}"),
+                reason: "needs at least one cell, each with at least one channel",
+            });
+        }
+        let peephole = variant.peephole();
+        let mut cells = Vec::with_capacity(hidden.len() + 1);
+        let mut c_in = INPUT_CHANNELS;
+        for (l, &c) in hidden.iter().enumerate() {
+            cells.push(Cell::new(params, &format!("cell{l}"), c_in, c, peephole, 1.0)?);
+            c_in = c;
+        }
+        // The output cell's state is in metres, and its candidate is bounded by 1 (tanh):
+        // at full scale an untrained model moves vertices by up to a metre per step. Its
+        // weights start at 1 % of the Glorot range, so training starts next to the skip
+        // connections (Eq. 11: the previous surface moved with the pose).
+        cells.push(Cell::new(params, "out", c_in, 3, peephole, OUTPUT_INIT_GAIN)?);
+        let skips = if variant == Variant::Alt {
+            mirrored_skips(hidden)
+        } else {
+            Vec::new()
+        };
+        Ok(Self { variant, cells, skips })
+    }
+
+    pub fn variant(&self) -> Variant {
+        self.variant
+    }
+
+    /// Predicted surfaces `Ŷ_1..Ŷ_steps` (each `[B, V, 3]`). With `truth` (`[B, T + 1, V, 3]`)
+    /// every step starts from the true previous surface (teacher forcing, single-step);
+    /// without, from the model's own (roll-out).
+    pub fn run(
+        &self,
+        adj: &NormalizedAdjacency,
+        drive: &Drive,
+        truth: Option<&Tensor>,
+        steps: usize,
+    ) -> Result<Vec<Tensor>> {
+        let (b, frames, v, three) = drive.skinned.dims4()?;
+        if three != 3 || v != adj.num_vertices() || drive.initial.dims() != [b, v, 3] {
+            return Err(Error::Shape {
+                what: "Alt-ConvLSTM drive",
+                expected: format!(
+                    "skinned [B, T+1, {}, 3] and initial [B, {}, 3]",
+                    adj.num_vertices(),
+                    adj.num_vertices()
+                ),
+                got: format!("{:?} and {:?}", drive.skinned.dims(), drive.initial.dims()),
+            });
+        }
+        if steps >= frames {
+            return Err(Error::InvalidParameter {
+                name: "Alt-ConvLSTM steps",
+                value: steps.to_string(),
+                reason: "needs one more skinned frame than steps",
+            });
+        }
+        if let Some(t) = truth {
+            if t.dims() != drive.skinned.dims() {
+                return Err(Error::Shape {
+                    what: "Alt-ConvLSTM truth",
+                    expected: format!("{:?}", drive.skinned.dims()),
+                    got: format!("{:?}", t.dims()),
+                });
+            }
+        }
+        let device = drive.skinned.device();
+        let x = |t: usize| -> Result<Tensor> { Ok(drive.skinned.narrow(1, t, 1)?.squeeze(1)?) };
+        let y_true = |t: usize| -> Result<Option<Tensor>> {
+            Ok(match truth {
+                Some(tr) => Some(tr.narrow(1, t, 1)?.squeeze(1)?),
+                None => None,
+            })
+        };
+        let x0 = x(0)?;
+        let offset0 = (&drive.initial - &x0)?;
+        let mut states: Vec<CellState> = self
+            .cells
+            .iter()
+            .map(|c| c.zero_state(b, v, device))
+            .collect::<Result<_>>()?;
+        // §5.1's initial state: the output accumulation is Y_0 (Alt-ConvLSTM); the -Y
+        // baselines' output state is the initial offset from the pose.
+        let out = self.cells.len() - 1;
+        match self.variant {
+            Variant::Alt => states[out].y = Some(drive.initial.clone()),
+            v if v.outputs_position() => states[out].c = offset0.clone(),
+            _ => {}
+        }
+        let mut previous = drive.initial.clone();
+        let mut x_prev = x0;
+        let mut predictions = Vec::with_capacity(steps);
+        for t in 1..=steps {
+            let xt = x(t)?;
+            let dx = (&xt - &x_prev)?;
+            if t > 1 {
+                if let Some(y_prev) = y_true(t - 1)? {
+                    // Teacher forcing: the step starts from the true surface.
+                    match self.variant {
+                        Variant::Alt => states[out].y = Some(y_prev.clone()),
+                        v if v.outputs_position() => states[out].c = (&y_prev - &x_prev)?,
+                        _ => {}
+                    }
+                    previous = y_prev;
+                }
+            }
+            let input = Tensor::cat(&[&xt, &dx, &offset0], 2)?;
+            let mut a_in = adj.apply(&input)?;
+            let mut new_states: Vec<CellState> = Vec::with_capacity(self.cells.len());
+            for (l, cell) in self.cells.iter().enumerate() {
+                let skip = if l == out {
+                    (self.variant == Variant::Alt).then_some(&dx)
+                } else {
+                    self.skips
+                        .iter()
+                        .find(|(to, _)| *to == l)
+                        .map(|(_, from)| &new_states[*from].c)
+                };
+                let skip = skip.cloned();
+                let s = cell.step(adj, &a_in, &states[l], skip.as_ref())?;
+                if l < out {
+                    a_in = adj.apply(&s.c)?;
+                }
+                new_states.push(s);
+            }
+            states = new_states;
+            let prediction = match self.variant {
+                Variant::Alt => states[out]
+                    .y
+                    .clone()
+                    .unwrap_or_else(|| unreachable!("Alt-ConvLSTM accumulates")),
+                v if v.outputs_position() => (&xt + &states[out].c)?,
+                _ => ((&previous + &states[out].c)? + &dx)?,
+            };
+            previous = prediction.clone();
+            predictions.push(prediction);
+            x_prev = xt;
+        }
+        Ok(predictions)
+    }
+}
+
+/// Eq. 12: the mean Euclidean distance between predicted and true surfaces over steps and
+/// vertices. `predictions[k]` is step `k + 1` of `truth` (`[B, T + 1, V, 3]`).
+pub fn mean_vertex_error(predictions: &[Tensor], truth: &Tensor) -> Result<Tensor> {
+    let steps = predictions.len();
+    let predicted = Tensor::stack(predictions, 1)?;
+    let target = truth.narrow(1, 1, steps)?;
+    // A tiny floor under the square root keeps the gradient finite at a perfect vertex.
+    let d = ((predicted - target)?.sqr()?.sum(3)? + 1e-14)?.sqrt()?;
+    Ok(d.mean_all()?)
+}
+
+/// Per-step, per-vertex errors `‖Ŷ_t(v_i) − Y_t(v_i)‖` (metres) of one sequence's
+/// predictions (`[1, V, 3]` each) against `truth` (`[1, T + 1, V, 3]`): `[steps][V]`.
+pub fn vertex_errors(predictions: &[Tensor], truth: &Tensor) -> Result<Vec<Vec<f64>>> {
+    predictions
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let t = truth.narrow(1, k + 1, 1)?.squeeze(1)?;
+            let d: Vec<f32> = (p - t)?.sqr()?.sum(2)?.sqrt()?.flatten_all()?.to_vec1()?;
+            Ok(d.into_iter().map(f64::from).collect())
+        })
+        .collect()
+}
+
+/// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
+/// fields; they keep the defaults of [`AltConvTrainingConfig::new`] for Alt-ConvLSTM.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AltConvTrainingConfig {
+    pub variant: Variant,
+    pub hidden: Vec<usize>,
+    /// Teacher-forced steps per training sequence (the paper: 20, after the initial frame).
+    pub steps: usize,
+    pub epochs: usize,
+    /// Sequences per optimiser step.
+    pub batch: usize,
+    pub adam: crate::adam::AdamSettings,
+    /// Learning-rate factor per epoch (the paper's "weight decay of 0.995").
+    pub lr_decay: f64,
+    pub seed: u64,
+}
+
+impl Default for AltConvTrainingConfig {
+    fn default() -> Self {
+        Self::new(Variant::Alt)
+    }
+}
+
+impl AltConvTrainingConfig {
+    pub fn new(variant: Variant) -> Self {
+        Self {
+            variant,
+            hidden: HIDDEN.to_vec(),
+            steps: 20,
+            epochs: 60,
+            batch: 2,
+            adam: crate::adam::AdamSettings {
+                learning_rate: 1e-3,
+                ..Default::default()
+            },
+            lr_decay: 0.995,
+            seed: 0,
+        }
+    }
+}
+
+/// One sequence as tensors: its drive and its true surfaces `[1, F, V, 3]` (f32, metres).
+#[derive(Debug, Clone)]
+pub struct SequenceTensors {
+    pub drive: Drive,
+    pub truth: Tensor,
+}
+
+impl SequenceTensors {
+    /// The first `frames` frames of `seq` (all of them if it has fewer).
+    pub fn new(seq: &crate::data::LimbSequence, frames: usize, device: &Device) -> Result<Self> {
+        let f = frames.min(seq.skinned.len());
+        let v = seq.skinned[0].len() / 3;
+        let stack = |frames: &[Vec<f64>], what: &'static str| -> Result<Tensor> {
+            let flat: Vec<f64> = frames[..f].iter().flatten().copied().collect();
+            let data = crate::convert::f64_to_f32(what, &flat)?;
+            Ok(Tensor::from_vec(data, (1, f, v, 3), device)?)
+        };
+        let skinned = stack(&seq.skinned, "skinned surfaces")?;
+        let truth = stack(&seq.simulated, "simulated surfaces")?;
+        let initial = truth.narrow(1, 0, 1)?.squeeze(1)?;
+        Ok(Self {
+            drive: Drive { skinned, initial },
+            truth,
+        })
+    }
+
+    /// Several sequences of equal length as one batch.
+    pub fn batch(items: &[&SequenceTensors]) -> Result<Self> {
+        let cat = |f: &dyn Fn(&SequenceTensors) -> &Tensor| -> Result<Tensor> {
+            Ok(Tensor::cat(&items.iter().map(|s| f(s)).collect::<Vec<_>>(), 0)?)
+        };
+        Ok(Self {
+            drive: Drive {
+                skinned: cat(&|s| &s.drive.skinned)?,
+                initial: cat(&|s| &s.drive.initial)?,
+            },
+            truth: cat(&|s| &s.truth)?,
+        })
+    }
+}
+
+/// One epoch of teacher-forced training (§5.1, loss Eq. 12) over `train` (each holding at
+/// least `config.steps + 1` frames), in an order drawn from SplitMix64(seed, epoch), with
+/// the learning rate decayed to `lr · lr_decay^epoch`; returns the mean batch loss
+/// (metres).
+#[allow(clippy::too_many_arguments)]
+pub fn train_epoch(
+    net: &AltConvNet,
+    params: &Params,
+    adam: &mut crate::adam::Adam,
+    adj: &NormalizedAdjacency,
+    train: &[SequenceTensors],
+    config: &AltConvTrainingConfig,
+    epoch: usize,
+    mut on_batch: impl FnMut(f64),
+) -> Result<f64> {
+    let mut order: Vec<usize> = (0..train.len()).collect();
+    let mut rng = weft_sim::rng::SplitMix64::new(config.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    for i in (1..order.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        order.swap(i, j);
+    }
+    adam.settings.learning_rate = config.adam.learning_rate * config.lr_decay.powi(epoch as i32);
+    let (mut total, mut batches) = (0.0, 0usize);
+    for chunk in order.chunks(config.batch.max(1)) {
+        let items: Vec<&SequenceTensors> = chunk.iter().map(|&k| &train[k]).collect();
+        let b = SequenceTensors::batch(&items)?;
+        let predictions = net.run(adj, &b.drive, Some(&b.truth), config.steps)?;
+        let loss = mean_vertex_error(&predictions, &b.truth)?;
+        let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+        if !value.is_finite() {
+            return Err(Error::NonFinite {
+                what: "Alt-ConvLSTM training loss",
+                index: batches,
+            });
+        }
+        adam.step(params, &loss.backward()?)?;
+        total += value;
+        batches += 1;
+        on_batch(value);
+    }
+    Ok(total / batches.max(1) as f64)
+}
+
+/// Eq. 12 of a model on `sequences` over `steps` steps, teacher-forced (`single_step`) or
+/// rolled out, averaged over sequences (metres).
+pub fn mean_error(
+    net: &AltConvNet,
+    adj: &NormalizedAdjacency,
+    sequences: &[SequenceTensors],
+    steps: usize,
+    single_step: bool,
+) -> Result<f64> {
+    let mut total = 0.0;
+    for s in sequences {
+        let predictions = net.run(adj, &s.drive, single_step.then_some(&s.truth), steps)?;
+        total += mean_vertex_error(&predictions, &s.truth)?
+            .to_dtype(DType::F64)?
+            .to_scalar::<f64>()?;
+    }
+    Ok(total / sequences.len().max(1) as f64)
+}
+
+/// A trained model directory written by `cargo xtask train altconv`: `config.json` and
+/// the latest `checkpoint/`.
+pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingConfig, Params, AltConvNet)> {
+    let path = dir.join("config.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let config: AltConvTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    let mut params = Params::new(device, config.seed);
+    let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?;
+    crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
+    Ok((config, params, net))
+}
