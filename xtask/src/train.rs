@@ -308,8 +308,30 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
 
 /// `cargo xtask train nnwarp`: pairs from the dataset's train and validation splits,
 /// standardised on the training pairs, one checkpoint per epoch.
+/// After a single-network model's epoch: its checkpoint swapped in atomically
+/// (`out/checkpoint`, with the epoch count) and `log_line` appended to `out/log.csv`.
+fn end_epoch(
+    out: &Path,
+    params: &weft_nn::params::Params,
+    adam: &weft_nn::adam::Adam,
+    epoch: usize,
+    log_line: &str,
+) -> anyhow::Result<()> {
+    let fresh = out.join("checkpoint.partial");
+    if fresh.exists() {
+        std::fs::remove_dir_all(&fresh)?;
+    }
+    checkpoint::save(&fresh, params, adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
+    swap_in(&fresh, &out.join("checkpoint"))?;
+    let mut log = std::fs::OpenOptions::new().append(true).open(out.join("log.csv"))?;
+    writeln!(log, "{log_line}")?;
+    Ok(())
+}
+
 fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, SequenceTensors, Variant, mean_error, train_epoch};
+    use weft_nn::altconv::{
+        AltConvNet, AltConvTrainingConfig, Scaling, SequenceTensors, Variant, mean_error, train_epoch,
+    };
     let variant = Variant::from_name(&args.model)?;
     let mut config: AltConvTrainingConfig = match &args.config {
         Some(p) => {
@@ -367,8 +389,17 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         let mut log = std::fs::File::create(args.out.join("log.csv"))?;
         writeln!(log, "epoch,train,validation")?;
     }
+    let scaling_path = args.out.join("scaling.json");
+    let scaling: Scaling = if resuming {
+        serde_json::from_str(&std::fs::read_to_string(&scaling_path)?)
+            .with_context(|| format!("reading {}", scaling_path.display()))?
+    } else {
+        let s = Scaling::fit(&train, variant, config.steps)?;
+        write_atomic(&scaling_path, &serde_json::to_string_pretty(&s)?)?;
+        s
+    };
     let mut params = weft_nn::params::Params::new(&device, config.seed);
-    let net = AltConvNet::new(&mut params, variant, &config.hidden)?;
+    let net = AltConvNet::new(&mut params, variant, &config.hidden)?.with_scaling(scaling);
     let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
     let mut first = 0;
     if resuming {
@@ -402,16 +433,7 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         } else {
             mean_error(&net, &adj, &validation, config.steps, true)?
         };
-        let fresh = args.out.join("checkpoint.partial");
-        if fresh.exists() {
-            std::fs::remove_dir_all(&fresh)?;
-        }
-        checkpoint::save(&fresh, &params, &adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
-        swap_in(&fresh, &ck)?;
-        let mut log = std::fs::OpenOptions::new()
-            .append(true)
-            .open(args.out.join("log.csv"))?;
-        writeln!(log, "{epoch},{loss},{val}")?;
+        end_epoch(&args.out, &params, &adam, epoch, &format!("{epoch},{loss},{val}"))?;
     }
     bar.finish_and_clear();
     eprintln!("model → {}", args.out.display());
@@ -510,16 +532,13 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
             bar.inc(1);
         })?;
         let validation = mean_loss(&mlp, &vx, &vy)?;
-        let fresh = args.out.join("checkpoint.partial");
-        if fresh.exists() {
-            std::fs::remove_dir_all(&fresh)?;
-        }
-        checkpoint::save(&fresh, &params, &adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
-        swap_in(&fresh, &ck)?;
-        let mut log = std::fs::OpenOptions::new()
-            .append(true)
-            .open(args.out.join("log.csv"))?;
-        writeln!(log, "{epoch},{train},{validation}")?;
+        end_epoch(
+            &args.out,
+            &params,
+            &adam,
+            epoch,
+            &format!("{epoch},{train},{validation}"),
+        )?;
     }
     bar.finish_and_clear();
     eprintln!("model → {}", args.out.display());

@@ -14,6 +14,14 @@ use weft_sim::ClothScene;
 
 use crate::error::{Error, Result};
 
+/// A dataset directory's `manifest.json`, parsed, and its path.
+fn read_manifest(dir: &Path) -> Result<(PathBuf, serde_json::Value)> {
+    let path = dir.join("manifest.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| io_error(&path, e))?;
+    let manifest = serde_json::from_str(&text).map_err(|e| data_error(&path, e.to_string()))?;
+    Ok((path, manifest))
+}
+
 /// Tan et al. §VI-A: of every 17 consecutive frames the first 12 train and the other 5
 /// test. `m` counts from a sequence's first frame.
 pub fn is_train_frame(m: usize) -> bool {
@@ -137,10 +145,7 @@ fn f64_array(path: &Path, st: &SafeTensors, name: &str, shape_tail: &[usize]) ->
 impl ClothDataset {
     /// Reads the dataset in `dir` (every sequence listed in its manifest).
     pub fn load(dir: &Path) -> Result<Self> {
-        let manifest_path = dir.join("manifest.json");
-        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
-        let manifest: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        let (manifest_path, manifest) = read_manifest(dir)?;
         if manifest["format"] != "weft-dataset/1" {
             return Err(data_error(&manifest_path, "not a weft-dataset/1 manifest"));
         }
@@ -248,10 +253,7 @@ fn vec3_of(path: &Path, v: &serde_json::Value, key: &str) -> Result<nalgebra::Ve
 impl WarpDataset {
     /// Reads every sequence of the dataset in `dir`, keeping `material`'s registration.
     pub fn load(dir: &Path, material: &str) -> Result<Self> {
-        let manifest_path = dir.join("manifest.json");
-        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
-        let manifest: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        let (manifest_path, manifest) = read_manifest(dir)?;
         if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "nnwarp" {
             return Err(data_error(&manifest_path, "not a weft-dataset/1 nnwarp manifest"));
         }
@@ -348,10 +350,7 @@ pub struct LimbDataset {
 impl LimbDataset {
     /// Reads every sequence of the `limb` dataset in `dir`.
     pub fn load(dir: &Path) -> Result<Self> {
-        let manifest_path = dir.join("manifest.json");
-        let text = std::fs::read_to_string(&manifest_path).map_err(|e| io_error(&manifest_path, e))?;
-        let manifest: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| data_error(&manifest_path, e.to_string()))?;
+        let (manifest_path, manifest) = read_manifest(dir)?;
         if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "limb" {
             return Err(data_error(&manifest_path, "not a weft-dataset/1 limb manifest"));
         }

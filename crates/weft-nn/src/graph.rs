@@ -10,6 +10,18 @@ use weft_mesh::{Topology, TriMesh};
 
 use crate::error::{Error, Result};
 
+/// An edge `[a, b]` of a graph over `num_vertices` vertices: two distinct vertices in range.
+fn check_edge(num_vertices: usize, a: usize, b: usize) -> Result<()> {
+    if a >= num_vertices || b >= num_vertices || a == b {
+        return Err(Error::InvalidParameter {
+            name: "graph edge",
+            value: format!("[{a}, {b}]"),
+            reason: "needs two distinct vertices below the vertex count",
+        });
+    }
+    Ok(())
+}
+
 /// The directed 1-ring edges of a mesh (`src` → `dst` for every neighbour pair, both ways)
 /// and each vertex's inverse degree.
 #[derive(Debug, Clone)]
@@ -34,13 +46,7 @@ impl MeshGraph {
         let mut dst = Vec::with_capacity(2 * edges.len());
         let mut degree = vec![0u32; num_vertices];
         for &[a, b] in edges {
-            if a >= num_vertices || b >= num_vertices || a == b {
-                return Err(Error::InvalidParameter {
-                    name: "graph edge",
-                    value: format!("[{a}, {b}]"),
-                    reason: "needs two distinct vertices below the vertex count",
-                });
-            }
+            check_edge(num_vertices, a, b)?;
             src.extend([a as u32, b as u32]);
             dst.extend([b as u32, a as u32]);
             degree[a] += 1;
@@ -114,13 +120,7 @@ impl NormalizedAdjacency {
     pub fn from_edges(num_vertices: usize, edges: &[[usize; 2]]) -> Result<Self> {
         let mut rows: Vec<Vec<u32>> = (0..num_vertices).map(|i| vec![i as u32]).collect();
         for &[a, b] in edges {
-            if a >= num_vertices || b >= num_vertices || a == b {
-                return Err(Error::InvalidParameter {
-                    name: "graph edge",
-                    value: format!("[{a}, {b}]"),
-                    reason: "needs two distinct vertices below the vertex count",
-                });
-            }
+            check_edge(num_vertices, a, b)?;
             rows[a].push(b as u32);
             rows[b].push(a as u32);
         }
@@ -158,6 +158,7 @@ impl NormalizedAdjacency {
     }
 
     /// Row `i`'s columns and values.
+    #[inline]
     pub fn row(&self, i: usize) -> (&[u32], &[f32]) {
         let r = self.offsets[i]..self.offsets[i + 1];
         (&self.columns[r.clone()], &self.values[r])
@@ -179,23 +180,67 @@ impl NormalizedAdjacency {
     /// `out = Â_n x` for row-major `[V, channels]` slices (every block of `V` rows of a
     /// longer `x` in turn), rows in parallel.
     pub fn multiply(&self, x: &[f32], channels: usize, out: &mut [f32]) {
-        let v = self.num_vertices();
-        let block = v * channels;
+        let block = self.num_vertices() * channels;
         debug_assert_eq!(x.len(), out.len());
         for (xb, ob) in x.chunks(block).zip(out.chunks_mut(block)) {
-            ob.par_chunks_mut(channels)
-                .with_min_len(64)
-                .enumerate()
-                .for_each(|(i, o)| {
-                    o.fill(0.0);
-                    let (cols, vals) = self.row(i);
-                    for (&j, &a) in cols.iter().zip(vals) {
-                        let xj = &xb[j as usize * channels..(j as usize + 1) * channels];
-                        for (oc, xc) in o.iter_mut().zip(xj) {
-                            *oc += a * xc;
-                        }
-                    }
-                });
+            self.multiply_into(xb, channels, ob, channels, 0);
+        }
+    }
+
+    /// `Â_n x` for one row-major `[V, channels]` slice `x`, written into columns
+    /// `offset..offset + channels` of the row-major `[V, stride]` slice `out` (its other
+    /// columns untouched), rows in parallel: how a runtime lays several products side by
+    /// side as the operand of one matrix product.
+    pub fn multiply_into(&self, x: &[f32], channels: usize, out: &mut [f32], stride: usize, offset: usize) {
+        debug_assert!(offset + channels <= stride && out.len() == self.num_vertices() * stride);
+        // Blocks of rows per task, each compiled for the CPU's widest vectors (the
+        // channel loop is the vector loop).
+        out.par_chunks_mut(stride * ROWS_PER_TASK)
+            .enumerate()
+            .for_each(|(t, rows)| {
+                pulp::Arch::new().dispatch(RowProducts {
+                    adj: self,
+                    first_row: t * ROWS_PER_TASK,
+                    x,
+                    channels,
+                    out: rows,
+                    stride,
+                    offset,
+                })
+            });
+    }
+}
+
+/// Rows per parallel task of [`NormalizedAdjacency::multiply_into`].
+const ROWS_PER_TASK: usize = 256;
+
+/// Rows `first_row..` of `Â_n x` into `out` (see [`NormalizedAdjacency::multiply_into`]).
+struct RowProducts<'a> {
+    adj: &'a NormalizedAdjacency,
+    first_row: usize,
+    x: &'a [f32],
+    channels: usize,
+    out: &'a mut [f32],
+    stride: usize,
+    offset: usize,
+}
+
+impl pulp::WithSimd for RowProducts<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let ch = self.channels;
+        for (r, row) in self.out.chunks_exact_mut(self.stride).enumerate() {
+            let o = &mut row[self.offset..self.offset + ch];
+            o.fill(0.0);
+            let (cols, vals) = self.adj.row(self.first_row + r);
+            for (&j, &a) in cols.iter().zip(vals) {
+                let xj = &self.x[j as usize * ch..(j as usize + 1) * ch];
+                for (oc, xc) in o.iter_mut().zip(xj) {
+                    *oc += a * xc;
+                }
+            }
         }
     }
 }

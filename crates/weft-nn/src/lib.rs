@@ -49,6 +49,7 @@ pub mod data;
 pub mod embed;
 pub mod embed_training;
 pub mod error;
+pub mod fast;
 pub mod graph;
 pub mod ik;
 pub mod layers;

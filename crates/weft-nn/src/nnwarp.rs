@@ -360,48 +360,6 @@ struct DenseLayer {
     bias: Vec<f32>,
 }
 
-/// `tanh` for the runtime's f32 activations, branch-free so that a pass over a
-/// buffer vectorises: the input clamped to ±7.905 (where f32 `tanh` is 1 to within rounding)
-/// and a [13/6] odd rational approximant there, the one Eigen uses for f32
-/// (`generic_fast_tanh_float`). Within 4e-7 of the exact value (tested), the network's own
-/// f32 precision. Activations were most of the correction's time (docs/BENCHMARKS.md).
-#[inline(always)]
-fn tanh_f32(x: f32) -> f32 {
-    const CLAMP: f32 = 7.905_311;
-    const ALPHA: [f32; 7] = [
-        4.893_524_6e-3,
-        6.372_619e-4,
-        1.485_722_4e-5,
-        5.122_297e-8,
-        -8.604_672e-11,
-        2.000_188e-13,
-        -2.760_768_5e-16,
-    ];
-    const BETA: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347_1e-4, 1.198_258_4e-6];
-    let x = x.clamp(-CLAMP, CLAMP);
-    let x2 = x * x;
-    // Fused multiply-adds where the dispatched instruction set has them (everywhere
-    // `pulp` picks its x86-64-v3 path).
-    let p = ALPHA.iter().rev().fold(0.0f32, |acc, &a| acc.mul_add(x2, a));
-    let q = BETA.iter().rev().fold(0.0f32, |acc, &b| acc.mul_add(x2, b));
-    x * p / q
-}
-
-/// [`tanh_f32`] over a buffer, compiled for the CPU's widest vectors (`pulp` dispatches
-/// at run time; the workspace targets baseline x86-64).
-struct TanhInPlace<'a>(&'a mut [f32]);
-
-impl pulp::WithSimd for TanhInPlace<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        for v in self.0.iter_mut() {
-            *v = tanh_f32(*v);
-        }
-    }
-}
-
 /// The trained network as plain Rust: one node at a time, on stack buffers.
 #[derive(Debug, Clone)]
 pub struct NodeMlp {
@@ -420,7 +378,7 @@ impl NodeMlp {
     /// The network's raw outputs for `n` nodes at once: `x` holds their standardised
     /// inputs column-major (`x[d * n + k]` is input `d` of node `k`), and so does the
     /// answer. Each layer is one matrix product over all `n` nodes (faer, one thread) and
-    /// one pass of [`tanh_f32`] over a contiguous buffer, which vectorises; node by node,
+    /// one pass of [`crate::fast::tanh_f32`] over a contiguous buffer, which vectorises; node by node,
     /// 16-wide layers leave the arithmetic units mostly idle. In f32, as the network was
     /// trained.
     fn net_batch(&self, x: &[f32], n: usize) -> Vec<f32> {
@@ -440,7 +398,7 @@ impl NodeMlp {
                 Par::Seq,
             );
             if k + 1 < self.layers.len() {
-                pulp::Arch::new().dispatch(TanhInPlace(&mut next));
+                crate::fast::tanh_in_place(&mut next);
             }
             h = next;
         }
@@ -925,25 +883,4 @@ pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
     }
     let diff: Vec<f64> = predicted.iter().zip(reference).map(|(p, r)| p - r).collect();
     (0..n).map(|i| norm(&diff, i)).sum::<f64>() / (n as f64 * max)
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn the_fast_tanh_is_tanh() {
-        // Across and beyond the clamp: within 4e-7 of tanh, odd, saturating, monotone.
-        let mut last = -1.0f32;
-        for k in -20000..=20000 {
-            let x = k as f32 / 2000.0;
-            let t = super::tanh_f32(x);
-            assert!((t as f64 - (x as f64).tanh()).abs() <= 4e-7, "{x}: {t}");
-            assert_eq!(super::tanh_f32(-x), -t);
-            // Monotone to within the approximation error.
-            assert!(t >= last - 8e-7, "not monotone at {x}");
-            last = t;
-        }
-        assert_eq!(super::tanh_f32(0.0), 0.0);
-        assert!((super::tanh_f32(1e30) - 1.0).abs() < 4e-7);
-        assert!(super::tanh_f32(f32::NAN).is_nan());
-    }
 }

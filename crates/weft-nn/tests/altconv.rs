@@ -6,7 +6,7 @@
 use candle_core::{Device, Tensor, Var};
 use weft_nn::adam::{Adam, AdamSettings};
 use weft_nn::altconv::{
-    AltConvNet, AltConvTrainingConfig, Drive, SequenceTensors, Variant, mean_vertex_error, train_epoch,
+    AltConvNet, AltConvTrainingConfig, Drive, Scaling, SequenceTensors, Variant, mean_vertex_error, train_epoch,
 };
 use weft_nn::graph::NormalizedAdjacency;
 use weft_nn::params::Params;
@@ -348,4 +348,109 @@ fn bad_input_is_a_typed_error() {
     for v in Variant::ALL {
         assert_eq!(Variant::from_name(v.name()).unwrap(), v);
     }
+}
+
+#[test]
+fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
+    use weft_nn::altconv::AltConvRuntime;
+    let mesh = sheet(6);
+    let adj = NormalizedAdjacency::new(&mesh).unwrap();
+    let s = sequence(&mesh, 6, 0.7);
+    let flat = |t: &Tensor| -> Vec<f64> {
+        t.flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap()
+            .into_iter()
+            .map(f64::from)
+            .collect()
+    };
+    let frame = |k: usize| flat(&s.drive.skinned.narrow(1, k, 1).unwrap());
+    for variant in Variant::ALL {
+        let mut params = Params::new(&cpu(), 9);
+        // A skip (Eq. 10) between the two 4-channel cells; weights trained a little so the
+        // output cell is not near zero.
+        // Fitted units, so the runtime's standardisation and output unit are exercised.
+        let scaling = Scaling::fit(std::slice::from_ref(&s), variant, 5).unwrap();
+        let net = AltConvNet::new(&mut params, variant, &[4, 6, 4])
+            .unwrap()
+            .with_scaling(scaling);
+        let mut adam = Adam::new(
+            &params,
+            AdamSettings {
+                learning_rate: 3e-2,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut config = AltConvTrainingConfig::new(variant);
+        config.steps = 5;
+        config.batch = 1;
+        for e in 0..3 {
+            train_epoch(
+                &net,
+                &params,
+                &mut adam,
+                &adj,
+                std::slice::from_ref(&s),
+                &config,
+                e,
+                |_| {},
+            )
+            .unwrap();
+        }
+        let reference = net.run(&adj, &s.drive, None, 5).unwrap();
+        let mut runtime = AltConvRuntime::new(&net, adj.clone()).unwrap();
+        assert!(runtime.step(&frame(1)).is_err(), "a step before start");
+        runtime.start(&frame(0), &flat(&s.drive.initial)).unwrap();
+        for (k, want) in reference.iter().enumerate() {
+            let got = runtime.step(&frame(k + 1)).unwrap();
+            let want = flat(want);
+            let err = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(err < 2e-5, "{variant:?} step {}: {err:e}", k + 1);
+        }
+        assert!(runtime.step(&frame(1)[3..]).is_err());
+    }
+}
+
+#[test]
+fn the_fitted_units_are_the_training_data_moments() {
+    let mesh = sheet(4);
+    let s = sequence(&mesh, 7, 0.4);
+    let frames = |t: &Tensor| -> Vec<Vec<f64>> {
+        let v: Vec<f32> = t.flatten_all().unwrap().to_vec1().unwrap();
+        v.chunks(3 * mesh.num_vertices())
+            .map(|f| f.iter().map(|&x| x as f64).collect())
+            .collect()
+    };
+    let (x, y) = (frames(&s.drive.skinned), frames(&s.truth));
+    let steps = 5;
+    for variant in [Variant::Alt, Variant::CpY] {
+        let fitted = Scaling::fit(std::slice::from_ref(&s), variant, steps).unwrap();
+        // The x coordinate of X_t over steps 1–5, and the output's RMS, by hand.
+        let xs: Vec<f64> = (1..=steps).flat_map(|t| x[t].iter().step_by(3).copied()).collect();
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        let std = (xs.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / xs.len() as f64).sqrt();
+        assert!((fitted.input_mean[0] - mean).abs() < 1e-6 && (fitted.input_std[0] - std).abs() < 1e-6);
+        let (x, y) = (&x, &y);
+        let target: Vec<f64> = (1..=steps)
+            .flat_map(|t| {
+                (0..x[t].len()).map(move |d| {
+                    if variant == Variant::CpY {
+                        y[t][d] - x[t][d]
+                    } else {
+                        y[t][d] - y[t - 1][d] - (x[t][d] - x[t - 1][d])
+                    }
+                })
+            })
+            .collect();
+        let rms = (target.iter().map(|v| v * v).sum::<f64>() / target.len() as f64).sqrt();
+        assert!(
+            (fitted.output - rms).abs() < 1e-6 * (1.0 + rms),
+            "{variant:?}: {} vs {rms}",
+            fitted.output
+        );
+        assert!(rms > 1e-4, "the synthetic tissue lags the skin");
+    }
+    assert!(Scaling::fit(&[], Variant::Alt, 5).is_err());
 }

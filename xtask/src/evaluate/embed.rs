@@ -241,6 +241,11 @@ fn train_ours(
 /// (the generator rewrites its manifest after every sequence, so a manifest alone does
 /// not mean the dataset is whole).
 pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<()> {
+    generate_dataset_frames(scene, size, dir, None)
+}
+
+/// [`generate_dataset`] with the size's frames per sequence overridden.
+pub fn generate_dataset_frames(scene: &str, size: Size, dir: &Path, frames: Option<usize>) -> anyhow::Result<()> {
     let manifest = dir.join("manifest.json");
     let exists = manifest.exists();
     if exists && crate::dataset::read_manifest(&manifest)?.is_complete() {
@@ -248,7 +253,11 @@ pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<(
     }
     let cmd = crate::dataset::DatasetArgs::augment_args(clap::Command::new("dataset"));
     let dir_arg = dir.display().to_string();
+    let frames_arg = frames.map(|f| f.to_string());
     let mut args = vec!["dataset", scene, "--size", size.as_str(), "--quiet", "--out", &dir_arg];
+    if let Some(f) = &frames_arg {
+        args.extend(["--frames", f.as_str()]);
+    }
     if exists {
         args.push("--resume");
     }
@@ -257,7 +266,7 @@ pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<(
 }
 
 /// Ground-truth solver seconds per frame of a dataset (its `timing.json`).
-fn ground_truth_seconds(dir: &Path) -> anyhow::Result<f64> {
+pub(crate) fn ground_truth_seconds(dir: &Path) -> anyhow::Result<f64> {
     let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timing.json"))?)?;
     let (mut frames, mut seconds) = (0.0, 0.0);
     for v in t["sequences"]

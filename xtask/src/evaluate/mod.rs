@@ -1,6 +1,6 @@
 //! `cargo xtask evaluate`: every method against its reference, speed beside accuracy.
 //!
-//! Each experiment (`sim`, `proj`, `embed`; later issues add theirs) runs its methods and a tight
+//! Each experiment (`sim`, `proj`, `embed`, `nnwarp`, `altconv`) runs its methods and a tight
 //! reference in one process, so time ratios compare one machine state, and returns an
 //! [`ExperimentOutput`]: tidy [`Record`]s, roll-out curves, energies and renders. Outputs
 //! are cached per experiment in `OUT/experiments/<name>.json`, so an interrupted
@@ -8,6 +8,7 @@
 //! tables.md, plots, index.html) is then rebuilt from every cached experiment.
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
+pub mod altconv;
 pub mod embed;
 pub mod nnwarp;
 pub mod paper;
@@ -26,7 +27,7 @@ use crate::output::write_json;
 pub use results::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
 
 /// Experiments `evaluate` runs, in order.
-pub const EXPERIMENTS: [&str; 4] = ["sim", "proj", "embed", "nnwarp"];
+pub const EXPERIMENTS: [&str; 5] = ["sim", "proj", "embed", "nnwarp", "altconv"];
 
 #[derive(Args)]
 pub struct EvaluateArgs {
@@ -36,7 +37,7 @@ pub struct EvaluateArgs {
     /// Shorthand for --size quick.
     #[arg(long)]
     quick: bool,
-    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp.
+    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Output directory (default: out/evaluate-<size>).
@@ -112,6 +113,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             "proj" => proj::run(&ctx)?,
             "embed" => embed::run(&ctx)?,
             "nnwarp" => nnwarp::run(&ctx)?,
+            "altconv" => altconv::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();

@@ -335,7 +335,7 @@ const PENDING: [(&str, &str, bool); 6] = [
     (
         "Alt-ConvLSTM Tables 1–2 (per-vertex error, single-step and roll-out, known and unseen motions)",
         "altconv",
-        false,
+        true,
     ),
     (
         "NNWarp Table 1 correction columns and the error curves (Figs. 13, 15, 18–19)",

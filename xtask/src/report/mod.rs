@@ -259,7 +259,11 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         }
     }
     // Every experiment/scene/method with an error metric has its predictions.
-    for r in records.iter().filter(|r| r.metric == "m-rms" || r.metric == "sqrt-mse") {
+    for r in records.iter().filter(|r| {
+        r.metric == "m-rms"
+            || r.metric == "sqrt-mse"
+            || (r.metric == "error-mm-rollout10" && r.split.as_deref() == Some("test"))
+    }) {
         let p = dir
             .join("predictions")
             .join(&r.experiment)

@@ -40,6 +40,18 @@ const WIDTH: u32 = 480;
 const HEIGHT: u32 = 420;
 const BAR: i32 = 70;
 
+/// The viridis colour of each vertex error (m) on a scale from 0 to `scale` (m): the
+/// colours of [`error_png`], for a PLY file a user can open in any mesh viewer.
+pub fn error_colors(errors: &[f64], scale: f64) -> Vec<[u8; 3]> {
+    errors
+        .iter()
+        .map(|&e| {
+            let c = ViridisRGB.get_color_normalized((e / scale.max(1e-300)).clamp(0.0, 1.0), 0.0, 1.0);
+            [c.0, c.1, c.2]
+        })
+        .collect()
+}
+
 /// Renders `positions` (flat, m) with `faces`, coloured by `errors` (m per vertex) on a
 /// scale from 0 to `scale` (m), to a PNG at `path`.
 pub fn error_png(

@@ -35,7 +35,12 @@
 //! models train and what the single-step error measures; a roll-out feeds back its own
 //! predictions. The loss is Eq. 12, the mean Euclidean vertex error.
 //!
-//! Training and evaluation run in candle.
+//! Training and evaluation run in candle; [`AltConvRuntime`] rolls a trained model out
+//! without it, for speed.
+
+mod runtime;
+
+pub use runtime::AltConvRuntime;
 
 use candle_core::{DType, Device, Tensor};
 use serde::{Deserialize, Serialize};
@@ -181,9 +186,17 @@ impl Cell {
         })
     }
 
-    /// One step of Eq. 5 (or the vanilla cell). `ax` is `Â_n X_t`; `skip` is added to the
-    /// accumulation (Eq. 10, Eq. 11).
-    fn step(&self, adj: &NormalizedAdjacency, ax: &Tensor, s: &CellState, skip: Option<&Tensor>) -> Result<CellState> {
+    /// One step of Eq. 5 (or the vanilla cell). `ax` is `Â_n X_t`; the accumulation adds
+    /// `unit · C_t` (the state's unit in the accumulation's, 1 but for the output cell)
+    /// and `skip` (Eq. 10, Eq. 11).
+    fn step(
+        &self,
+        adj: &NormalizedAdjacency,
+        ax: &Tensor,
+        s: &CellState,
+        skip: Option<&Tensor>,
+        unit: f64,
+    ) -> Result<CellState> {
         let c = self.c;
         let gates = (ax.broadcast_matmul(&self.w_x)? + adj.apply(&s.h)?.broadcast_matmul(&self.w_h)?)?
             .broadcast_add(&self.bias)?;
@@ -204,7 +217,11 @@ impl Cell {
         let cell = ((f * &s.c)? + (i * candidate)?)?;
         let y = match &s.y {
             Some(y) => {
-                let mut y = (y + &cell)?;
+                let mut y = if unit == 1.0 {
+                    (y + &cell)?
+                } else {
+                    (y + (&cell * unit)?)?
+                };
                 if let Some(k) = skip {
                     y = (y + k)?;
                 }
@@ -233,6 +250,102 @@ pub struct AltConvNet {
     cells: Vec<Cell>,
     /// Eq. 10's skips: `(layer, from)`, layer `layer`'s accumulation also adds `C^{from}`.
     skips: Vec<(usize, usize)>,
+    scaling: Scaling,
+}
+
+/// The units the network works in: its 9 input channels standardised, and its output
+/// state `C^out` measured in units of `output` metres (a velocity, or for the `-Y`
+/// baselines an offset from the pose). [`Scaling::identity`] is the paper's raw metres.
+///
+/// A deviation from the paper, which states no normalisation: on the `limb` data a
+/// vertex moves about a centimetre per frame and the tissue leaves the skin by about a
+/// millimetre, while the output cell's candidate is bounded by 1 (tanh) in whatever unit
+/// its state has. In metres, the first Adam steps moved the prediction by centimetres
+/// (docs/ALTCONV.md). [`Scaling::fit`] measures both on the training split.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scaling {
+    pub input_mean: [f64; INPUT_CHANNELS],
+    pub input_std: [f64; INPUT_CHANNELS],
+    pub output: f64,
+}
+
+impl Scaling {
+    pub fn identity() -> Self {
+        Self {
+            input_mean: [0.0; INPUT_CHANNELS],
+            input_std: [1.0; INPUT_CHANNELS],
+            output: 1.0,
+        }
+    }
+
+    /// Fitted on the first `steps` steps of the training sequences: each input channel's
+    /// mean and standard deviation over steps and vertices, and the RMS of what the
+    /// variant's output state must represent — `Y_t − Y_{t−1} − (X_t − X_{t−1})` for a
+    /// velocity, `Y_t − X_t` for the `-Y` baselines' offset. Floors of 1e-9 keep a
+    /// constant channel finite.
+    pub fn fit(train: &[SequenceTensors], variant: Variant, steps: usize) -> Result<Self> {
+        if train.is_empty() {
+            return Err(Error::InvalidParameter {
+                name: "Alt-ConvLSTM scaling",
+                value: "0 sequences".into(),
+                reason: "needs at least one training sequence",
+            });
+        }
+        let mut inputs: Vec<Tensor> = Vec::new();
+        let mut targets: Vec<Tensor> = Vec::new();
+        for s in train {
+            let frames = s.truth.dim(1)?;
+            let n = steps.min(frames - 1);
+            let x = s.drive.skinned.narrow(1, 0, n + 1)?;
+            let y = s.truth.narrow(1, 0, n + 1)?;
+            let xt = x.narrow(1, 1, n)?;
+            let dx = (&xt - x.narrow(1, 0, n)?)?;
+            let offset = (&s.drive.initial - x.narrow(1, 0, 1)?.squeeze(1)?)?
+                .unsqueeze(1)?
+                .broadcast_as(xt.shape())?;
+            inputs.push(Tensor::cat(&[&xt, &dx, &offset.contiguous()?], 3)?.reshape(((), INPUT_CHANNELS))?);
+            let yt = y.narrow(1, 1, n)?;
+            let target = if variant.outputs_position() {
+                (&yt - &xt)?
+            } else {
+                ((&yt - y.narrow(1, 0, n)?)? - &dx)?
+            };
+            targets.push(target.flatten_all()?);
+        }
+        let inputs = Tensor::cat(&inputs, 0)?.to_dtype(DType::F64)?;
+        let mean: Vec<f64> = inputs.mean(0)?.to_vec1()?;
+        let std: Vec<f64> = inputs
+            .broadcast_sub(&inputs.mean_keepdim(0)?)?
+            .sqr()?
+            .mean(0)?
+            .sqrt()?
+            .to_vec1()?;
+        let rms = Tensor::cat(&targets, 0)?
+            .to_dtype(DType::F64)?
+            .sqr()?
+            .mean_all()?
+            .sqrt()?
+            .to_scalar::<f64>()?;
+        let scaling = Self {
+            input_mean: std::array::from_fn(|d| mean[d]),
+            input_std: std::array::from_fn(|d| std[d].max(1e-9)),
+            output: rms.max(1e-9),
+        };
+        if !(scaling.output.is_finite()
+            && scaling
+                .input_mean
+                .iter()
+                .chain(&scaling.input_std)
+                .all(|v| v.is_finite()))
+        {
+            return Err(Error::NonFinite {
+                what: "Alt-ConvLSTM scaling",
+                index: 0,
+            });
+        }
+        Ok(scaling)
+    }
 }
 
 /// Skips of Eq. 10 between equal-width hidden cells, mirrored across the widest one.
@@ -279,11 +392,26 @@ impl AltConvNet {
         } else {
             Vec::new()
         };
-        Ok(Self { variant, cells, skips })
+        Ok(Self {
+            variant,
+            cells,
+            skips,
+            scaling: Scaling::identity(),
+        })
     }
 
     pub fn variant(&self) -> Variant {
         self.variant
+    }
+
+    /// The same network working in the units of `scaling`.
+    pub fn with_scaling(mut self, scaling: Scaling) -> Self {
+        self.scaling = scaling;
+        self
+    }
+
+    pub fn scaling(&self) -> &Scaling {
+        &self.scaling
     }
 
     /// Predicted surfaces `Ŷ_1..Ŷ_steps` (each `[B, V, 3]`). With `truth` (`[B, T + 1, V, 3]`)
@@ -334,6 +462,17 @@ impl AltConvNet {
         };
         let x0 = x(0)?;
         let offset0 = (&drive.initial - &x0)?;
+        let unit = self.scaling.output;
+        let mean = Tensor::from_vec(
+            self.scaling.input_mean.map(|v| v as f32).to_vec(),
+            INPUT_CHANNELS,
+            device,
+        )?;
+        let inv_std = Tensor::from_vec(
+            self.scaling.input_std.map(|v| (1.0 / v) as f32).to_vec(),
+            INPUT_CHANNELS,
+            device,
+        )?;
         let mut states: Vec<CellState> = self
             .cells
             .iter()
@@ -344,7 +483,7 @@ impl AltConvNet {
         let out = self.cells.len() - 1;
         match self.variant {
             Variant::Alt => states[out].y = Some(drive.initial.clone()),
-            v if v.outputs_position() => states[out].c = offset0.clone(),
+            v if v.outputs_position() => states[out].c = (&offset0 / unit)?,
             _ => {}
         }
         let mut previous = drive.initial.clone();
@@ -358,13 +497,15 @@ impl AltConvNet {
                     // Teacher forcing: the step starts from the true surface.
                     match self.variant {
                         Variant::Alt => states[out].y = Some(y_prev.clone()),
-                        v if v.outputs_position() => states[out].c = (&y_prev - &x_prev)?,
+                        v if v.outputs_position() => states[out].c = ((&y_prev - &x_prev)? / unit)?,
                         _ => {}
                     }
                     previous = y_prev;
                 }
             }
-            let input = Tensor::cat(&[&xt, &dx, &offset0], 2)?;
+            let input = Tensor::cat(&[&xt, &dx, &offset0], 2)?
+                .broadcast_sub(&mean)?
+                .broadcast_mul(&inv_std)?;
             let mut a_in = adj.apply(&input)?;
             let mut new_states: Vec<CellState> = Vec::with_capacity(self.cells.len());
             for (l, cell) in self.cells.iter().enumerate() {
@@ -377,7 +518,7 @@ impl AltConvNet {
                         .map(|(_, from)| &new_states[*from].c)
                 };
                 let skip = skip.cloned();
-                let s = cell.step(adj, &a_in, &states[l], skip.as_ref())?;
+                let s = cell.step(adj, &a_in, &states[l], skip.as_ref(), if l == out { unit } else { 1.0 })?;
                 if l < out {
                     a_in = adj.apply(&s.c)?;
                 }
@@ -389,8 +530,8 @@ impl AltConvNet {
                     .y
                     .clone()
                     .unwrap_or_else(|| unreachable!("Alt-ConvLSTM accumulates")),
-                v if v.outputs_position() => (&xt + &states[out].c)?,
-                _ => ((&previous + &states[out].c)? + &dx)?,
+                v if v.outputs_position() => (&xt + (&states[out].c * unit)?)?,
+                _ => ((&previous + (&states[out].c * unit)?)? + &dx)?,
             };
             previous = prediction.clone();
             predictions.push(prediction);
@@ -570,8 +711,8 @@ pub fn mean_error(
     Ok(total / sequences.len().max(1) as f64)
 }
 
-/// A trained model directory written by `cargo xtask train altconv`: `config.json` and
-/// the latest `checkpoint/`.
+/// A trained model directory written by `cargo xtask train altconv`: `config.json`,
+/// `scaling.json` and the latest `checkpoint/`.
 pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingConfig, Params, AltConvNet)> {
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
@@ -582,8 +723,86 @@ pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrai
         path: path.display().to_string(),
         reason: e.to_string(),
     })?;
+    let scaling_path = dir.join("scaling.json");
+    let scaling: Scaling = match std::fs::read_to_string(&scaling_path) {
+        Ok(text) => serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+            path: scaling_path.display().to_string(),
+            reason: e.to_string(),
+        })?,
+        Err(source) => {
+            return Err(Error::Io {
+                path: scaling_path.display().to_string(),
+                source,
+            });
+        }
+    };
     let mut params = Params::new(device, config.seed);
-    let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?;
+    let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?.with_scaling(scaling);
     crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
     Ok((config, params, net))
+}
+
+/// The skinning-only prediction `Ŷ_t = X_t + (Y_0 − X_0)` for steps 1..=`steps`: the
+/// surface carried by the skin alone (the paper's SMPL row).
+pub fn skinning(drive: &Drive, steps: usize) -> Result<Vec<Tensor>> {
+    let x0 = drive.skinned.narrow(1, 0, 1)?.squeeze(1)?;
+    let offset = (&drive.initial - x0)?;
+    (1..=steps)
+        .map(|t| Ok(drive.skinned.narrow(1, t, 1)?.squeeze(1)?.broadcast_add(&offset)?))
+        .collect()
+}
+
+/// How a model (or skinning) does on one sequence over `steps` steps.
+#[derive(Debug, Clone)]
+pub struct SequenceErrors {
+    /// Per step, per vertex `‖Ŷ_t − Y_t‖` (m): single-step (teacher-forced) and roll-out.
+    pub single: Vec<Vec<f64>>,
+    pub rollout: Vec<Vec<f64>>,
+    /// The roll-out's surfaces, steps 1..=`steps` (flat `3V` each, m).
+    pub rollout_surfaces: Vec<Vec<f64>>,
+    /// Wall time of the roll-out (s).
+    pub rollout_seconds: f64,
+}
+
+/// Scores `net` (skinning when `None`) on the batch-of-one sequence `s`.
+pub fn score_sequence(
+    net: Option<&AltConvNet>,
+    adj: &NormalizedAdjacency,
+    s: &SequenceTensors,
+    steps: usize,
+) -> Result<SequenceErrors> {
+    if s.truth.dim(0)? != 1 {
+        return Err(Error::Shape {
+            what: "scored sequence",
+            expected: "a batch of one".into(),
+            got: format!("{:?}", s.truth.dims()),
+        });
+    }
+    let t = std::time::Instant::now();
+    let rolled = match net {
+        Some(net) => net.run(adj, &s.drive, None, steps)?,
+        None => skinning(&s.drive, steps)?,
+    };
+    let rollout_seconds = t.elapsed().as_secs_f64();
+    let forced = match net {
+        Some(net) => net.run(adj, &s.drive, Some(&s.truth), steps)?,
+        None => rolled.clone(),
+    };
+    if steps == 0 {
+        return Err(Error::InvalidParameter {
+            name: "scored steps",
+            value: "0".into(),
+            reason: "needs at least one step",
+        });
+    }
+    let rollout_surfaces = rolled
+        .iter()
+        .map(|p| Ok(p.flatten_all()?.to_vec1::<f32>()?.into_iter().map(f64::from).collect()))
+        .collect::<Result<_>>()?;
+    Ok(SequenceErrors {
+        single: vertex_errors(&forced, &s.truth)?,
+        rollout: vertex_errors(&rolled, &s.truth)?,
+        rollout_surfaces,
+        rollout_seconds,
+    })
 }

@@ -1,0 +1,385 @@
+//! The `altconv` experiment (Alt-ConvLSTM, seed 001 §5.2, Tables 1–2) on the `limb`
+//! scene: Alt-ConvLSTM, the four graph ConvLSTM baselines and the skinning-only row,
+//! each trained on the `limb` dataset's training sequences (teacher forcing on their
+//! first steps) and scored on the training motions (`known`) and on unseen ones (`test`).
+//!
+//! Metrics (per-vertex Euclidean error, Eq. 12, in mm; docs/RESULTS.md):
+//! - `error-mm-step1`: single-step, every step starting from the true previous surface,
+//!   averaged over steps 1–H (H = 50 where the sequences are long enough);
+//! - `error-mm-rollout{N}`: a roll-out from the initial surface on the model's own
+//!   predictions, averaged over its steps 1–N.
+//!
+//! The paper's columns "N steps" are read the same way: its 20-step known-motion column is
+//! the training loss, the mean over the 20 teacher-forced training steps.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, SequenceTensors, Variant, score_sequence};
+use weft_nn::data::LimbDataset;
+use weft_nn::graph::NormalizedAdjacency;
+
+use super::EvalContext;
+use super::paper::Table;
+use super::results::{ExperimentOutput, Timing};
+use crate::dataset::Size;
+use crate::report::render::{View, error_colors, error_png};
+use crate::train::{AltconvArgs, TrainCommand};
+
+const SCENE: &str = "limb";
+const SKINNING: &str = "skinning";
+/// Roll-out windows of the tables (steps).
+const WINDOWS: [usize; 5] = [10, 20, 30, 40, 50];
+/// Frames per quick sequence: enough for the 10-step window.
+const QUICK_FRAMES: usize = 12;
+
+/// The paper's Table 1 (known motions), columns 20–50 steps: (mean, sd) in mm.
+fn paper_known(method: &str, single_step: bool) -> Option<[(f64, f64); 4]> {
+    Some(match (method, single_step) {
+        (SKINNING, _) => [(17.76, 2.67), (17.87, 2.67), (18.07, 2.66), (18.26, 2.69)],
+        ("convlstm-cp-dy", true) => [(21.44, 20.67), (41.06, 32.54), (61.09, 42.91), (77.62, 49.00)],
+        ("convlstm-np-dy", true) => [(21.21, 20.52), (40.53, 32.29), (60.36, 42.70), (76.76, 48.89)],
+        ("convlstm-cp-y", true) => [(2.50, 0.38), (2.23, 0.45), (2.19, 0.48), (2.58, 0.52)],
+        ("convlstm-np-y", true) => [(3.21, 0.43), (2.98, 0.46), (2.95, 0.50), (2.95, 0.51)],
+        ("alt-convlstm", true) => [(0.97, 0.41), (1.09, 0.48), (1.21, 0.53), (1.30, 0.56)],
+        ("convlstm-cp-dy", false) => [(22.04, 20.22), (41.33, 32.04), (61.00, 42.58), (77.20, 48.89)],
+        ("convlstm-np-dy", false) => [(21.49, 20.18), (40.59, 31.83), (60.15, 42.34), (76.31, 48.71)],
+        ("convlstm-cp-y", false) => [(13.94, 1.59), (14.89, 1.65), (16.62, 1.80), (18.87, 2.09)],
+        ("convlstm-np-y", false) => [(13.30, 1.62), (14.21, 1.82), (15.73, 2.27), (17.34, 2.72)],
+        ("alt-convlstm", false) => [(3.38, 2.08), (4.94, 2.98), (6.52, 3.70), (7.92, 4.11)],
+        _ => return None,
+    })
+}
+
+/// The paper's Table 2 (unseen motions), columns 10–50 steps: (mean, sd) in mm. The
+/// paper evaluates only the `-Y` baselines there.
+fn paper_test(method: &str, single_step: bool) -> Option<[(f64, f64); 5]> {
+    Some(match (method, single_step) {
+        (SKINNING, _) => [
+            (19.40, 3.17),
+            (19.42, 3.20),
+            (19.51, 3.13),
+            (19.64, 2.97),
+            (19.86, 2.87),
+        ],
+        ("convlstm-cp-y", true) => [(4.13, 0.69), (2.66, 0.51), (2.31, 0.48), (2.22, 0.46), (2.69, 0.64)],
+        ("convlstm-np-y", true) => [(4.70, 0.76), (3.45, 0.62), (3.12, 0.57), (3.03, 0.54), (3.05, 0.54)],
+        ("alt-convlstm", true) => [(0.97, 0.67), (1.00, 0.55), (1.08, 0.52), (1.17, 0.48), (1.29, 0.51)],
+        ("convlstm-cp-y", false) => [
+            (14.45, 2.17),
+            (15.24, 2.32),
+            (16.10, 2.33),
+            (17.67, 2.33),
+            (20.07, 2.81),
+        ],
+        ("convlstm-np-y", false) => [
+            (14.06, 2.17),
+            (14.51, 2.55),
+            (15.27, 2.90),
+            (16.60, 3.17),
+            (18.18, 3.40),
+        ],
+        ("alt-convlstm", false) => [(2.32, 1.71), (3.70, 2.51), (5.18, 3.03), (6.64, 3.24), (8.14, 3.28)],
+        _ => return None,
+    })
+}
+
+/// The paper's (mean, sd) for `window` steps, or `None` where it prints none.
+fn paper_value(split: &str, method: &str, single_step: bool, window: usize) -> Option<(f64, f64)> {
+    match split {
+        "known" => paper_known(method, single_step)
+            .and_then(|row| [20, 30, 40, 50].iter().position(|&w| w == window).map(|k| row[k])),
+        _ => paper_test(method, single_step).and_then(|row| WINDOWS.iter().position(|&w| w == window).map(|k| row[k])),
+    }
+}
+
+/// The training configuration of every model at `size` (the same for all, as the paper
+/// compares them).
+pub fn training_config(size: Size, variant: Variant) -> AltConvTrainingConfig {
+    let mut c = AltConvTrainingConfig::new(variant);
+    if size == Size::Quick {
+        c.hidden = vec![8, 16, 8];
+        c.steps = 6;
+        c.epochs = 2;
+    } else {
+        c.epochs = STANDARD_EPOCHS;
+        // One sequence per Adam step: the few steps a standard run affords.
+        c.batch = 1;
+    }
+    c
+}
+
+/// Epochs of the standard evaluation (the paper trains 1000; one epoch of the paper's
+/// network on the 12 standard training sequences takes about 1.5 min here, docs/ALTCONV.md).
+const STANDARD_EPOCHS: usize = 12;
+
+/// Per-step pooled vertex errors (mm) of one method on one split: `[step][sample]`.
+struct Errors {
+    single: Vec<Vec<f64>>,
+    rollout: Vec<Vec<f64>>,
+    /// Roll-out wall time per step and sequence (s).
+    seconds_per_frame: f64,
+    /// The last roll-out step's vertex errors (m) and surface of the split's first
+    /// sequence, for the heat map.
+    last: Option<(Vec<f64>, Vec<f64>)>,
+    /// Every sequence's roll-out surfaces, flattened `[steps, V, 3]` each.
+    surfaces: Vec<Vec<f64>>,
+}
+
+fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = samples.collect();
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}
+
+/// Steps 1..=n pooled.
+fn window(steps: &[Vec<f64>], n: usize) -> (f64, f64) {
+    mean_sd(steps[..n].iter().flatten().copied())
+}
+
+/// Scores `net` (or skinning, when `None`) on `sequences` over `horizon` steps.
+fn score(
+    net: Option<&AltConvNet>,
+    adj: &NormalizedAdjacency,
+    sequences: &[SequenceTensors],
+    horizon: usize,
+) -> anyhow::Result<Errors> {
+    let mut single = vec![Vec::new(); horizon];
+    let mut rollout = vec![Vec::new(); horizon];
+    let mut seconds = 0.0;
+    let mut last = None;
+    let mut surfaces = Vec::with_capacity(sequences.len());
+    for (k, s) in sequences.iter().enumerate() {
+        let e = score_sequence(net, adj, s, horizon)?;
+        seconds += e.rollout_seconds;
+        for t in 0..horizon {
+            single[t].extend(e.single[t].iter().map(|e| 1e3 * e));
+            rollout[t].extend(e.rollout[t].iter().map(|e| 1e3 * e));
+        }
+        if k == 0 {
+            last = Some((e.rollout[horizon - 1].clone(), e.rollout_surfaces[horizon - 1].clone()));
+        }
+        surfaces.push(e.rollout_surfaces.concat());
+    }
+    Ok(Errors {
+        single,
+        rollout,
+        seconds_per_frame: seconds / (horizon * sequences.len().max(1)) as f64,
+        last,
+        surfaces,
+    })
+}
+
+pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+    let mut out = ExperimentOutput::new("altconv", ctx.size);
+    let root = ctx.out.join("altconv");
+    let data = root.join("data");
+    let frames = (ctx.size == Size::Quick).then_some(QUICK_FRAMES);
+    crate::evaluate::embed::generate_dataset_frames(SCENE, ctx.size, &data, frames).context("limb dataset")?;
+    let gt = crate::evaluate::embed::ground_truth_seconds(&data)?;
+    let dataset = LimbDataset::load(&data)?;
+    let adj = NormalizedAdjacency::new(&dataset.rest)?;
+    let device = weft_nn::Device::Cpu;
+    for variant in Variant::ALL {
+        let config = training_config(ctx.size, variant);
+        let config_path = root.join("configs").join(format!("{}.json", variant.name()));
+        std::fs::create_dir_all(config_path.parent().context("config directory")?)?;
+        std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
+        crate::train::run(TrainCommand::Altconv(AltconvArgs {
+            data: data.clone(),
+            model: variant.name().into(),
+            config: Some(config_path),
+            out: root.join("models").join(variant.name()),
+            resume: true,
+            quiet: ctx.quiet,
+        }))
+        .with_context(|| format!("training altconv/{}", variant.name()))?;
+    }
+    let longest_common = dataset.sequences.iter().map(|s| s.skinned.len() - 1).min().unwrap_or(0);
+    let horizon = longest_common.min(*WINDOWS.last().unwrap_or(&50));
+    anyhow::ensure!(horizon >= 1, "the limb sequences hold no step");
+    let windows: Vec<usize> = WINDOWS.iter().copied().filter(|&w| w <= horizon).collect();
+    let train_steps = training_config(ctx.size, Variant::Alt).steps;
+    out.notes.push(format!(
+        "altconv: {} surface vertices (the limb's boundary, metres, scored in mm); models trained with teacher \
+         forcing on the first {train_steps} steps of each `train` sequence ({} epochs); `known` = the training \
+         sequences, `test` = unseen ones; single-step and roll-out errors over steps 1–{horizon}; roll-out time per \
+         frame in candle on this machine against the Neo-Hookean ground truth's time per stored frame from the \
+         dataset's timing.json",
+        dataset.rest.num_vertices(),
+        training_config(ctx.size, Variant::Alt).epochs,
+    ));
+    let mut methods: Vec<(String, Option<AltConvNet>)> = vec![(SKINNING.into(), None)];
+    for variant in Variant::ALL {
+        let (_, _, net) = weft_nn::altconv::load_model(&root.join("models").join(variant.name()), &device)?;
+        methods.push((variant.name().into(), Some(net)));
+    }
+    let mut tables_rows: HashMap<&str, Vec<Vec<String>>> = HashMap::new();
+    let mut heat: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
+    for (split, source) in [("known", "train"), ("test", "test")] {
+        let sequences: Vec<SequenceTensors> = dataset
+            .split(source)
+            .map(|s| SequenceTensors::new(s, horizon + 1, &device))
+            .collect::<Result<_, _>>()?;
+        if sequences.is_empty() {
+            out.failures
+                .push(format!("altconv/{split}: the dataset has no {source} sequence"));
+            continue;
+        }
+        for (method, net) in &methods {
+            let e = score(net.as_ref(), &adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?;
+            let timing = Timing::new(e.seconds_per_frame, gt);
+            let (m, _) = window(&e.single, horizon);
+            out.record(SCENE, method, "error-mm-step1", m, "mm", timing);
+            if let Some((p, _)) = paper_value(split, method, true, 50) {
+                out.paper(p);
+            }
+            set_split(&mut out, split);
+            for &w in &windows {
+                let (m, _) = window(&e.rollout, w);
+                out.record(SCENE, method, &format!("error-mm-rollout{w}"), m, "mm", timing);
+                if let Some((p, _)) = paper_value(split, method, false, w) {
+                    out.paper(p);
+                }
+                set_split(&mut out, split);
+            }
+            let rows = tables_rows.entry(split).or_default();
+            for single_step in [true, false] {
+                let steps = if single_step { &e.single } else { &e.rollout };
+                let mut row = vec![
+                    if single_step { "single-step" } else { "roll-out" }.to_string(),
+                    format!("`{method}`"),
+                ];
+                for &w in &windows {
+                    let (m, sd) = window(steps, w);
+                    let paper = paper_value(split, method, single_step, w)
+                        .map_or("—".to_string(), |(p, s)| format!("{p:.2}±{s:.2}"));
+                    row.push(format!("{paper} / {m:.2}±{sd:.2}"));
+                }
+                rows.push(row);
+            }
+            if split == "test" {
+                write_predictions(ctx, method, &dataset, source, horizon, &e.surfaces)?;
+                if let Some((errs, x)) = e.last {
+                    heat.push((method.clone(), x, errs));
+                }
+            }
+        }
+    }
+    for (split, title, caption) in [
+        (
+            "known",
+            "Alt-ConvLSTM Table 1 — future prediction error on known motions, paper / ours",
+            "Per-vertex error mean±sd (mm), `limb` training sequences. Each cell: the paper's figure (Dynamic FAUST, \
+             6890 vertices) / ours; column N = the mean over steps 1–N. The paper's table starts at 20 steps.",
+        ),
+        (
+            "test",
+            "Alt-ConvLSTM Table 2 — generalisation error on unseen motions, paper / ours",
+            "Per-vertex error mean±sd (mm), `limb` test sequences. Each cell: the paper's figure / ours; column N = \
+             the mean over steps 1–N. The paper does not evaluate the ΔY baselines here.",
+        ),
+    ] {
+        if let Some(rows) = tables_rows.remove(split) {
+            let mut header = vec!["type".to_string(), "model".to_string()];
+            header.extend(windows.iter().map(|w| format!("{w} steps")));
+            out.tables.push(Table {
+                title: title.into(),
+                caption: caption.into(),
+                header,
+                rows,
+            });
+        }
+    }
+    render_heat_maps(ctx, &mut out, &dataset, &heat, horizon)?;
+    Ok(out)
+}
+
+/// Writes `predictions/altconv/limb/<method>.safetensors`: the roll-outs of the `source`
+/// split's sequences beside their ground truth, steps 1..=`horizon`.
+fn write_predictions(
+    ctx: &EvalContext,
+    method: &str,
+    dataset: &LimbDataset,
+    source: &str,
+    horizon: usize,
+    surfaces: &[Vec<f64>],
+) -> anyhow::Result<()> {
+    let dir = ctx.out.join("predictions").join("altconv").join(SCENE);
+    std::fs::create_dir_all(&dir)?;
+    let sequences: Vec<_> = dataset.split(source).collect();
+    let truth: Vec<f64> = sequences
+        .iter()
+        .flat_map(|s| s.simulated[1..=horizon].iter().flatten().copied())
+        .collect();
+    let index: Vec<i64> = sequences.iter().map(|s| s.index as i64).collect();
+    let shape = vec![sequences.len(), horizon, dataset.rest.num_vertices(), 3];
+    let mut meta = HashMap::new();
+    meta.insert(
+        "units".into(),
+        format!(
+            "positions (the roll-out from each sequence's initial surface) and ground_truth [sequences, steps 1..={horizon}, \
+             vertices, 3] in metres, the `{source}` sequences of the limb dataset; sequence_index [sequences]"
+        ),
+    );
+    crate::output::write_safetensors(
+        &dir.join(format!("{method}.safetensors")),
+        &[
+            crate::output::Array::f64("positions", shape.clone(), &surfaces.concat()),
+            crate::output::Array::f64("ground_truth", shape, &truth),
+            crate::output::Array::i64("sequence_index", &index),
+        ],
+        meta,
+    )
+}
+
+fn set_split(out: &mut ExperimentOutput, split: &str) {
+    if let Some(r) = out.records.last_mut() {
+        r.split = Some(split.into());
+    }
+}
+
+/// Error heat maps of the last roll-out step on the first test sequence: a PNG per method
+/// in the report and a PLY with per-vertex colours beside it, all on the skinning row's
+/// largest error as the common scale (the floor every model should beat).
+fn render_heat_maps(
+    ctx: &EvalContext,
+    out: &mut ExperimentOutput,
+    dataset: &LimbDataset,
+    heat: &[(String, Vec<f64>, Vec<f64>)],
+    horizon: usize,
+) -> anyhow::Result<()> {
+    let scale = heat
+        .iter()
+        .find(|(m, _, _)| m == SKINNING)
+        .map(|(_, _, e)| e.iter().copied().fold(0.0f64, f64::max))
+        .unwrap_or(0.0)
+        .max(1e-6);
+    let dir = Path::new("renders").join("altconv").join(SCENE);
+    std::fs::create_dir_all(ctx.out.join(&dir))?;
+    for (method, x, errs) in heat {
+        let png = dir.join(format!("{method}.png"));
+        error_png(
+            &ctx.out.join(&png),
+            x,
+            dataset.rest.faces(),
+            errs,
+            scale,
+            &format!("{SCENE} — {method}, roll-out step {horizon} (test)"),
+            View::BEAM,
+        )?;
+        out.renders.push(png.display().to_string());
+        let points: Vec<Vector3<f64>> = x.chunks_exact(3).map(|p| Vector3::new(p[0], p[1], p[2])).collect();
+        weft_mesh::io::write_ply(
+            &ctx.out.join(dir.join(format!("{method}.ply"))),
+            &points,
+            dataset.rest.faces(),
+            Some(&error_colors(errs, scale)),
+        )?;
+    }
+    Ok(())
+}
