@@ -410,6 +410,16 @@ fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
             assert!(err < 2e-5, "{variant:?} step {}: {err:e}", k + 1);
         }
         assert!(runtime.step(&frame(1)[3..]).is_err());
+        // Teacher forcing: every step from the true previous surface.
+        let forced = net.run(&adj, &s.drive, Some(&s.truth), 5).unwrap();
+        runtime.start(&frame(0), &flat(&s.drive.initial)).unwrap();
+        for (k, want) in forced.iter().enumerate() {
+            let truth = flat(&s.truth.narrow(1, k, 1).unwrap());
+            let got = runtime.step_from(&frame(k + 1), Some(&truth)).unwrap();
+            let want = flat(want);
+            let err = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(err < 2e-5, "{variant:?} forced step {}: {err:e}", k + 1);
+        }
     }
 }
 

@@ -17,8 +17,8 @@ use std::path::Path;
 
 use anyhow::Context;
 use nalgebra::Vector3;
-use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, SequenceTensors, Variant, score_sequence};
-use weft_nn::data::LimbDataset;
+use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Variant, score_sequence};
+use weft_nn::data::{LimbDataset, LimbSequence};
 use weft_nn::graph::NormalizedAdjacency;
 
 use super::EvalContext;
@@ -145,7 +145,7 @@ fn window(steps: &[Vec<f64>], n: usize) -> (f64, f64) {
 fn score(
     net: Option<&AltConvNet>,
     adj: &NormalizedAdjacency,
-    sequences: &[SequenceTensors],
+    sequences: &[&LimbSequence],
     horizon: usize,
 ) -> anyhow::Result<Errors> {
     let mut single = vec![Vec::new(); horizon];
@@ -208,7 +208,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         "altconv: {} surface vertices (the limb's boundary, metres, scored in mm); models trained with teacher \
          forcing on the first {train_steps} steps of each `train` sequence ({} epochs); `known` = the training \
          sequences, `test` = unseen ones; single-step and roll-out errors over steps 1–{horizon}; roll-out time per \
-         frame in candle on this machine against the Neo-Hookean ground truth's time per stored frame from the \
+         frame of AltConvRuntime on this machine against the Neo-Hookean ground truth's time per stored frame from the \
          dataset's timing.json",
         dataset.rest.num_vertices(),
         training_config(ctx.size, Variant::Alt).epochs,
@@ -221,10 +221,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut tables_rows: HashMap<&str, Vec<Vec<String>>> = HashMap::new();
     let mut heat: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
     for (split, source) in [("known", "train"), ("test", "test")] {
-        let sequences: Vec<SequenceTensors> = dataset
-            .split(source)
-            .map(|s| SequenceTensors::new(s, horizon + 1, &device))
-            .collect::<Result<_, _>>()?;
+        let sequences: Vec<&LimbSequence> = dataset.split(source).collect();
         if sequences.is_empty() {
             out.failures
                 .push(format!("altconv/{split}: the dataset has no {source} sequence"));

@@ -552,20 +552,6 @@ pub fn mean_vertex_error(predictions: &[Tensor], truth: &Tensor) -> Result<Tenso
     Ok(d.mean_all()?)
 }
 
-/// Per-step, per-vertex errors `‖Ŷ_t(v_i) − Y_t(v_i)‖` (metres) of one sequence's
-/// predictions (`[1, V, 3]` each) against `truth` (`[1, T + 1, V, 3]`): `[steps][V]`.
-pub fn vertex_errors(predictions: &[Tensor], truth: &Tensor) -> Result<Vec<Vec<f64>>> {
-    predictions
-        .iter()
-        .enumerate()
-        .map(|(k, p)| {
-            let t = truth.narrow(1, k + 1, 1)?.squeeze(1)?;
-            let d: Vec<f32> = (p - t)?.sqr()?.sum(2)?.sqrt()?.flatten_all()?.to_vec1()?;
-            Ok(d.into_iter().map(f64::from).collect())
-        })
-        .collect()
-}
-
 /// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
 /// fields; they keep the defaults of [`AltConvTrainingConfig::new`] for Alt-ConvLSTM.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -742,16 +728,6 @@ pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrai
     Ok((config, params, net))
 }
 
-/// The skinning-only prediction `Ŷ_t = X_t + (Y_0 − X_0)` for steps 1..=`steps`: the
-/// surface carried by the skin alone (the paper's SMPL row).
-pub fn skinning(drive: &Drive, steps: usize) -> Result<Vec<Tensor>> {
-    let x0 = drive.skinned.narrow(1, 0, 1)?.squeeze(1)?;
-    let offset = (&drive.initial - x0)?;
-    (1..=steps)
-        .map(|t| Ok(drive.skinned.narrow(1, t, 1)?.squeeze(1)?.broadcast_add(&offset)?))
-        .collect()
-}
-
 /// How a model (or skinning) does on one sequence over `steps` steps.
 #[derive(Debug, Clone)]
 pub struct SequenceErrors {
@@ -764,45 +740,67 @@ pub struct SequenceErrors {
     pub rollout_seconds: f64,
 }
 
-/// Scores `net` (skinning when `None`) on the batch-of-one sequence `s`.
+/// Scores `net` (skinning when `None`) on `seq` over `steps` steps: a roll-out and a
+/// teacher-forced run, both through [`AltConvRuntime`] (which reproduces the candle model,
+/// tested) on `adj`, the mesh of `seq`.
 pub fn score_sequence(
     net: Option<&AltConvNet>,
     adj: &NormalizedAdjacency,
-    s: &SequenceTensors,
+    seq: &crate::data::LimbSequence,
     steps: usize,
 ) -> Result<SequenceErrors> {
-    if s.truth.dim(0)? != 1 {
-        return Err(Error::Shape {
-            what: "scored sequence",
-            expected: "a batch of one".into(),
-            got: format!("{:?}", s.truth.dims()),
-        });
-    }
-    let t = std::time::Instant::now();
-    let rolled = match net {
-        Some(net) => net.run(adj, &s.drive, None, steps)?,
-        None => skinning(&s.drive, steps)?,
-    };
-    let rollout_seconds = t.elapsed().as_secs_f64();
-    let forced = match net {
-        Some(net) => net.run(adj, &s.drive, Some(&s.truth), steps)?,
-        None => rolled.clone(),
-    };
-    if steps == 0 {
+    if steps == 0 || steps >= seq.skinned.len() {
         return Err(Error::InvalidParameter {
             name: "scored steps",
-            value: "0".into(),
-            reason: "needs at least one step",
+            value: steps.to_string(),
+            reason: "needs at least one step and one more frame than steps",
         });
     }
-    let rollout_surfaces = rolled
-        .iter()
-        .map(|p| Ok(p.flatten_all()?.to_vec1::<f32>()?.into_iter().map(f64::from).collect()))
-        .collect::<Result<_>>()?;
+    let (x, y) = (&seq.skinned, &seq.simulated);
+    let errors = |predicted: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        predicted
+            .iter()
+            .zip(&y[1..])
+            .map(|(p, t)| {
+                p.chunks_exact(3)
+                    .zip(t.chunks_exact(3))
+                    .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt())
+                    .collect()
+            })
+            .collect()
+    };
+    let t = std::time::Instant::now();
+    let (rolled, forced) = match net {
+        None => {
+            // Ŷ_t = X_t + (Y_0 − X_0): the surface carried by the skin alone.
+            let p: Vec<Vec<f64>> = (1..=steps)
+                .map(|k| {
+                    x[k].iter()
+                        .zip(&x[0])
+                        .zip(&y[0])
+                        .map(|((xt, x0), y0)| xt + y0 - x0)
+                        .collect()
+                })
+                .collect();
+            (p.clone(), p)
+        }
+        Some(net) => {
+            let mut runtime = AltConvRuntime::new(net, adj.clone())?;
+            runtime.start(&x[0], &y[0])?;
+            let rolled = (1..=steps).map(|k| runtime.step(&x[k])).collect::<Result<Vec<_>>>()?;
+            runtime.start(&x[0], &y[0])?;
+            let forced = (1..=steps)
+                .map(|k| runtime.step_from(&x[k], Some(&y[k - 1])))
+                .collect::<Result<Vec<_>>>()?;
+            (rolled, forced)
+        }
+    };
+    // The roll-out's share of the time: half of the two runs (the skinning row's are one).
+    let rollout_seconds = t.elapsed().as_secs_f64() / if net.is_some() { 2.0 } else { 1.0 };
     Ok(SequenceErrors {
-        single: vertex_errors(&forced, &s.truth)?,
-        rollout: vertex_errors(&rolled, &s.truth)?,
-        rollout_surfaces,
+        single: errors(&forced),
+        rollout: errors(&rolled),
+        rollout_surfaces: rolled,
         rollout_seconds,
     })
 }

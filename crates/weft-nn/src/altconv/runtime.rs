@@ -264,6 +264,13 @@ impl AltConvRuntime {
     /// Advances one frame with the skinned surface `x_t` (flat `3V`, m); returns the
     /// predicted tissue surface `Ŷ_t`.
     pub fn step(&mut self, x_t: &[f64]) -> Result<Vec<f64>> {
+        self.step_from(x_t, None)
+    }
+
+    /// [`AltConvRuntime::step`]; with `previous_truth`, the true tissue surface of the
+    /// previous frame, the step starts from it instead of the model's own prediction
+    /// (teacher forcing, as in training and the single-step error).
+    pub fn step_from(&mut self, x_t: &[f64], previous_truth: Option<&[f64]>) -> Result<Vec<f64>> {
         if !self.started {
             return Err(Error::InvalidParameter {
                 name: "Alt-ConvLSTM runtime",
@@ -272,6 +279,33 @@ impl AltConvRuntime {
             });
         }
         let xt = self.surface("skinned surface", x_t)?;
+        if let Some(truth) = previous_truth {
+            let truth = self.surface("previous true tissue surface", truth)?;
+            let out = self.cells.len() - 1;
+            let unit = self.scaling.output as f32;
+            match self.variant {
+                Variant::Alt => self.states[out].y = Some(truth.clone()),
+                v if v.outputs_position() => {
+                    self.states[out].c = truth
+                        .iter()
+                        .zip(&self.x_previous)
+                        .map(|(y, x)| (y - x) / unit)
+                        .collect()
+                }
+                _ => {}
+            }
+            // The peepholes' view of the replaced state.
+            let watched = match self.cells[out].peephole {
+                Peephole::Accumulation => self.states[out].y.as_deref(),
+                Peephole::Cell => Some(self.states[out].c.as_slice()),
+                Peephole::None => None,
+            }
+            .map(|x| self.adjacency_product(x, 3));
+            if watched.is_some() {
+                self.states[out].watched = watched;
+            }
+            self.previous = truth;
+        }
         let v = self.num_vertices();
         let dx: Vec<f32> = xt.iter().zip(&self.x_previous).map(|(a, b)| a - b).collect();
         // [X_t, X_t − X_{t−1}, Y₀ − X₀] per vertex.
