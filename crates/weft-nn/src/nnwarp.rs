@@ -13,9 +13,10 @@
 //! trained; [`WarpContext`] does the scaling, so a body of any size can be warped.
 //!
 //! Training runs in candle ([`WarpMlp`]); the runtime ([`NnWarp`]) evaluates the same
-//! weights in plain Rust ([`NodeMlp`]) over all nodes in parallel, because 16-wide layers
-//! are far below the size at which a tensor library's per-call overhead pays off (the
-//! bench `nnwarp_correction` measures both).
+//! weights outside it ([`NodeMlp`]: one faer product per layer over all nodes), because
+//! 16-wide layers are far below the size at which a tensor library's per-call overhead
+//! pays off. The bench `weft-nn/benches/nnwarp_correction.rs` measures both on the beam's
+//! 637 nodes: 0.78 ms in candle, 0.042 ms in the runtime (docs/BENCHMARKS.md).
 
 use std::sync::Arc;
 
@@ -381,7 +382,7 @@ impl NodeMlp {
     /// one pass of [`crate::fast::tanh_f32`] over a contiguous buffer, which vectorises; node by node,
     /// 16-wide layers leave the arithmetic units mostly idle. In f32, as the network was
     /// trained.
-    fn net_batch(&self, x: &[f32], n: usize) -> Vec<f32> {
+    pub fn net_batch(&self, x: &[f32], n: usize) -> Vec<f32> {
         use faer::{Accum, MatMut, MatRef, Par};
         let mut h = x.to_vec();
         for (k, l) in self.layers.iter().enumerate() {
