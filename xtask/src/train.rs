@@ -42,6 +42,8 @@ pub struct AltconvArgs {
     /// Training configuration (JSON; omitted fields keep their defaults): `hidden`
     /// ([32, 64, 128, 64, 32]), `steps` (20 teacher-forced steps per sequence), `epochs`
     /// (60), `batch` (2 sequences), `adam` (lr 1e-3), `lr_decay` (0.995 per epoch), `seed`.
+    /// After training, the roll-out error on the test sequences (up to 50 steps) beside
+    /// skinning alone is printed and written to `scores.json`.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Where the model is written.
@@ -436,6 +438,30 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         end_epoch(&args.out, &params, &adam, epoch, &format!("{epoch},{loss},{val}"))?;
     }
     bar.finish_and_clear();
+    // Where the model stands on unseen motions: the roll-out against skinning alone.
+    let test: Vec<_> = dataset.split("test").collect();
+    if let Some(frames) = test.iter().map(|s| s.skinned.len()).min() {
+        let horizon = (frames - 1).min(50);
+        let mut scores = serde_json::Map::new();
+        for (name, model) in [("skinning", None), (variant.name(), Some(&net))] {
+            let mut sum = (0.0, 0usize);
+            for s in &test {
+                let e = weft_nn::altconv::score_sequence(model, &adj, s, horizon)?;
+                sum.0 += e.rollout.iter().flatten().sum::<f64>();
+                sum.1 += e.rollout.iter().map(Vec::len).sum::<usize>();
+            }
+            let mm = 1e3 * sum.0 / sum.1.max(1) as f64;
+            eprintln!(
+                "altconv/{}: {name} roll-out error over steps 1-{horizon} of the test sequences: {mm:.3} mm",
+                variant.name()
+            );
+            scores.insert(name.to_string(), serde_json::json!(mm));
+        }
+        write_atomic(
+            &args.out.join("scores.json"),
+            &serde_json::to_string_pretty(&serde_json::json!({ "steps": horizon, "test_rollout_mm": scores }))?,
+        )?;
+    }
     eprintln!("model → {}", args.out.display());
     Ok(())
 }

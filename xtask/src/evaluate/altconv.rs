@@ -23,7 +23,7 @@ use weft_nn::graph::NormalizedAdjacency;
 
 use super::EvalContext;
 use super::paper::Table;
-use super::results::{ExperimentOutput, Timing};
+use super::results::{ExperimentOutput, LinePlot, Series, Timing};
 use crate::dataset::Size;
 use crate::report::render::{View, error_colors, error_png};
 use crate::train::{AltconvArgs, TrainCommand};
@@ -115,6 +115,26 @@ pub fn training_config(size: Size, variant: Variant) -> AltConvTrainingConfig {
 /// network on the 12 standard training sequences takes about 1.5 min here, docs/ALTCONV.md).
 const STANDARD_EPOCHS: usize = 12;
 
+/// Removes a model directory trained under another configuration than `config` (or
+/// whose configuration cannot be read), so that it is retrained rather than refused.
+fn discard_if_stale(dir: &Path, config: &AltConvTrainingConfig) -> anyhow::Result<()> {
+    let path = dir.join("config.json");
+    if !path.exists() {
+        return Ok(());
+    }
+    let stored: Option<AltConvTrainingConfig> = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    if stored.as_ref() != Some(config) {
+        eprintln!(
+            "altconv: {} was trained under another configuration; retraining it",
+            dir.display()
+        );
+        std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;
+    }
+    Ok(())
+}
+
 /// Per-step pooled vertex errors (mm) of one method on one split: `[step][sample]`.
 struct Errors {
     single: Vec<Vec<f64>>,
@@ -134,6 +154,15 @@ fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
     let mean = v.iter().sum::<f64>() / n;
     let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
     (mean, var.sqrt())
+}
+
+/// The `q` quantile of `samples` (nearest rank).
+fn percentile(samples: &[f64], q: f64) -> f64 {
+    let mut v = samples.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(((q * v.len() as f64).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0)
 }
 
 /// Steps 1..=n pooled.
@@ -189,11 +218,13 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         let config_path = root.join("configs").join(format!("{}.json", variant.name()));
         std::fs::create_dir_all(config_path.parent().context("config directory")?)?;
         std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
+        let model_dir = root.join("models").join(variant.name());
+        discard_if_stale(&model_dir, &config)?;
         crate::train::run(TrainCommand::Altconv(AltconvArgs {
             data: data.clone(),
             model: variant.name().into(),
             config: Some(config_path),
-            out: root.join("models").join(variant.name()),
+            out: model_dir,
             resume: true,
             quiet: ctx.quiet,
         }))
@@ -221,6 +252,9 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut tables_rows: HashMap<&str, Vec<Vec<String>>> = HashMap::new();
     let mut heat: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
     for (split, source) in [("known", "train"), ("test", "test")] {
+        // Per-step roll-out errors: where each method drifts (mean and 99th percentile).
+        let mut mean_series = Vec::new();
+        let mut p99_series = Vec::new();
         let sequences: Vec<&LimbSequence> = dataset.split(source).collect();
         if sequences.is_empty() {
             out.failures
@@ -244,6 +278,17 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                 }
                 set_split(&mut out, split);
             }
+            let steps: Vec<f64> = (1..=horizon).map(|t| t as f64).collect();
+            mean_series.push(Series {
+                label: method.clone(),
+                x: steps.clone(),
+                y: e.rollout.iter().map(|v| mean_sd(v.iter().copied()).0).collect(),
+            });
+            p99_series.push(Series {
+                label: method.clone(),
+                x: steps,
+                y: e.rollout.iter().map(|v| percentile(v, 0.99)).collect(),
+            });
             let rows = tables_rows.entry(split).or_default();
             for single_step in [true, false] {
                 let steps = if single_step { &e.single } else { &e.rollout };
@@ -265,6 +310,19 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                     heat.push((method.clone(), x, errs));
                 }
             }
+        }
+        for (stat, series) in [("mean", mean_series), ("p99", p99_series)] {
+            out.lines.push(LinePlot {
+                name: format!("rollout-{stat}-{split}"),
+                title: format!(
+                    "altconv / limb ({split}): roll-out error at each step, {} over vertices and sequences",
+                    if stat == "mean" { "mean" } else { "99th percentile" }
+                ),
+                x_label: format!("roll-out step (trained: 1–{train_steps})"),
+                y_label: "vertex error (mm)".into(),
+                log_y: false,
+                series,
+            });
         }
     }
     for (split, title, caption) in [
@@ -379,4 +437,49 @@ fn render_heat_maps(
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_values_are_read_from_the_right_table_and_column() {
+        // Table 1's 50-step roll-out: 7.92 for Alt-ConvLSTM, 17.34 for the best vanilla model.
+        assert_eq!(paper_value("known", "alt-convlstm", false, 50), Some((7.92, 4.11)));
+        assert_eq!(paper_value("known", "convlstm-np-y", false, 50), Some((17.34, 2.72)));
+        // Table 1 starts at 20 steps; Table 2 at 10, without the ΔY baselines.
+        assert_eq!(paper_value("known", "alt-convlstm", true, 10), None);
+        assert_eq!(paper_value("test", "alt-convlstm", true, 10), Some((0.97, 0.67)));
+        assert_eq!(paper_value("test", "convlstm-cp-dy", false, 50), None);
+        assert_eq!(paper_value("test", SKINNING, false, 30), Some((19.51, 3.13)));
+        assert_eq!(paper_value("known", SKINNING, true, 20), Some((17.76, 2.67)));
+    }
+
+    #[test]
+    fn a_model_trained_under_another_configuration_is_discarded() {
+        let dir = std::env::temp_dir().join(format!("weft-altconv-stale-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = training_config(Size::Quick, Variant::Alt);
+        std::fs::write(dir.join("config.json"), serde_json::to_string(&config).unwrap()).unwrap();
+        discard_if_stale(&dir, &config).unwrap();
+        assert!(dir.exists(), "the same configuration keeps the model");
+        let mut other = config.clone();
+        other.epochs += 1;
+        discard_if_stale(&dir, &other).unwrap();
+        assert!(!dir.exists(), "another configuration discards it");
+        discard_if_stale(&dir, &other).unwrap();
+    }
+
+    #[test]
+    fn windows_pool_every_sample_of_their_steps() {
+        let steps = vec![vec![1.0, 3.0], vec![5.0, 7.0], vec![100.0]];
+        assert_eq!(window(&steps, 2), (4.0, 5.0f64.sqrt()));
+        let (m, _) = window(&steps, 3);
+        assert!((m - 23.2).abs() < 1e-12);
+        let hundred: Vec<f64> = (1..=100).map(f64::from).rev().collect();
+        assert_eq!(percentile(&hundred, 0.99), 99.0);
+        assert_eq!(percentile(&hundred, 0.5), 50.0);
+        assert_eq!(percentile(&[], 0.5), 0.0);
+    }
 }
