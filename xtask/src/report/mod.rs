@@ -35,12 +35,18 @@ pub mod fonts {
     }
 }
 
-/// The error metric each experiment's Pareto plot uses.
-fn pareto_metric(experiment: &str) -> (&'static str, &'static str) {
+/// The error metric each experiment's Pareto plot uses, and the split it is read on
+/// (`None`: every record of the metric).
+fn pareto_metric(experiment: &str) -> (&'static str, &'static str, Option<&'static str>) {
     match experiment {
-        "proj" => ("sqrt-mse", "SqrtMSE against the tight reference (mm)"),
-        "nnwarp" => ("rel-error", "rel-error against full nonlinear FEM"),
-        _ => ("m-rms", "M_rms against the tight reference (mm)"),
+        "proj" => ("sqrt-mse", "SqrtMSE against the tight reference (mm)", None),
+        "nnwarp" => ("rel-error", "rel-error against full nonlinear FEM", None),
+        "altconv" => (
+            "error-mm-rollout50",
+            "50-step roll-out error on unseen motions (mm)",
+            Some("test"),
+        ),
+        _ => ("m-rms", "M_rms against the tight reference (mm)", None),
     }
 }
 
@@ -68,17 +74,14 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
             scatter: Vec::new(),
             lines: Vec::new(),
         };
-        let (metric, label) = pareto_metric(&o.experiment);
-        for scene in distinct(
-            o.records
-                .iter()
-                .filter(|r| r.metric == metric)
-                .map(|r| r.scene.as_str()),
-        ) {
+        let (metric, label, split) = pareto_metric(&o.experiment);
+        let plotted = |r: &&Record| r.metric == metric && (split.is_none() || r.split.as_deref() == split);
+        for scene in distinct(o.records.iter().filter(plotted).map(|r| r.scene.as_str())) {
             let points: Vec<ParetoPoint> = o
                 .records
                 .iter()
-                .filter(|r| r.scene == scene && r.metric == metric)
+                .filter(plotted)
+                .filter(|r| r.scene == scene)
                 .filter_map(|r| {
                     Some(ParetoPoint {
                         method: r.method.clone(),

@@ -124,7 +124,7 @@ where
         .configure_mesh()
         .x_desc("time per frame / ground truth's (same run)")
         .y_desc(error_label)
-        .x_label_formatter(&|v| format!("{v:.2}"))
+        .x_label_formatter(&|v| format!("{v:.1e}"))
         .y_label_formatter(&|v| format!("{v:.1e}"))
         .draw()
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
