@@ -12,7 +12,11 @@
 //! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
 //!   same potential minimised over every vertex;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
-//!   sequences, training in candle, and a plain-Rust runtime over the trained weights;
+//!   sequences, training in candle, and a runtime over the trained weights outside it;
+//! - [`altconv`]: Alt-ConvLSTM and its graph ConvLSTM baselines for soft-tissue dynamics —
+//!   the cells on the Kipf–Welling normalised adjacency
+//!   ([`graph::NormalizedAdjacency`]), teacher-forced training, and a roll-out runtime
+//!   outside candle; [`fast`] holds the f32 activations both runtimes share;
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
 //!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
 //!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
