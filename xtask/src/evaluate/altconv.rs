@@ -112,7 +112,7 @@ pub fn training_config(size: Size, variant: Variant) -> AltConvTrainingConfig {
 }
 
 /// Epochs of the standard evaluation (the paper trains 1000; one epoch of the paper's
-/// network on the 12 standard training sequences takes about 1.5 min here, docs/ALTCONV.md).
+/// network on the 12 standard training sequences takes 25 s to 1.5 min here, docs/ALTCONV.md).
 const STANDARD_EPOCHS: usize = 12;
 
 /// Removes a model directory trained under another configuration than `config` (or
