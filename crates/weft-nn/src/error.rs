@@ -9,6 +9,9 @@ pub enum Error {
     /// ACAP⁻¹ or its vector–Jacobian product failed.
     #[error(transparent)]
     Acap(#[from] weft_acap::Error),
+    /// A projection layer's solve or backward pass failed.
+    #[error(transparent)]
+    Proj(#[from] weft_proj::Error),
     /// The physics (L_phys and its gradient) failed.
     #[error(transparent)]
     Sim(#[from] weft_sim::Error),

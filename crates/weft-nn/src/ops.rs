@@ -296,3 +296,110 @@ impl CustomOp1 for ClothPotential {
         Ok(Some(Tensor::from_vec(out, arg.dims(), arg.device())?))
     }
 }
+
+/// Geng et al.'s quasistatic projection (§5) as a candle op over a batch: predictions
+/// `[B, V, 3]` (f32, metres) and the zero-length scaling μ — `[1]` for one global μ or `[V]`
+/// for one μ_i per vertex (Eq. 15–16) — to the equilibria `r*` `[B, V, 3]`. The solves run
+/// in f64 in weft-proj, one example per thread.
+///
+/// The backward pass is weft-proj's adjoint (Eq. 14 for `r̂`, Eq. 16 for μ, summed over the
+/// batch). The factorisation it needs is not kept between the passes, so the backward pass
+/// solves each example again (the forward solve is deterministic): twice the forward cost
+/// in training, in exchange for an op that holds no state.
+#[derive(Debug, Clone)]
+pub struct QuasistaticProjection {
+    layer: Arc<weft_proj::QuasistaticLayer>,
+}
+
+impl QuasistaticProjection {
+    pub fn new(layer: Arc<weft_proj::QuasistaticLayer>) -> Self {
+        Self { layer }
+    }
+
+    /// `r*` for predictions `[B, V, 3]` and μ (`[1]` or `[V]`), differentiable in both.
+    pub fn apply(&self, predictions: &Tensor, mu: &Tensor) -> crate::error::Result<Tensor> {
+        let v = self.layer.num_vertices();
+        let (_, pv, three) = predictions.dims3()?;
+        let m = mu.dims1()?;
+        if pv != v || three != 3 || !(m == 1 || m == v) {
+            return Err(crate::error::Error::Shape {
+                what: "quasistatic projection input",
+                expected: format!("predictions [B, {v}, 3] and mu [1] or [{v}]"),
+                got: format!("{:?} and {:?}", predictions.dims(), mu.dims()),
+            });
+        }
+        Ok(predictions.contiguous()?.apply_op2(&mu.contiguous()?, self.clone())?)
+    }
+
+    fn scaling(mu: &[f32]) -> weft_proj::ZeroLengthScaling {
+        if mu.len() == 1 {
+            weft_proj::ZeroLengthScaling::Global(f64::from(mu[0]))
+        } else {
+            weft_proj::ZeroLengthScaling::PerVertex(mu.iter().map(|&m| f64::from(m)).collect())
+        }
+    }
+
+    /// Every example's forward solve, in parallel.
+    fn solve(
+        &self,
+        predictions: &[f32],
+        mu: &[f32],
+    ) -> candle_core::Result<Vec<weft_proj::quasistatic::QuasistaticSolution>> {
+        let x = convert::f32_to_f64("quasistatic projection input", predictions).map_err(op_error)?;
+        let examples: Vec<&[f64]> = x.chunks_exact(3 * self.layer.num_vertices()).collect();
+        self.layer
+            .forward_batch(&examples, &Self::scaling(mu))
+            .into_iter()
+            .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
+            .collect()
+    }
+}
+
+impl candle_core::CustomOp2 for QuasistaticProjection {
+    fn name(&self) -> &'static str {
+        "quasistatic-projection"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let solutions = self.solve(f32_slice(self.name(), s1, l1)?, f32_slice(self.name(), s2, l2)?)?;
+        let flat: Vec<f64> = solutions.iter().flat_map(|s| s.positions().iter().copied()).collect();
+        let out = convert::f64_to_f32("quasistatic projection output", &flat).map_err(op_error)?;
+        Ok((CpuStorage::F32(out), l1.shape().clone()))
+    }
+
+    fn bwd(
+        &self,
+        predictions: &Tensor,
+        mu: &Tensor,
+        _res: &Tensor,
+        grad_res: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let x: Vec<f32> = predictions.flatten_all()?.to_vec1()?;
+        let m: Vec<f32> = mu.flatten_all()?.to_vec1()?;
+        let solutions = self.solve(&x, &m)?;
+        let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
+        let g = convert::f32_to_f64("quasistatic projection output gradient", &g).map_err(op_error)?;
+        let grads: Vec<&[f64]> = g.chunks_exact(3 * self.layer.num_vertices()).collect();
+        let back = self.layer.backward_batch(&solutions, &grads).map_err(op_error)?;
+        let d_pred: Vec<f64> = back.iter().flat_map(|b| b.pred.iter().copied()).collect();
+        let d_mu: Vec<f64> = if m.len() == 1 {
+            vec![back.iter().map(|b| b.mu).sum()]
+        } else {
+            (0..m.len())
+                .map(|i| back.iter().map(|b| b.mu_per_vertex[i]).sum())
+                .collect()
+        };
+        let d_pred = convert::f64_to_f32("quasistatic projection input gradient", &d_pred).map_err(op_error)?;
+        let d_mu = convert::f64_to_f32("quasistatic projection mu gradient", &d_mu).map_err(op_error)?;
+        Ok((
+            Some(Tensor::from_vec(d_pred, predictions.shape(), predictions.device())?),
+            Some(Tensor::from_vec(d_mu, mu.shape(), mu.device())?),
+        ))
+    }
+}

@@ -1,0 +1,113 @@
+//! The projection layers as candle ops (Geng et al. §5): the quasistatic op's gradients
+//! into the prediction and into μ, global and per vertex, against finite differences of
+//! the op itself.
+
+use std::sync::Arc;
+
+use candle_core::{Device, Tensor, Var};
+use weft_nn::ops::QuasistaticProjection;
+use weft_proj::{QuasistaticLayer, QuasistaticParams};
+use weft_testkit::TestRng;
+
+#[test]
+fn the_quasistatic_op_has_the_gradients_of_its_finite_differences() {
+    let rest = weft_mesh::generators::sheet(4, 1.0).unwrap();
+    let v = rest.num_vertices();
+    let layer = Arc::new(QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap());
+    let op = QuasistaticProjection::new(layer);
+    let mut rng = TestRng::new(11);
+    // Two predictions: the rest sheet stretched and bumped, with noise.
+    let pred: Vec<f32> = (0..2)
+        .flat_map(|b| {
+            let rest = &rest;
+            let noise: Vec<f64> = (0..3 * v).map(|_| rng.uniform(-0.02, 0.02)).collect();
+            rest.positions().iter().enumerate().flat_map(move |(i, p)| {
+                let s = 1.1 + 0.05 * b as f64;
+                [
+                    (s * p.x + noise[3 * i]) as f32,
+                    (p.y + noise[3 * i + 1]) as f32,
+                    (0.1 * (3.0 * p.x).sin() + noise[3 * i + 2]) as f32,
+                ]
+            })
+        })
+        .collect();
+    let weights: Vec<f32> = (0..2 * 3 * v).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
+    let w = Tensor::from_vec(weights, (2, v, 3), &Device::Cpu).unwrap();
+    for mu0 in [vec![0.1f32], (0..v).map(|i| 0.05 + 0.01 * i as f32).collect()] {
+        let x = Var::from_tensor(&Tensor::from_vec(pred.clone(), (2, v, 3), &Device::Cpu).unwrap()).unwrap();
+        let mu = Var::from_tensor(&Tensor::from_vec(mu0.clone(), mu0.len(), &Device::Cpu).unwrap()).unwrap();
+        let loss = |x: &Tensor, mu: &Tensor| -> f64 {
+            (op.apply(x, mu).unwrap() * &w)
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap() as f64
+        };
+        let out = op.apply(x.as_tensor(), mu.as_tensor()).unwrap();
+        assert_eq!(out.dims(), &[2, v, 3]);
+        let grads = (out * &w).unwrap().sum_all().unwrap().backward().unwrap();
+        let gx: Vec<f32> = grads
+            .get(x.as_tensor())
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let gmu: Vec<f32> = grads
+            .get(mu.as_tensor())
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let scale = gx.iter().fold(0.0f32, |m, g| m.max(g.abs())) as f64;
+        assert!(scale > 0.0);
+        // Central differences of the op in f32: step 1e-3 m, tolerance 3 % of the largest entry.
+        for k in [0, 7, 3 * v + 4, 6 * v - 1] {
+            let at = |d: f32| {
+                let mut p = pred.clone();
+                p[k] += d;
+                loss(&Tensor::from_vec(p, (2, v, 3), &Device::Cpu).unwrap(), mu.as_tensor())
+            };
+            let fd = (at(1e-3) - at(-1e-3)) / 2e-3;
+            assert!(
+                (fd - gx[k] as f64).abs() <= 0.03 * scale,
+                "prediction entry {k}: fd {fd} vs {}",
+                gx[k]
+            );
+        }
+        let mu_scale = gmu.iter().fold(0.0f32, |m, g| m.max(g.abs())) as f64;
+        for k in [0, mu0.len() - 1] {
+            let h = 1e-2 * mu0[k];
+            let at = |d: f32| {
+                let mut m = mu0.clone();
+                m[k] += d;
+                loss(
+                    x.as_tensor(),
+                    &Tensor::from_vec(m.clone(), m.len(), &Device::Cpu).unwrap(),
+                )
+            };
+            let fd = (at(h) - at(-h)) / (2.0 * h as f64);
+            assert!(
+                (fd - gmu[k] as f64).abs() <= 0.03 * mu_scale.max(fd.abs()),
+                "mu entry {k} of {}: fd {fd} vs {}",
+                mu0.len(),
+                gmu[k]
+            );
+        }
+    }
+    // A μ of the wrong length and a prediction of the wrong size are typed errors.
+    let x = Tensor::from_vec(pred.clone(), (2, v, 3), &Device::Cpu).unwrap();
+    assert!(
+        op.apply(&x, &Tensor::from_vec(vec![0.1f32; 3], 3, &Device::Cpu).unwrap())
+            .is_err()
+    );
+    assert!(
+        op.apply(
+            &x.narrow(1, 0, v - 1).unwrap(),
+            &Tensor::from_vec(vec![0.1f32], 1, &Device::Cpu).unwrap()
+        )
+        .is_err()
+    );
+}
