@@ -9,7 +9,7 @@
 //!   weft-acap's pre-factorised Poisson solve and its vector–Jacobian product, and
 //!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
 //!   frames stopped (Eq. 9–10), the elastic potential `P_s + P_b`, and Geng et al.'s
-//!   quasistatic projection through weft-proj's adjoint;
+//!   inextensibility and quasistatic projections through weft-proj's backward passes;
 //! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
 //!   same potential minimised over every vertex;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered

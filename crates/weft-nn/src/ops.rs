@@ -403,3 +403,68 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
         ))
     }
 }
+
+/// Geng et al.'s inextensibility projection (§4, the edge-length SOCP) as a candle op over a
+/// batch: predictions `[B, V, 3]` (f32, metres) to the nearest shapes `r*` whose edges are
+/// at most `1 + ε` times their rest length. The solves run in f64 in weft-proj, one example
+/// per thread; the backward pass is weft-proj's (Eq. 11), after solving each example again
+/// (as [`QuasistaticProjection`], the op keeps no state).
+#[derive(Debug, Clone)]
+pub struct InextensibilityProjection {
+    layer: Arc<weft_proj::InextensibilityLayer>,
+}
+
+impl InextensibilityProjection {
+    pub fn new(layer: Arc<weft_proj::InextensibilityLayer>) -> Self {
+        Self { layer }
+    }
+
+    /// `r*` for predictions `[B, V, 3]`, differentiable.
+    pub fn apply(&self, predictions: &Tensor) -> crate::error::Result<Tensor> {
+        let v = self.layer.num_vertices();
+        let (_, pv, three) = predictions.dims3()?;
+        if pv != v || three != 3 {
+            return Err(crate::error::Error::Shape {
+                what: "inextensibility projection input",
+                expected: format!("[B, {v}, 3]"),
+                got: format!("{:?}", predictions.dims()),
+            });
+        }
+        Ok(predictions.contiguous()?.apply_op1(self.clone())?)
+    }
+
+    fn solve(&self, predictions: &[f32]) -> candle_core::Result<Vec<weft_proj::SocpSolution>> {
+        let x = convert::f32_to_f64("inextensibility projection input", predictions).map_err(op_error)?;
+        let examples: Vec<&[f64]> = x.chunks_exact(3 * self.layer.num_vertices()).collect();
+        self.layer
+            .forward_batch(&examples)
+            .into_iter()
+            .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
+            .collect()
+    }
+}
+
+impl CustomOp1 for InextensibilityProjection {
+    fn name(&self) -> &'static str {
+        "inextensibility-projection"
+    }
+
+    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+        let solutions = self.solve(f32_slice(self.name(), s, l)?)?;
+        let flat: Vec<f64> = solutions.iter().flat_map(|s| s.positions().iter().copied()).collect();
+        let out = convert::f64_to_f32("inextensibility projection output", &flat).map_err(op_error)?;
+        Ok((CpuStorage::F32(out), l.shape().clone()))
+    }
+
+    fn bwd(&self, predictions: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let x: Vec<f32> = predictions.flatten_all()?.to_vec1()?;
+        let solutions = self.solve(&x)?;
+        let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
+        let g = convert::f32_to_f64("inextensibility projection output gradient", &g).map_err(op_error)?;
+        let grads: Vec<&[f64]> = g.chunks_exact(3 * self.layer.num_vertices()).collect();
+        let back = self.layer.backward_batch(&solutions, &grads).map_err(op_error)?;
+        let flat: Vec<f64> = back.concat();
+        let out = convert::f64_to_f32("inextensibility projection input gradient", &flat).map_err(op_error)?;
+        Ok(Some(Tensor::from_vec(out, predictions.shape(), predictions.device())?))
+    }
+}

@@ -111,3 +111,79 @@ fn the_quasistatic_op_has_the_gradients_of_its_finite_differences() {
         .is_err()
     );
 }
+
+#[test]
+fn the_inextensibility_op_has_the_gradient_of_its_finite_differences() {
+    use weft_nn::ops::InextensibilityProjection;
+    use weft_proj::{InextensibilityLayer, SocpSettings};
+    let rest = weft_mesh::generators::sheet(4, 1.0).unwrap();
+    let v = rest.num_vertices();
+    let op = InextensibilityProjection::new(Arc::new(
+        InextensibilityLayer::new(&rest, 0.05, SocpSettings::default()).unwrap(),
+    ));
+    let mut rng = TestRng::new(13);
+    // Stretched 15 % along x, so that the bound is active on many edges.
+    let pred: Vec<f32> = rest
+        .positions()
+        .iter()
+        .flat_map(|p| {
+            [
+                (1.15 * p.x + rng.uniform(-0.01, 0.01)) as f32,
+                (p.y + rng.uniform(-0.01, 0.01)) as f32,
+                (0.05 * (2.0 * p.y).cos() + rng.uniform(-0.01, 0.01)) as f32,
+            ]
+        })
+        .collect();
+    let w = Tensor::from_vec(
+        (0..3 * v).map(|_| rng.uniform(-1.0, 1.0) as f32).collect::<Vec<_>>(),
+        (1, v, 3),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let loss = |x: &Tensor| -> f64 {
+        (op.apply(x).unwrap() * &w)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap() as f64
+    };
+    let x = Var::from_tensor(&Tensor::from_vec(pred.clone(), (1, v, 3), &Device::Cpu).unwrap()).unwrap();
+    let out = op.apply(x.as_tensor()).unwrap();
+    // The projection moved the prediction: the bound was active.
+    let moved = (&out - x.as_tensor())
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    assert!(moved > 1e-3, "{moved}");
+    let grads = (out * &w).unwrap().sum_all().unwrap().backward().unwrap();
+    let g: Vec<f32> = grads
+        .get(x.as_tensor())
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let scale = g.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
+    for k in [0, 5, 3 * v / 2, 3 * v - 1] {
+        let at = |d: f32| {
+            let mut p = pred.clone();
+            p[k] += d;
+            loss(&Tensor::from_vec(p, (1, v, 3), &Device::Cpu).unwrap())
+        };
+        let fd = (at(1e-3) - at(-1e-3)) / 2e-3;
+        assert!(
+            (fd - g[k] as f64).abs() <= 0.05 * scale,
+            "entry {k}: fd {fd} vs {}",
+            g[k]
+        );
+    }
+    assert!(
+        op.apply(&Tensor::zeros((1, v + 1, 3), candle_core::DType::F32, &Device::Cpu).unwrap())
+            .is_err()
+    );
+}
