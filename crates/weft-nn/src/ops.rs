@@ -297,6 +297,11 @@ impl CustomOp1 for ClothPotential {
     }
 }
 
+/// A flat batch of `[B, V, 3]` values as its `B` examples of `3V` each.
+fn examples(flat: &[f64], num_vertices: usize) -> Vec<&[f64]> {
+    flat.chunks_exact(3 * num_vertices).collect()
+}
+
 /// Geng et al.'s quasistatic projection (§5) as a candle op over a batch: predictions
 /// `[B, V, 3]` (f32, metres) and the zero-length scaling μ — `[1]` for one global μ or `[V]`
 /// for one μ_i per vertex (Eq. 15–16) — to the equilibria `r*` `[B, V, 3]`. The solves run
@@ -346,9 +351,8 @@ impl QuasistaticProjection {
         mu: &[f32],
     ) -> candle_core::Result<Vec<weft_proj::quasistatic::QuasistaticSolution>> {
         let x = convert::f32_to_f64("quasistatic projection input", predictions).map_err(op_error)?;
-        let examples: Vec<&[f64]> = x.chunks_exact(3 * self.layer.num_vertices()).collect();
         self.layer
-            .forward_batch(&examples, &Self::scaling(mu))
+            .forward_batch(&examples(&x, self.layer.num_vertices()), &Self::scaling(mu))
             .into_iter()
             .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
             .collect()
@@ -385,8 +389,10 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
         let solutions = self.solve(&x, &m)?;
         let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
         let g = convert::f32_to_f64("quasistatic projection output gradient", &g).map_err(op_error)?;
-        let grads: Vec<&[f64]> = g.chunks_exact(3 * self.layer.num_vertices()).collect();
-        let back = self.layer.backward_batch(&solutions, &grads).map_err(op_error)?;
+        let back = self
+            .layer
+            .backward_batch(&solutions, &examples(&g, self.layer.num_vertices()))
+            .map_err(op_error)?;
         let d_pred: Vec<f64> = back.iter().flat_map(|b| b.pred.iter().copied()).collect();
         let d_mu: Vec<f64> = if m.len() == 1 {
             vec![back.iter().map(|b| b.mu).sum()]
@@ -435,9 +441,8 @@ impl InextensibilityProjection {
 
     fn solve(&self, predictions: &[f32]) -> candle_core::Result<Vec<weft_proj::SocpSolution>> {
         let x = convert::f32_to_f64("inextensibility projection input", predictions).map_err(op_error)?;
-        let examples: Vec<&[f64]> = x.chunks_exact(3 * self.layer.num_vertices()).collect();
         self.layer
-            .forward_batch(&examples)
+            .forward_batch(&examples(&x, self.layer.num_vertices()))
             .into_iter()
             .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
             .collect()
@@ -461,8 +466,10 @@ impl CustomOp1 for InextensibilityProjection {
         let solutions = self.solve(&x)?;
         let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
         let g = convert::f32_to_f64("inextensibility projection output gradient", &g).map_err(op_error)?;
-        let grads: Vec<&[f64]> = g.chunks_exact(3 * self.layer.num_vertices()).collect();
-        let back = self.layer.backward_batch(&solutions, &grads).map_err(op_error)?;
+        let back = self
+            .layer
+            .backward_batch(&solutions, &examples(&g, self.layer.num_vertices()))
+            .map_err(op_error)?;
         let flat: Vec<f64> = back.concat();
         let out = convert::f64_to_f32("inextensibility projection input gradient", &flat).map_err(op_error)?;
         Ok(Some(Tensor::from_vec(out, predictions.shape(), predictions.device())?))

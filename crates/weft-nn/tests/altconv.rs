@@ -293,10 +293,9 @@ fn alt_convlstm_overfits_one_sequence() {
     let skin_error = mean_vertex_error(&skin, &s.truth).unwrap().to_scalar::<f32>().unwrap() as f64;
     let (_, losses) = train(Variant::Alt, 7, 300, std::slice::from_ref(&s), &adj);
     let (first, last) = (losses[0], *losses.last().unwrap());
-    // 300 Adam steps reach 1.5 mm (measured), under a tenth of what skinning misses. The
-    // cell sees the previous tissue only through its gates (Eq. 5), so the last
-    // millimetres come slowly (1.2 mm after 1500 steps, before the output cell's small
-    // initialisation).
+    // 300 Adam steps reach 1.5 mm (the failure message prints it), under a tenth of what
+    // skinning misses. The cell sees the previous tissue only through its gates (Eq. 5),
+    // so the last millimetres come slowly; the test does not ask for zero.
     assert!(
         last < 0.1 * skin_error && last < 0.5 * first,
         "loss {last:e} after 300 steps, skinning {skin_error:e}, first {first:e}"

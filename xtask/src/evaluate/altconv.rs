@@ -111,8 +111,8 @@ pub fn training_config(size: Size, variant: Variant) -> AltConvTrainingConfig {
     c
 }
 
-/// Epochs of the standard evaluation (the paper trains 1000; one epoch of the paper's
-/// network on the 12 standard training sequences takes 25 s to 1.5 min here, docs/ALTCONV.md).
+/// Epochs of the standard evaluation (the paper trains 1000; the cost of one is in
+/// docs/ALTCONV.md, *Training length*).
 const STANDARD_EPOCHS: usize = 12;
 
 /// Removes a model directory trained under another configuration than `config` (or
