@@ -22,15 +22,17 @@ use crate::output::{
 };
 use crate::record::Recorder;
 
+pub mod drape;
 pub mod nnwarp;
 
 /// The datasets: every built-in cloth scene (Tan et al. §VI, design §3), the
-/// soft-tissue `limb` (design §6) and NNWarp's registered beam sequences (design §7).
+/// soft-tissue `limb` (design §6), NNWarp's registered beam sequences (design §7) and
+/// the sleeve `drape` examples (design §8).
 pub fn dataset_names() -> Vec<&'static str> {
     weft_sim::BUILTIN_SCENES
         .iter()
         .copied()
-        .chain([weft_sim::scenes::load::SOFT_TISSUE_SCENE, nnwarp::NAME])
+        .chain([weft_sim::scenes::load::SOFT_TISSUE_SCENE, nnwarp::NAME, drape::NAME])
         .collect()
 }
 
@@ -171,6 +173,18 @@ pub struct DatasetSpec {
     pub split: Split,
 }
 
+impl DatasetSpec {
+    /// Frames stored per sequence: the simulated ones and the initial state, or for
+    /// `drape` the examples of a chunk.
+    pub fn stored_frames(&self) -> usize {
+        if self.name == drape::NAME {
+            self.frames
+        } else {
+            self.frames + 1
+        }
+    }
+}
+
 /// How a dataset is split into train / validation / test.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -181,6 +195,9 @@ pub enum Split {
     /// Whole sequences, in index order: 62 % train, 15.5 % validation, the rest test
     /// (Alt-ConvLSTM §5.1's 80 / 20 / 29 of 129).
     Sequences,
+    /// Whole sequences (chunks of examples), in index order: the first `train` train, the
+    /// next `validation` validate, the rest test.
+    Chunks { train: usize, validation: usize },
 }
 
 impl Split {
@@ -199,6 +216,15 @@ impl Split {
                     "test"
                 }
             }
+            Self::Chunks { train, validation } => {
+                if i < train {
+                    "train"
+                } else if i < train + validation {
+                    "validation"
+                } else {
+                    "test"
+                }
+            }
         }
     }
 }
@@ -211,6 +237,21 @@ impl DatasetSpec {
             dataset_names().join(", ")
         );
         let quick = size == Size::Quick;
+        if name == drape::NAME {
+            // A "sequence" is a chunk of independent examples; "frames" its size.
+            let (train, validation, test, chunk) = drape::counts(size);
+            return Ok(Self {
+                name: name.into(),
+                size,
+                sequences: (train + validation + test) / chunk,
+                frames: chunk,
+                scene: AnyScene::SoftTissue(weft_sim::SoftTissueScene::builtin(quick)),
+                split: Split::Chunks {
+                    train: train / chunk,
+                    validation: validation / chunk,
+                },
+            });
+        }
         if name == nnwarp::NAME {
             // The training beam (12 × 6 × 6 cells, 2592 tets; quick 6 × 3 × 3); the
             // sequence count and ramp frames by size (the paper: 20 829 poses).
@@ -462,7 +503,16 @@ pub fn generate_with(
     let scene_toml = base.scene.to_toml()?;
     // weft-mesh's writers (atomic, full precision) write the rest shape; they are
     // deterministic, so rewriting it on a resume leaves the same bytes.
-    let rest_files: Vec<&str> = if spec.name == nnwarp::NAME {
+    let rest_files: Vec<&str> = if spec.name == drape::NAME {
+        // The sleeve and the body at the neutral pose, and the scene's parameters.
+        let scene = weft_sim::scenes::drape::Drape::new(drape::params(spec.size))?;
+        let sleeve = scene.sleeve();
+        weft_mesh::io::write_obj(&out.join("sleeve.obj"), sleeve.positions(), sleeve.faces())?;
+        let body = scene.body_rest();
+        weft_mesh::io::write_obj(&out.join("body.obj"), body.positions(), body.faces())?;
+        write_json(&out.join("drape.json"), scene.params())?;
+        vec!["sleeve.obj", "body.obj", "drape.json"]
+    } else if spec.name == nnwarp::NAME {
         // The volume itself, scaled into the unit sphere, as TetGen .node/.ele.
         let (body, _) = nnwarp::training_body(spec)?;
         weft_mesh::io::write_tetgen(&out.join("rest.node"), &body)?;
@@ -492,7 +542,7 @@ pub fn generate_with(
         seed,
         code_version: code_version(),
         sequences_total: spec.sequences,
-        frames_per_sequence: spec.frames + 1,
+        frames_per_sequence: spec.stored_frames(),
         split: spec.split,
         shard,
         files,
@@ -545,7 +595,9 @@ pub fn generate_with(
     let mut failed = Vec::new();
     for i in todo {
         let wall = Instant::now();
-        let rec = if spec.name == nnwarp::NAME {
+        let rec = if spec.name == drape::NAME {
+            drape::chunk(spec, sequence_seed(seed, i), i, &bar)?
+        } else if spec.name == nnwarp::NAME {
             let rec = nnwarp::sequence(spec, sequence_seed(seed, i), i)?;
             bar.inc(spec.frames as u64);
             rec

@@ -43,6 +43,53 @@ fn sheet_arrays(n: usize, size: f64) -> Result<(Vec<Vector3<f64>>, Vec<[usize; 3
     Ok((positions, faces))
 }
 
+/// An open tube along +X: `rings` circles of `around` vertices at `x` evenly from `x0`
+/// to `x1`, circle `k` of radius `radius(x_k)` about the X axis. Vertex `(k, j)` (ring
+/// `k`, angle `2πj/around` from +Y towards +Z) has index `k·around + j`. Faces are
+/// oriented with normals pointing away from the axis, and quad diagonals alternate as in
+/// [`sheet`]. The sleeve of the drape scene (design §8).
+pub fn tube(around: usize, rings: usize, x0: f64, x1: f64, radius: impl Fn(f64) -> f64) -> Result<TriMesh> {
+    if around < 3 || rings < 2 {
+        return Err(Error::InvalidParameter(format!(
+            "a tube needs ≥ 3 vertices around and ≥ 2 rings, got {around} and {rings}"
+        )));
+    }
+    if !(x1 > x0) || !x0.is_finite() || !x1.is_finite() {
+        return Err(Error::InvalidParameter(format!(
+            "a tube needs finite ends x0 < x1, got {x0} and {x1}"
+        )));
+    }
+    let mut positions = Vec::with_capacity(around * rings);
+    for k in 0..rings {
+        let x = x0 + (x1 - x0) * k as f64 / (rings - 1) as f64;
+        let r = radius(x);
+        check_positive("tube radius", r)?;
+        for j in 0..around {
+            let phi = 2.0 * std::f64::consts::PI * j as f64 / around as f64;
+            positions.push(Vector3::new(x, r * phi.cos(), r * phi.sin()));
+        }
+    }
+    let mut faces = Vec::with_capacity(2 * around * (rings - 1));
+    for k in 0..rings - 1 {
+        for j in 0..around {
+            let jn = (j + 1) % around;
+            let (a, b, c, d) = (
+                k * around + j,
+                (k + 1) * around + j,
+                (k + 1) * around + jn,
+                k * around + jn,
+            );
+            // (a, b, c) runs +X then +φ: x̂ × φ̂ points at the axis, so reverse it.
+            if (j + k) % 2 == 0 {
+                faces.extend([[a, c, b], [a, d, c]]);
+            } else {
+                faces.extend([[a, d, b], [b, d, c]]);
+            }
+        }
+    }
+    TriMesh::new(positions, faces)
+}
+
 /// A circular hole in grid units: vertices strictly inside are removed.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hole {

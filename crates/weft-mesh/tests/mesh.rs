@@ -588,3 +588,38 @@ fn vtk_tet_round_trip_and_bad_files() {
     std::fs::write(&tri, &text[..text.len() / 3]).unwrap();
     assert!(matches!(read_vtk_tets(&tri), Err(Error::Parse { .. })));
 }
+
+#[test]
+fn tube_is_an_open_cylinder_with_outward_faces() {
+    let (around, rings) = (12, 5);
+    let m = generators::tube(around, rings, 0.1, 0.5, |x| 0.05 + 0.02 * x).unwrap();
+    assert_eq!(m.num_vertices(), around * rings);
+    assert_eq!(m.num_faces(), 2 * around * (rings - 1));
+    // An open cylinder: V − E + F = 0, and two boundary loops of `around` vertices.
+    assert_eq!(m.euler_characteristic(), 0);
+    let t = Topology::new(&m);
+    let boundary = t.boundary_vertices(m.num_vertices());
+    assert_eq!(boundary.iter().filter(|b| **b).count(), 2 * around);
+    // Every face normal points away from the X axis.
+    let p = m.positions();
+    for f in m.faces() {
+        let n = triangle_normal(&p[f[0]], &p[f[1]], &p[f[2]]);
+        let c = (p[f[0]] + p[f[1]] + p[f[2]]) / 3.0;
+        let radial = Vector3::new(0.0, c.y, c.z).normalize();
+        assert!(n.dot(&radial) > 0.9, "face {f:?} normal {n:?}");
+    }
+    // Ring radii follow the profile.
+    for k in 0..rings {
+        let x = 0.1 + 0.4 * k as f64 / (rings - 1) as f64;
+        let q = p[k * around + 3];
+        assert_close!(
+            (q.y * q.y + q.z * q.z).sqrt(),
+            0.05 + 0.02 * x,
+            rtol = 1e-12,
+            atol = 0.0
+        );
+    }
+    assert!(generators::tube(2, 5, 0.0, 1.0, |_| 1.0).is_err());
+    assert!(generators::tube(8, 5, 1.0, 0.0, |_| 1.0).is_err());
+    assert!(generators::tube(8, 5, 0.0, 1.0, |_| -1.0).is_err());
+}

@@ -5,12 +5,14 @@
 //! - [`volume`]: tetrahedral FEM bodies (beams, the limb) under anchors and loads
 //!   ([`VolumeScene`]), and the skinned soft-tissue limb ([`SoftTissueScene`]).
 //! - [`soft_tissue`]: the limb's skeleton, skinning and soft-tissue dynamics.
+//! - [`drape`]: a sleeve draped on the posed limb (Geng et al.'s shirt analogue, design §8).
 //! - [`load`]: one entry point for every kind ([`AnyScene`]).
 //!
 //! A scene builds only the energy terms it names: a scene without an obstacle runs no
 //! collision code.
 
 pub mod cloth;
+pub mod drape;
 pub mod load;
 pub mod soft_tissue;
 pub mod volume;

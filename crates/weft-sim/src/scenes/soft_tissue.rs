@@ -107,10 +107,58 @@ impl BoneTransform {
     }
 }
 
+/// Largest shoulder flexion and abduction of [`SkeletalMotion`] at amplitude 1 (rad).
+pub const SHOULDER_RANGE: f64 = 0.5;
+/// Mid-range and half-range of elbow flexion of [`SkeletalMotion`] at amplitude 1 (rad).
+pub const ELBOW_MID: f64 = 0.7;
+pub const ELBOW_HALF_RANGE: f64 = 0.6;
+
+/// A pose of the two-bone limb: the joint angles (rad) and the shoulder's vertical offset (m).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct ArmPose {
+    /// About +Y.
+    pub shoulder_flexion: f64,
+    /// About +Z.
+    pub shoulder_abduction: f64,
+    /// About +Y at the elbow; positive bends the forearm towards −Z (palm down).
+    pub elbow_flexion: f64,
+    /// Vertical shoulder offset (m).
+    pub bounce: f64,
+}
+
+impl ArmPose {
+    /// The transforms of the upper arm (bone 0, about the shoulder at the origin) and
+    /// the forearm (bone 1, about the elbow at `elbow`, chained to bone 0).
+    pub fn bone_transforms(&self, elbow: &Vector3<f64>) -> [BoneTransform; 2] {
+        let r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), self.shoulder_flexion);
+        let t0 = Vector3::new(0.0, 0.0, self.bounce);
+        let upper = BoneTransform {
+            rotation: r0,
+            translation: t0,
+        };
+        let re = Rotation3::from_axis_angle(&Vector3::y_axis(), self.elbow_flexion);
+        let fore = BoneTransform {
+            rotation: r0 * re,
+            translation: r0 * (elbow - re * elbow) + t0,
+        };
+        [upper, fore]
+    }
+}
+
+/// Linear-blend-skinning weight of the forearm at rest point `x` (the upper arm's is
+/// `1 − w`): a smoothstep across the elbow gap, at least ±5 cm wide.
+pub fn forearm_weight(limb: &LimbParams, x: &Vector3<f64>) -> f64 {
+    let joint_x = limb.joint * limb.length;
+    let half = (0.5 * limb.joint_gap).max(0.05);
+    let s = ((x.x - (joint_x - half)) / (2.0 * half)).clamp(0.0, 1.0);
+    s * s * (3.0 - 2.0 * s)
+}
+
 /// Smooth random skeletal motion of the two-bone limb: shoulder flexion (about Y) and
-/// abduction (about Z) within ±0.5 rad, elbow flexion in [0.1, 1.3] rad, and a vertical
-/// bounce of the shoulder within ±2 cm (walking-like, 1.2–2 Hz) — all scaled by the
-/// motion amplitude. Joint frequencies are 0.2–1 Hz.
+/// abduction (about Z) within ±[`SHOULDER_RANGE`], elbow flexion in [`ELBOW_MID`] ± [`ELBOW_HALF_RANGE`], and
+/// a vertical bounce of the shoulder within ±2 cm (walking-like, 1.2–2 Hz) — all scaled
+/// by the motion amplitude. Joint frequencies are 0.2–1 Hz.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SkeletalMotion {
     pub shoulder_flexion: Sinusoids,
@@ -123,30 +171,26 @@ impl SkeletalMotion {
     pub fn random(seed: u64, amplitude: f64) -> Self {
         let mut rng = SplitMix64::new(seed ^ SEED_SALT);
         Self {
-            shoulder_flexion: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
-            shoulder_abduction: Sinusoids::random(&mut rng, 0.0, 0.5 * amplitude, 0.2, 1.0),
-            elbow_flexion: Sinusoids::random(&mut rng, 0.7 * amplitude, 0.6 * amplitude, 0.2, 1.0),
+            shoulder_flexion: Sinusoids::random(&mut rng, 0.0, SHOULDER_RANGE * amplitude, 0.2, 1.0),
+            shoulder_abduction: Sinusoids::random(&mut rng, 0.0, SHOULDER_RANGE * amplitude, 0.2, 1.0),
+            elbow_flexion: Sinusoids::random(&mut rng, ELBOW_MID * amplitude, ELBOW_HALF_RANGE * amplitude, 0.2, 1.0),
             bounce: Sinusoids::random(&mut rng, 0.0, 0.02 * amplitude, 1.2, 2.0),
         }
     }
 
-    /// The transforms of the upper arm (bone 0, about the shoulder at the origin) and
-    /// the forearm (bone 1, about the elbow at `elbow`, chained to bone 0) at time `t`.
+    /// The pose at time `t` (s).
+    pub fn pose(&self, t: f64) -> ArmPose {
+        ArmPose {
+            shoulder_flexion: self.shoulder_flexion.at(t),
+            shoulder_abduction: self.shoulder_abduction.at(t),
+            elbow_flexion: self.elbow_flexion.at(t),
+            bounce: self.bounce.at(t),
+        }
+    }
+
+    /// The bone transforms at time `t` (see [`ArmPose::bone_transforms`]).
     pub fn bone_transforms(&self, t: f64, elbow: &Vector3<f64>) -> [BoneTransform; 2] {
-        let r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction.at(t))
-            * Rotation3::from_axis_angle(&Vector3::y_axis(), self.shoulder_flexion.at(t));
-        let t0 = Vector3::new(0.0, 0.0, self.bounce.at(t));
-        let upper = BoneTransform {
-            rotation: r0,
-            translation: t0,
-        };
-        // Elbow flexion bends the forearm towards −Z (palm down) about the elbow.
-        let re = Rotation3::from_axis_angle(&Vector3::y_axis(), self.elbow_flexion.at(t));
-        let fore = BoneTransform {
-            rotation: r0 * re,
-            translation: r0 * (elbow - re * elbow) + t0,
-        };
-        [upper, fore]
+        self.pose(t).bone_transforms(elbow)
     }
 }
 
@@ -213,18 +257,8 @@ impl SoftTissue {
         let gravity = ConstantForce::gravity(&masses, params.gravity)?;
         let bone_nodes = limb.all_bone_nodes();
         let fixed = crate::anchors::fixed_dofs(nv, &bone_nodes)?;
-        // Skinning weights: a smoothstep across the elbow gap (at least ±5 cm wide).
         let p = limb.params;
-        let joint_x = p.joint * p.length;
-        let half = (0.5 * p.joint_gap).max(0.05);
-        let forearm_weight: Vec<f64> = mesh
-            .positions()
-            .iter()
-            .map(|x| {
-                let s = ((x.x - (joint_x - half)) / (2.0 * half)).clamp(0.0, 1.0);
-                s * s * (3.0 - 2.0 * s)
-            })
-            .collect();
+        let forearm_weight: Vec<f64> = mesh.positions().iter().map(|x| forearm_weight(&p, x)).collect();
         let motion = SkeletalMotion::random(params.seed, params.motion_amplitude);
         let rest = mesh.flat_positions();
         let mut this_x = vec![0.0; 3 * nv];
@@ -345,7 +379,7 @@ impl SoftTissue {
 }
 
 /// Linear blend skinning of one point.
-fn blend(x: &Vector3<f64>, w: f64, transforms: &[BoneTransform; 2]) -> Vector3<f64> {
+pub(crate) fn blend(x: &Vector3<f64>, w: f64, transforms: &[BoneTransform; 2]) -> Vector3<f64> {
     transforms[0].apply(x) * (1.0 - w) + transforms[1].apply(x) * w
 }
 
