@@ -396,3 +396,87 @@ impl LimbDataset {
         self.sequences.iter().filter(move |s| s.split == name)
     }
 }
+
+/// One example of the `drape` dataset (design §8): the pose and the sleeve's kinematic
+/// guess and draped truth, flat `3V` (metres).
+#[derive(Debug, Clone)]
+pub struct DrapeExample {
+    /// `train`, `validation` or `test` (the split of its chunk).
+    pub split: String,
+    /// Shoulder flexion, shoulder abduction, elbow flexion (rad).
+    pub pose: [f64; 3],
+    pub guess: Vec<f64>,
+    pub truth: Vec<f64>,
+}
+
+/// The `drape` dataset: the rest sleeve and body and every example (docs/DATASETS.md).
+#[derive(Debug, Clone)]
+pub struct DrapeDataset {
+    pub dir: PathBuf,
+    /// The sleeve at rest (`sleeve.obj`); every example is in its vertex order.
+    pub sleeve: TriMesh,
+    /// The body at the neutral pose (`body.obj`).
+    pub body: TriMesh,
+    pub examples: Vec<DrapeExample>,
+}
+
+impl DrapeDataset {
+    /// Reads every chunk of the `drape` dataset in `dir`.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let (manifest_path, manifest) = read_manifest(dir)?;
+        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "drape" {
+            return Err(data_error(&manifest_path, "not a weft-dataset/1 drape manifest"));
+        }
+        let read = |name: &str| -> Result<TriMesh> {
+            let p = dir.join(name);
+            weft_mesh::io::read_obj(&p).map_err(|e| data_error(&p, e.to_string()))
+        };
+        let (sleeve, body) = (read("sleeve.obj")?, read("body.obj")?);
+        let v = sleeve.num_vertices();
+        let listed = manifest["sequences"]
+            .as_array()
+            .ok_or_else(|| data_error(&manifest_path, "no chunk list"))?;
+        let mut examples = Vec::new();
+        for entry in listed {
+            let path = dir.join(entry["path"].as_str().unwrap_or_default());
+            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+            let (f, pose) = f64_array(&path, &st, "pose", &[3])?;
+            let (fg, guess) = f64_array(&path, &st, "guess", &[v, 3])?;
+            let (ft, truth) = f64_array(&path, &st, "truth", &[v, 3])?;
+            if f != fg || f != ft {
+                return Err(data_error(
+                    &path,
+                    "pose, guess and truth hold different numbers of examples",
+                ));
+            }
+            let split = entry["split"].as_str().unwrap_or("train").to_string();
+            for k in 0..f {
+                examples.push(DrapeExample {
+                    split: split.clone(),
+                    pose: [pose[3 * k], pose[3 * k + 1], pose[3 * k + 2]],
+                    guess: guess[3 * v * k..3 * v * (k + 1)].to_vec(),
+                    truth: truth[3 * v * k..3 * v * (k + 1)].to_vec(),
+                });
+            }
+        }
+        if examples.is_empty() {
+            return Err(data_error(&manifest_path, "the dataset has no example"));
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            sleeve,
+            body,
+            examples,
+        })
+    }
+
+    /// The examples of one split as tensors (f32, metres).
+    pub fn tensors(&self, split: &str, device: &candle_core::Device) -> Result<crate::drape::DrapeTensors> {
+        let chosen: Vec<&DrapeExample> = self.examples.iter().filter(|e| e.split == split).collect();
+        let pose: Vec<f64> = chosen.iter().flat_map(|e| e.pose).collect();
+        let guess: Vec<f64> = chosen.iter().flat_map(|e| e.guess.iter().copied()).collect();
+        let truth: Vec<f64> = chosen.iter().flat_map(|e| e.truth.iter().copied()).collect();
+        crate::drape::DrapeTensors::new(&pose, &guess, &truth, self.sleeve.num_vertices(), device)
+    }
+}

@@ -14,6 +14,8 @@
 //!   same potential minimised over every vertex;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
 //!   sequences, training in candle, and a runtime over the trained weights outside it;
+//! - [`drape`]: Geng et al.'s pose → cloth network with the projection layers inside
+//!   training (a fixed, learned global or learned per-vertex μ);
 //! - [`altconv`]: Alt-ConvLSTM and its graph ConvLSTM baselines for soft-tissue dynamics —
 //!   the cells on the Kipf–Welling normalised adjacency
 //!   ([`graph::NormalizedAdjacency`]), teacher-forced training, and a roll-out runtime
@@ -51,6 +53,7 @@ pub mod altconv;
 pub mod checkpoint;
 pub mod convert;
 pub mod data;
+pub mod drape;
 pub mod embed;
 pub mod embed_training;
 pub mod error;

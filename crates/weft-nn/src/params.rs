@@ -19,6 +19,8 @@ pub enum Init {
     Zeros,
     /// Uniform in `±bound`.
     Uniform(f64),
+    /// Every entry equal to the value.
+    Constant(f64),
 }
 
 impl Init {
@@ -65,6 +67,7 @@ impl Params {
         let values: Vec<f32> = match init {
             Init::Zeros => vec![0.0; n],
             Init::Uniform(bound) => (0..n).map(|_| self.rng.uniform(-bound, bound) as f32).collect(),
+            Init::Constant(c) => vec![c as f32; n],
         };
         let var = Var::from_tensor(&Tensor::from_vec(values, shape, &self.device)?)?;
         let t = var.as_tensor().clone();

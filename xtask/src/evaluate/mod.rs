@@ -1,6 +1,6 @@
 //! `cargo xtask evaluate`: every method against its reference, speed beside accuracy.
 //!
-//! Each experiment (`sim`, `proj`, `embed`, `nnwarp`, `altconv`) runs its methods and a tight
+//! Each experiment (`sim`, `proj`, `embed`, `nnwarp`, `altconv`, `drape`) runs its methods and a tight
 //! reference in one process, so time ratios compare one machine state, and returns an
 //! [`ExperimentOutput`]: tidy [`Record`]s, roll-out curves, energies and renders. Outputs
 //! are cached per experiment in `OUT/experiments/<name>.json`, so an interrupted
@@ -9,6 +9,7 @@
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
 pub mod altconv;
+pub mod drape;
 pub mod embed;
 pub mod nnwarp;
 pub mod paper;
@@ -27,7 +28,7 @@ use crate::output::write_json;
 pub use results::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
 
 /// Experiments `evaluate` runs, in order.
-pub const EXPERIMENTS: [&str; 5] = ["sim", "proj", "embed", "nnwarp", "altconv"];
+pub const EXPERIMENTS: [&str; 6] = ["sim", "proj", "embed", "nnwarp", "altconv", "drape"];
 
 #[derive(Args)]
 pub struct EvaluateArgs {
@@ -37,7 +38,7 @@ pub struct EvaluateArgs {
     /// Shorthand for --size quick.
     #[arg(long)]
     quick: bool,
-    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv.
+    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv, drape.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Output directory (default: out/evaluate-<size>).
@@ -114,6 +115,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             "embed" => embed::run(&ctx)?,
             "nnwarp" => nnwarp::run(&ctx)?,
             "altconv" => altconv::run(&ctx)?,
+            "drape" => drape::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();

@@ -345,11 +345,11 @@ const PENDING: [(&str, &str, bool); 6] = [
     (
         "Geng et al. Tables 1–3 (SqrtMSE, MaxDist of network, postprocess and trained postprocess)",
         "drape",
-        false,
+        true,
     ),
     (
         "Geng et al. Table 4 (compression and stretching energy errors)",
         "drape",
-        false,
+        true,
     ),
 ];

@@ -41,6 +41,7 @@ fn pareto_metric(experiment: &str) -> (&'static str, &'static str, Option<&'stat
     match experiment {
         "proj" => ("sqrt-mse", "SqrtMSE against the tight reference (mm)", None),
         "nnwarp" => ("rel-error", "rel-error against full nonlinear FEM", None),
+        "drape" => ("sqrtmse-mm", "SqrtMSE on the test split (mm)", Some("test")),
         "altconv" => (
             "error-mm-rollout50",
             "50-step roll-out error on unseen motions (mm)",
@@ -266,6 +267,7 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         r.metric == "m-rms"
             || r.metric == "sqrt-mse"
             || (r.metric == "error-mm-rollout10" && r.split.as_deref() == Some("test"))
+            || (r.metric == "sqrtmse-mm" && r.split.as_deref() == Some("test"))
     }) {
         let p = dir
             .join("predictions")

@@ -1,0 +1,324 @@
+//! Geng et al.'s pose → cloth network with physics postprocesses in training (§2–6):
+//! a network maps the joint angles θ to per-vertex offsets `d(θ)` added to the kinematic
+//! guess, `r̂ = r̃(θ) + d(θ)` (Geng et al. Eq. in §2, after Jin et al.), and an optional
+//! projection layer maps `r̂` to `r*` ([`ops::InextensibilityProjection`] or
+//! [`ops::QuasistaticProjection`]). Training minimises `Σ ‖r* − r_T‖²` (§4, §6), so the
+//! network learns what the layer does to its output.
+//!
+//! The network is the same for every method: a small MLP (the issue allows an MLP in
+//! place of Jin et al.'s image CNN), leaky-ReLU hidden layers and a linear output scaled
+//! by `offset_scale` (m), so the output layer's weights are of order one.
+//!
+//! μ of the quasistatic layer is either fixed or learned, as one global value or one per
+//! vertex (Eq. 15–16). A learned μ is parameterised by `log μ`, which keeps it positive
+//! (weft-proj rejects μ ≤ 0) and makes a step of Adam a relative change of μ; it has its
+//! own parameter set so it can take its own learning rate.
+
+use candle_core::{DType, Device, Tensor};
+
+use crate::error::{Error, Result};
+use crate::layers::{Dense, leaky_relu};
+use crate::ops::{InextensibilityProjection, QuasistaticProjection};
+use crate::params::{Init, Params};
+
+/// Shape of [`DrapeNet`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DrapeNetConfig {
+    /// Widths of the hidden layers.
+    pub hidden: Vec<usize>,
+    /// The output is `offset_scale · (x W + b)` metres.
+    pub offset_scale: f64,
+}
+
+impl Default for DrapeNetConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![64, 256],
+            offset_scale: 0.01,
+        }
+    }
+}
+
+/// θ `[B, 3]` → offsets `d` `[B, V, 3]` (m).
+#[derive(Debug, Clone)]
+pub struct DrapeNet {
+    hidden: Vec<Dense>,
+    out: Dense,
+    scale: f64,
+    num_vertices: usize,
+}
+
+impl DrapeNet {
+    pub fn new(params: &mut Params, config: &DrapeNetConfig, num_vertices: usize) -> Result<Self> {
+        if config.hidden.is_empty() || config.hidden.contains(&0) || !(config.offset_scale > 0.0) {
+            return Err(Error::InvalidParameter {
+                name: "drape network shape",
+                value: format!("hidden {:?}, offset scale {}", config.hidden, config.offset_scale),
+                reason: "needs non-empty, non-zero hidden widths and a positive offset scale",
+            });
+        }
+        let mut hidden = Vec::with_capacity(config.hidden.len());
+        let mut c_in = 3;
+        for (k, &w) in config.hidden.iter().enumerate() {
+            hidden.push(Dense::new(params, &format!("hidden{k}"), c_in, w)?);
+            c_in = w;
+        }
+        let out = Dense::new(params, "out", c_in, 3 * num_vertices)?;
+        Ok(Self {
+            hidden,
+            out,
+            scale: config.offset_scale,
+            num_vertices,
+        })
+    }
+
+    pub fn num_vertices(&self) -> usize {
+        self.num_vertices
+    }
+
+    /// The offsets `d(θ)` for poses `[B, 3]` (rad), `[B, V, 3]` in metres.
+    pub fn offsets(&self, pose: &Tensor) -> Result<Tensor> {
+        let (b, three) = pose.dims2()?;
+        if three != 3 {
+            return Err(Error::Shape {
+                what: "drape network input",
+                expected: "[B, 3] joint angles".into(),
+                got: format!("{:?}", pose.dims()),
+            });
+        }
+        let mut x = pose.clone();
+        for layer in &self.hidden {
+            x = leaky_relu(&layer.forward(&x)?)?;
+        }
+        Ok((self.out.forward(&x)? * self.scale)?.reshape((b, self.num_vertices, 3))?)
+    }
+}
+
+/// μ of the quasistatic layer.
+#[derive(Debug, Clone)]
+pub enum Mu {
+    /// A fixed global μ.
+    Fixed(f64),
+    /// A learned `log μ`: shape `[1]` (global) or `[V]` (per vertex).
+    Learned(Tensor),
+}
+
+impl Mu {
+    /// A learned μ starting at `start` everywhere, in `params` under `mu.log`.
+    pub fn learned(params: &mut Params, start: f64, per_vertex: Option<usize>) -> Result<Self> {
+        if !(start > 0.0 && start.is_finite()) {
+            return Err(Error::InvalidParameter {
+                name: "learned mu start",
+                value: start.to_string(),
+                reason: "must be positive and finite",
+            });
+        }
+        let n = per_vertex.unwrap_or(1);
+        Ok(Self::Learned(params.create(
+            "mu.log",
+            &[n],
+            Init::Constant(start.ln()),
+        )?))
+    }
+
+    /// μ as a tensor (`[1]` or `[V]`).
+    pub fn value(&self, device: &Device) -> Result<Tensor> {
+        Ok(match self {
+            Self::Fixed(mu) => Tensor::new(&[*mu as f32], device)?,
+            Self::Learned(log_mu) => log_mu.exp()?,
+        })
+    }
+}
+
+/// What follows the network.
+#[derive(Debug, Clone)]
+pub enum Postprocess {
+    None,
+    Inextensibility(InextensibilityProjection),
+    Quasistatic { op: QuasistaticProjection, mu: Mu },
+}
+
+/// The network and its postprocess.
+#[derive(Debug, Clone)]
+pub struct DrapeModel {
+    pub net: DrapeNet,
+    pub post: Postprocess,
+}
+
+impl DrapeModel {
+    /// `r̂ = r̃ + d(θ)` for poses `[B, 3]` and guesses `[B, V, 3]` (m).
+    pub fn network_output(&self, pose: &Tensor, guess: &Tensor) -> Result<Tensor> {
+        Ok((guess + self.net.offsets(pose)?)?)
+    }
+
+    /// `r*`: the postprocess applied to [`DrapeModel::network_output`].
+    pub fn predict(&self, pose: &Tensor, guess: &Tensor) -> Result<Tensor> {
+        let r_hat = self.network_output(pose, guess)?;
+        match &self.post {
+            Postprocess::None => Ok(r_hat),
+            Postprocess::Inextensibility(op) => op.apply(&r_hat),
+            Postprocess::Quasistatic { op, mu } => op.apply(&r_hat, &mu.value(r_hat.device())?),
+        }
+    }
+}
+
+/// Geng et al.'s training energy per example, in mm²: the mean over the batch of
+/// `Σ_i ‖r*_i − r_T,i‖² / V` (the square of SqrtMSE), so its scale does not depend on
+/// the mesh size.
+pub fn loss(prediction: &Tensor, truth: &Tensor) -> Result<Tensor> {
+    let (_, v, _) = truth.dims3()?;
+    let d = ((prediction - truth)? * 1e3)?;
+    Ok((d.sqr()?.sum_all()? / (v * prediction.dim(0)?) as f64)?)
+}
+
+/// Poses, guesses and truths of a set of examples as f32 tensors.
+#[derive(Debug, Clone)]
+pub struct DrapeTensors {
+    pub pose: Tensor,
+    pub guess: Tensor,
+    pub truth: Tensor,
+}
+
+impl DrapeTensors {
+    /// From flat f64 arrays: poses `3N`, guesses and truths `3VN` (m).
+    pub fn new(pose: &[f64], guess: &[f64], truth: &[f64], num_vertices: usize, device: &Device) -> Result<Self> {
+        let n = pose.len() / 3;
+        if pose.len() != 3 * n || guess.len() != 3 * num_vertices * n || truth.len() != guess.len() || n == 0 {
+            return Err(Error::Shape {
+                what: "drape examples",
+                expected: format!("3N pose values and 3·{num_vertices}·N guess and truth values, N ≥ 1"),
+                got: format!("{}, {} and {}", pose.len(), guess.len(), truth.len()),
+            });
+        }
+        let t = |what: &'static str, x: &[f64], shape: &[usize]| -> Result<Tensor> {
+            let f = crate::convert::f64_to_f32(what, x)?;
+            Ok(Tensor::from_vec(f, shape, device)?)
+        };
+        Ok(Self {
+            pose: t("drape poses", pose, &[n, 3])?,
+            guess: t("drape guesses", guess, &[n, num_vertices, 3])?,
+            truth: t("drape truths", truth, &[n, num_vertices, 3])?,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.pose.dim(0).unwrap_or(0)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Every example's pose, flat `3N` f64 (rad).
+    pub fn poses(&self) -> Result<Vec<f64>> {
+        Ok(self.pose.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
+    }
+
+    /// Every example's truth, flat f64 (m).
+    pub fn truths(&self) -> Result<Vec<Vec<f64>>> {
+        let t = self.truth.to_dtype(DType::F64)?;
+        (0..self.len())
+            .map(|k| Ok(t.get(k)?.flatten_all()?.to_vec1::<f64>()?))
+            .collect()
+    }
+
+    /// The examples at `indices`.
+    pub fn select(&self, indices: &[usize]) -> Result<Self> {
+        let idx = Tensor::from_vec(
+            indices.iter().map(|&i| i as u32).collect::<Vec<_>>(),
+            indices.len(),
+            self.pose.device(),
+        )?;
+        Ok(Self {
+            pose: self.pose.index_select(&idx, 0)?,
+            guess: self.guess.index_select(&idx, 0)?,
+            truth: self.truth.index_select(&idx, 0)?,
+        })
+    }
+}
+
+/// Optimisers of a [`DrapeModel`]: one for the network, one for a learned μ.
+#[derive(Debug)]
+pub struct DrapeOptimizers<'a> {
+    pub net_params: &'a Params,
+    pub net: &'a mut crate::adam::Adam,
+    pub mu: Option<(&'a Params, &'a mut crate::adam::Adam)>,
+}
+
+/// One epoch over `data` in shuffled batches (seeded by `seed`); the mean training loss
+/// (mm²).
+pub fn train_epoch(
+    model: &DrapeModel,
+    opt: &mut DrapeOptimizers<'_>,
+    data: &DrapeTensors,
+    batch: usize,
+    seed: u64,
+) -> Result<f64> {
+    let n = data.len();
+    if batch == 0 || n == 0 {
+        return Err(Error::InvalidParameter {
+            name: "drape training batch",
+            value: format!("batch {batch}, {n} examples"),
+            reason: "needs a batch of at least 1 and at least one example",
+        });
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    // Fisher–Yates with SplitMix64, so an epoch's order depends on the seed alone.
+    let mut rng = weft_sim::rng::SplitMix64::new(seed);
+    for i in (1..n).rev() {
+        order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
+    }
+    let mut total = 0.0;
+    for chunk in order.chunks(batch) {
+        let b = data.select(chunk)?;
+        let l = loss(&model.predict(&b.pose, &b.guess)?, &b.truth)?;
+        let value = f64::from(l.to_scalar::<f32>()?);
+        if !value.is_finite() {
+            return Err(Error::NonFinite {
+                what: "drape training loss",
+                index: 0,
+            });
+        }
+        let grads = l.backward()?;
+        opt.net.step(opt.net_params, &grads)?;
+        if let Some((params, adam)) = opt.mu.as_mut() {
+            adam.step(params, &grads)?;
+        }
+        total += value * chunk.len() as f64;
+    }
+    Ok(total / n as f64)
+}
+
+/// `r*` of every example, in batches, as flat f64 per example (m).
+pub fn predict_all(model: &DrapeModel, data: &DrapeTensors, batch: usize) -> Result<Vec<Vec<f64>>> {
+    let n = data.len();
+    let mut out = Vec::with_capacity(n);
+    let idx: Vec<usize> = (0..n).collect();
+    for chunk in idx.chunks(batch.max(1)) {
+        let b = data.select(chunk)?;
+        let r = model.predict(&b.pose, &b.guess)?.to_dtype(DType::F64)?;
+        for k in 0..chunk.len() {
+            out.push(r.get(k)?.flatten_all()?.to_vec1::<f64>()?);
+        }
+    }
+    Ok(out)
+}
+
+/// Geng et al.'s per-example errors (mm): SqrtMSE `sqrt(Σ_i ‖r_i − r_T,i‖² / V)` and
+/// MaxDist `max_i ‖r_i − r_T,i‖` (docs/DRAPE.md; per-vertex normalisation).
+pub fn sqrtmse_maxdist_mm(prediction: &[f64], truth: &[f64]) -> Result<(f64, f64)> {
+    if prediction.len() != truth.len() || prediction.is_empty() || !prediction.len().is_multiple_of(3) {
+        return Err(Error::Shape {
+            what: "drape error",
+            expected: format!("{} coordinates", truth.len()),
+            got: format!("{}", prediction.len()),
+        });
+    }
+    let (mut sum, mut max) = (0.0f64, 0.0f64);
+    for (p, t) in prediction.chunks_exact(3).zip(truth.chunks_exact(3)) {
+        let d2 = (p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2) + (p[2] - t[2]).powi(2);
+        sum += d2;
+        max = max.max(d2);
+    }
+    let v = (prediction.len() / 3) as f64;
+    Ok((1e3 * (sum / v).sqrt(), 1e3 * max.sqrt()))
+}

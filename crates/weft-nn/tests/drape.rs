@@ -1,0 +1,151 @@
+//! Geng et al.'s pose → cloth training with the projection layers (weft_nn::drape) on the
+//! quick drape scene: the gradient of the whole training loss into a learned μ (global
+//! and per vertex) against finite differences, and short training runs in which the
+//! trained postprocess lowers the training loss.
+
+use std::sync::Arc;
+
+use candle_core::{Device, Tensor};
+use weft_nn::adam::{Adam, AdamSettings};
+use weft_nn::drape::{
+    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, Mu, Postprocess, loss, train_epoch,
+};
+use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
+use weft_nn::params::Params;
+use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
+use weft_sim::rng::SplitMix64;
+use weft_sim::scenes::drape::{Drape, DrapeParams};
+use weft_sim::scenes::soft_tissue::ArmPose;
+
+/// Six solved examples of the quick scene (the converged ones of the first draws).
+fn examples() -> (Drape, DrapeTensors) {
+    let d = Drape::new(DrapeParams::quick()).unwrap();
+    let mut rng = SplitMix64::new(3);
+    let (mut pose, mut guess, mut truth) = (Vec::new(), Vec::new(), Vec::new());
+    while pose.len() < 18 {
+        if let Ok(e) = d.solve(&ArmPose::sample(&mut rng)) {
+            pose.extend(e.pose.angles());
+            guess.extend(e.guess);
+            truth.extend(e.truth);
+        }
+    }
+    let v = d.sleeve().num_vertices();
+    let t = DrapeTensors::new(&pose, &guess, &truth, v, &Device::Cpu).unwrap();
+    (d, t)
+}
+
+fn quasistatic(d: &Drape) -> QuasistaticProjection {
+    QuasistaticProjection::new(Arc::new(
+        QuasistaticLayer::new(d.sleeve(), QuasistaticParams::default()).unwrap(),
+    ))
+}
+
+#[test]
+fn the_mu_gradient_of_the_training_loss_matches_finite_differences() {
+    let (d, data) = examples();
+    let v = d.sleeve().num_vertices();
+    for per_vertex in [None, Some(v)] {
+        let mut net_params = Params::new(&Device::Cpu, 5);
+        let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+        let mut mu_params = Params::new(&Device::Cpu, 6);
+        let mu = Mu::learned(&mut mu_params, 0.1, per_vertex).unwrap();
+        let Mu::Learned(log_mu) = &mu else { unreachable!() };
+        let log_mu = log_mu.clone();
+        let model = DrapeModel {
+            net,
+            post: Postprocess::Quasistatic {
+                op: quasistatic(&d),
+                mu,
+            },
+        };
+        let l = loss(&model.predict(&data.pose, &data.guess).unwrap(), &data.truth).unwrap();
+        let grads = l.backward().unwrap();
+        let g: Vec<f32> = grads.get(&log_mu).unwrap().to_vec1().unwrap();
+        // A direction in log μ: all ones (global) or alternating signs (per vertex).
+        let dir: Vec<f32> = (0..g.len()).map(|i| if i % 3 == 2 { -1.0 } else { 1.0 }).collect();
+        let analytic: f64 = g.iter().zip(&dir).map(|(a, b)| f64::from(a * b)).sum();
+        let var = &mu_params.vars()["mu.log"];
+        let base: Vec<f32> = log_mu.to_vec1().unwrap();
+        let at = |h: f32| -> f64 {
+            let moved: Vec<f32> = base.iter().zip(&dir).map(|(b, d)| b + h * d).collect();
+            var.set(&Tensor::from_vec(moved, base.len(), &Device::Cpu).unwrap())
+                .unwrap();
+            let l = loss(&model.predict(&data.pose, &data.guess).unwrap(), &data.truth).unwrap();
+            f64::from(l.to_scalar::<f32>().unwrap())
+        };
+        let h = 0.02;
+        let fd = (at(h) - at(-h)) / (2.0 * f64::from(h));
+        assert!(analytic.abs() > 1e-3, "the μ gradient is zero: {analytic}");
+        assert!(
+            (fd - analytic).abs() <= 0.02 * analytic.abs(),
+            "per vertex {}: analytic {analytic}, finite differences {fd}",
+            per_vertex.is_some()
+        );
+    }
+}
+
+/// Trains the network alone for `epochs`, then with `post` for as many, returning the
+/// training loss with the postprocess before and after its training.
+fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params) -> Postprocess) -> (f64, f64) {
+    let v = d.sleeve().num_vertices();
+    let mut net_params = Params::new(&Device::Cpu, 9);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+    let settings = AdamSettings {
+        learning_rate: 1e-3,
+        ..AdamSettings::default()
+    };
+    let mut adam = Adam::new(&net_params, settings).unwrap();
+    let mut model = DrapeModel {
+        net,
+        post: Postprocess::None,
+    };
+    for epoch in 0..30 {
+        let mut opt = DrapeOptimizers {
+            net_params: &net_params,
+            net: &mut adam,
+            mu: None,
+        };
+        train_epoch(&model, &mut opt, data, 3, epoch).unwrap();
+    }
+    let mut mu_params = Params::new(&Device::Cpu, 10);
+    model.post = post(&mut mu_params);
+    let eval = |m: &DrapeModel| {
+        f64::from(
+            loss(&m.predict(&data.pose, &data.guess).unwrap(), &data.truth)
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap(),
+        )
+    };
+    let before = eval(&model);
+    let mut adam = Adam::new(&net_params, settings).unwrap();
+    for epoch in 0..8 {
+        let mut opt = DrapeOptimizers {
+            net_params: &net_params,
+            net: &mut adam,
+            mu: None,
+        };
+        train_epoch(&model, &mut opt, data, 3, 100 + epoch).unwrap();
+    }
+    (before, eval(&model))
+}
+
+#[test]
+fn training_through_the_quasistatic_layer_lowers_the_training_loss() {
+    let (d, data) = examples();
+    let (before, after) = pretrain_then_train(&d, &data, |_| Postprocess::Quasistatic {
+        op: quasistatic(&d),
+        mu: Mu::Fixed(0.1),
+    });
+    assert!(after < 0.9 * before, "training loss {before} → {after} mm²");
+}
+
+#[test]
+fn training_through_the_inextensibility_layer_lowers_the_training_loss() {
+    let (d, data) = examples();
+    let layer = Arc::new(InextensibilityLayer::new(d.sleeve(), 0.1, SocpSettings::default()).unwrap());
+    let (before, after) = pretrain_then_train(&d, &data, |_| {
+        Postprocess::Inextensibility(InextensibilityProjection::new(layer.clone()))
+    });
+    assert!(after < 0.9 * before, "training loss {before} → {after} mm²");
+}
