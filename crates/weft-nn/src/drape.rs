@@ -153,11 +153,19 @@ impl DrapeModel {
 
     /// `r*`: the postprocess applied to [`DrapeModel::network_output`].
     pub fn predict(&self, pose: &Tensor, guess: &Tensor) -> Result<Tensor> {
+        self.predict_keyed(pose, guess, None)
+    }
+
+    /// [`predict`](Self::predict) naming the examples (their indices in the training set),
+    /// so either layer warm-starts each from its previous solution.
+    pub fn predict_keyed(&self, pose: &Tensor, guess: &Tensor, keys: Option<&[usize]>) -> Result<Tensor> {
         let r_hat = self.network_output(pose, guess)?;
-        match &self.post {
-            Postprocess::None => Ok(r_hat),
-            Postprocess::Inextensibility(op) => op.apply(&r_hat),
-            Postprocess::Quasistatic { op, mu } => op.apply(&r_hat, &mu.value(r_hat.device())?),
+        match (&self.post, keys) {
+            (Postprocess::None, _) => Ok(r_hat),
+            (Postprocess::Inextensibility(op), None) => op.apply(&r_hat),
+            (Postprocess::Inextensibility(op), Some(k)) => op.apply_keyed(&r_hat, k),
+            (Postprocess::Quasistatic { op, mu }, None) => op.apply(&r_hat, &mu.value(r_hat.device())?),
+            (Postprocess::Quasistatic { op, mu }, Some(k)) => op.apply_keyed(&r_hat, &mu.value(r_hat.device())?, k),
         }
     }
 }
@@ -245,7 +253,8 @@ pub struct DrapeOptimizers<'a> {
 }
 
 /// One epoch over `data` in shuffled batches (seeded by `seed`); the mean training loss
-/// (mm²).
+/// (mm²). The layers warm-start every example from its solution of the previous epoch
+/// (keys: the examples' indices in `data`).
 pub fn train_epoch(
     model: &DrapeModel,
     opt: &mut DrapeOptimizers<'_>,
@@ -270,7 +279,7 @@ pub fn train_epoch(
     let mut total = 0.0;
     for chunk in order.chunks(batch) {
         let b = data.select(chunk)?;
-        let l = loss(&model.predict(&b.pose, &b.guess)?, &b.truth)?;
+        let l = loss(&model.predict_keyed(&b.pose, &b.guess, Some(chunk))?, &b.truth)?;
         let value = f64::from(l.to_scalar::<f32>()?);
         if !value.is_finite() {
             return Err(Error::NonFinite {

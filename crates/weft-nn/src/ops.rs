@@ -302,27 +302,98 @@ fn examples(flat: &[f64], num_vertices: usize) -> Vec<&[f64]> {
     flat.chunks_exact(3 * num_vertices).collect()
 }
 
+/// The solutions of an op's last forward pass, kept for its backward pass: keyed by the
+/// exact inputs, so the backward pass of that same call reuses them and any other call
+/// solves again (the forward solve is deterministic either way).
+#[derive(Debug)]
+struct LastForward<S> {
+    inputs: Vec<f32>,
+    solutions: Vec<S>,
+}
+
+type ForwardCache<S> = Arc<std::sync::Mutex<Option<LastForward<S>>>>;
+
+/// The cached solutions for exactly `inputs`, if the last forward pass had them.
+fn take_cached<S>(cache: &ForwardCache<S>, inputs: &[f32]) -> Option<Vec<S>> {
+    let mut guard = cache.lock().ok()?;
+    if guard.as_ref().is_some_and(|l| l.inputs == inputs) {
+        guard.take().map(|l| l.solutions)
+    } else {
+        None
+    }
+}
+
+fn store_cached<S>(cache: &ForwardCache<S>, inputs: Vec<f32>, solutions: Vec<S>) {
+    if let Ok(mut guard) = cache.lock() {
+        *guard = Some(LastForward { inputs, solutions });
+    }
+}
+
+/// `keys` as the op's example keys, one per batch entry of `predictions`.
+fn example_keys(what: &'static str, predictions: &Tensor, keys: &[usize]) -> crate::error::Result<Arc<Vec<usize>>> {
+    if keys.len() != predictions.dim(0)? {
+        return Err(crate::error::Error::Shape {
+            what,
+            expected: format!("one per example ({})", predictions.dim(0)?),
+            got: format!("{}", keys.len()),
+        });
+    }
+    Ok(Arc::new(keys.to_vec()))
+}
+
 /// Geng et al.'s quasistatic projection (§5) as a candle op over a batch: predictions
 /// `[B, V, 3]` (f32, metres) and the zero-length scaling μ — `[1]` for one global μ or `[V]`
 /// for one μ_i per vertex (Eq. 15–16) — to the equilibria `r*` `[B, V, 3]`. The solves run
 /// in f64 in weft-proj, one example per thread.
 ///
 /// The backward pass is weft-proj's adjoint (Eq. 14 for `r̂`, Eq. 16 for μ, summed over the
-/// batch). The factorisation it needs is not kept between the passes, so the backward pass
-/// solves each example again (the forward solve is deterministic): twice the forward cost
-/// in training, in exchange for an op that holds no state.
+/// batch). It reuses the forward pass's solutions when it follows it with the same inputs
+/// (the op keeps the last call's), and solves again otherwise.
+///
+/// Warm starts (training): [`QuasistaticProjection::apply_keyed`] names each example of the
+/// batch, and Newton starts from that example's previous equilibrium instead of from its
+/// prediction.
 #[derive(Debug, Clone)]
 pub struct QuasistaticProjection {
     layer: Arc<weft_proj::QuasistaticLayer>,
+    keys: Option<Arc<Vec<usize>>>,
+    previous: Arc<std::sync::Mutex<std::collections::HashMap<usize, Vec<f64>>>>,
+    last: ForwardCache<weft_proj::quasistatic::QuasistaticSolution>,
 }
 
 impl QuasistaticProjection {
     pub fn new(layer: Arc<weft_proj::QuasistaticLayer>) -> Self {
-        Self { layer }
+        Self {
+            layer,
+            keys: None,
+            previous: Arc::default(),
+            last: Arc::default(),
+        }
     }
 
     /// `r*` for predictions `[B, V, 3]` and μ (`[1]` or `[V]`), differentiable in both.
     pub fn apply(&self, predictions: &Tensor, mu: &Tensor) -> crate::error::Result<Tensor> {
+        self.check(predictions, mu)?;
+        let op = Self {
+            keys: None,
+            ..self.clone()
+        };
+        Ok(predictions.contiguous()?.apply_op2(&mu.contiguous()?, op)?)
+    }
+
+    /// [`apply`](Self::apply) with example `keys[b]` for batch entry `b`: each solve starts
+    /// from the equilibrium this op last found for the same key (a warm start), and its
+    /// result is remembered for the key's next call.
+    pub fn apply_keyed(&self, predictions: &Tensor, mu: &Tensor, keys: &[usize]) -> crate::error::Result<Tensor> {
+        self.check(predictions, mu)?;
+        let op = Self {
+            keys: Some(example_keys("quasistatic projection keys", predictions, keys)?),
+            ..self.clone()
+        };
+        Ok(predictions.contiguous()?.apply_op2(&mu.contiguous()?, op)?)
+    }
+
+    fn check(&self, predictions: &Tensor, mu: &Tensor) -> crate::error::Result<()> {
         let v = self.layer.num_vertices();
         let (_, pv, three) = predictions.dims3()?;
         let m = mu.dims1()?;
@@ -333,7 +404,7 @@ impl QuasistaticProjection {
                 got: format!("{:?} and {:?}", predictions.dims(), mu.dims()),
             });
         }
-        Ok(predictions.contiguous()?.apply_op2(&mu.contiguous()?, self.clone())?)
+        Ok(())
     }
 
     fn scaling(mu: &[f32]) -> weft_proj::ZeroLengthScaling {
@@ -344,18 +415,40 @@ impl QuasistaticProjection {
         }
     }
 
-    /// Every example's forward solve, in parallel.
+    /// Every example's forward solve, in parallel, warm-started where a key has a previous
+    /// equilibrium.
     fn solve(
         &self,
         predictions: &[f32],
         mu: &[f32],
     ) -> candle_core::Result<Vec<weft_proj::quasistatic::QuasistaticSolution>> {
         let x = convert::f32_to_f64("quasistatic projection input", predictions).map_err(op_error)?;
-        self.layer
-            .forward_batch(&examples(&x, self.layer.num_vertices()), &Self::scaling(mu))
-            .into_iter()
-            .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
-            .collect()
+        let preds = examples(&x, self.layer.num_vertices());
+        let starts: Vec<Option<Vec<f64>>> = match (&self.keys, self.previous.lock()) {
+            (Some(keys), Ok(previous)) => keys.iter().map(|k| previous.get(k).cloned()).collect(),
+            _ => vec![None; preds.len()],
+        };
+        let scaling = Self::scaling(mu);
+        let solutions: Vec<_> = preds
+            .par_iter()
+            .zip(&starts)
+            .map(|(p, s)| {
+                self.layer
+                    .forward_from(p, &scaling, s.as_deref())
+                    .map(|(solution, _)| solution)
+                    .map_err(op_error)
+            })
+            .collect::<candle_core::Result<_>>()?;
+        if let (Some(keys), Ok(mut previous)) = (&self.keys, self.previous.lock()) {
+            for (k, s) in keys.iter().zip(&solutions) {
+                previous.insert(*k, s.positions().to_vec());
+            }
+        }
+        Ok(solutions)
+    }
+
+    fn inputs(predictions: &[f32], mu: &[f32]) -> Vec<f32> {
+        predictions.iter().chain(mu).copied().collect()
     }
 }
 
@@ -371,9 +464,11 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let solutions = self.solve(f32_slice(self.name(), s1, l1)?, f32_slice(self.name(), s2, l2)?)?;
+        let (x, m) = (f32_slice(self.name(), s1, l1)?, f32_slice(self.name(), s2, l2)?);
+        let solutions = self.solve(x, m)?;
         let flat: Vec<f64> = solutions.iter().flat_map(|s| s.positions().iter().copied()).collect();
         let out = convert::f64_to_f32("quasistatic projection output", &flat).map_err(op_error)?;
+        store_cached(&self.last, Self::inputs(x, m), solutions);
         Ok((CpuStorage::F32(out), l1.shape().clone()))
     }
 
@@ -386,7 +481,10 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
     ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
         let x: Vec<f32> = predictions.flatten_all()?.to_vec1()?;
         let m: Vec<f32> = mu.flatten_all()?.to_vec1()?;
-        let solutions = self.solve(&x, &m)?;
+        let solutions = match take_cached(&self.last, &Self::inputs(&x, &m)) {
+            Some(s) => s,
+            None => self.solve(&x, &m)?,
+        };
         let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
         let g = convert::f32_to_f64("quasistatic projection output gradient", &g).map_err(op_error)?;
         let back = self
@@ -413,20 +511,52 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
 /// Geng et al.'s inextensibility projection (§4, the edge-length SOCP) as a candle op over a
 /// batch: predictions `[B, V, 3]` (f32, metres) to the nearest shapes `r*` whose edges are
 /// at most `1 + ε` times their rest length. The solves run in f64 in weft-proj, one example
-/// per thread; the backward pass is weft-proj's (Eq. 11), after solving each example again
-/// (as [`QuasistaticProjection`], the op keeps no state).
+/// per thread; the backward pass is weft-proj's (Eq. 11), on the forward pass's solutions
+/// when it follows it with the same inputs (as [`QuasistaticProjection`]).
+///
+/// Warm starts (training): [`InextensibilityProjection::apply_keyed`] names each example, and
+/// its solve starts from that example's previous solution and active set
+/// (`InextensibilityLayer::forward_from`).
 #[derive(Debug, Clone)]
 pub struct InextensibilityProjection {
     layer: Arc<weft_proj::InextensibilityLayer>,
+    keys: Option<Arc<Vec<usize>>>,
+    previous: Arc<std::sync::Mutex<std::collections::HashMap<usize, weft_proj::SocpSolution>>>,
+    last: ForwardCache<weft_proj::SocpSolution>,
 }
 
 impl InextensibilityProjection {
     pub fn new(layer: Arc<weft_proj::InextensibilityLayer>) -> Self {
-        Self { layer }
+        Self {
+            layer,
+            keys: None,
+            previous: Arc::default(),
+            last: Arc::default(),
+        }
     }
 
     /// `r*` for predictions `[B, V, 3]`, differentiable.
     pub fn apply(&self, predictions: &Tensor) -> crate::error::Result<Tensor> {
+        self.check(predictions)?;
+        let op = Self {
+            keys: None,
+            ..self.clone()
+        };
+        Ok(predictions.contiguous()?.apply_op1(op)?)
+    }
+
+    /// [`apply`](Self::apply) with example `keys[b]` for batch entry `b`: each solve starts
+    /// from the solution this op last found for the same key.
+    pub fn apply_keyed(&self, predictions: &Tensor, keys: &[usize]) -> crate::error::Result<Tensor> {
+        self.check(predictions)?;
+        let op = Self {
+            keys: Some(example_keys("inextensibility projection keys", predictions, keys)?),
+            ..self.clone()
+        };
+        Ok(predictions.contiguous()?.apply_op1(op)?)
+    }
+
+    fn check(&self, predictions: &Tensor) -> crate::error::Result<()> {
         let v = self.layer.num_vertices();
         let (_, pv, three) = predictions.dims3()?;
         if pv != v || three != 3 {
@@ -436,16 +566,29 @@ impl InextensibilityProjection {
                 got: format!("{:?}", predictions.dims()),
             });
         }
-        Ok(predictions.contiguous()?.apply_op1(self.clone())?)
+        Ok(())
     }
 
     fn solve(&self, predictions: &[f32]) -> candle_core::Result<Vec<weft_proj::SocpSolution>> {
         let x = convert::f32_to_f64("inextensibility projection input", predictions).map_err(op_error)?;
-        self.layer
-            .forward_batch(&examples(&x, self.layer.num_vertices()))
+        let preds = examples(&x, self.layer.num_vertices());
+        let previous: Vec<Option<weft_proj::SocpSolution>> = match (&self.keys, self.previous.lock()) {
+            (Some(keys), Ok(previous)) => keys.iter().map(|k| previous.get(k).cloned()).collect(),
+            _ => vec![None; preds.len()],
+        };
+        let starts: Vec<Option<&weft_proj::SocpSolution>> = previous.iter().map(Option::as_ref).collect();
+        let solutions: Vec<weft_proj::SocpSolution> = self
+            .layer
+            .forward_batch_from(&preds, &starts)
             .into_iter()
             .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
-            .collect()
+            .collect::<candle_core::Result<_>>()?;
+        if let (Some(keys), Ok(mut previous)) = (&self.keys, self.previous.lock()) {
+            for (k, s) in keys.iter().zip(&solutions) {
+                previous.insert(*k, s.clone());
+            }
+        }
+        Ok(solutions)
     }
 }
 
@@ -455,15 +598,20 @@ impl CustomOp1 for InextensibilityProjection {
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let solutions = self.solve(f32_slice(self.name(), s, l)?)?;
+        let x = f32_slice(self.name(), s, l)?;
+        let solutions = self.solve(x)?;
         let flat: Vec<f64> = solutions.iter().flat_map(|s| s.positions().iter().copied()).collect();
         let out = convert::f64_to_f32("inextensibility projection output", &flat).map_err(op_error)?;
+        store_cached(&self.last, x.to_vec(), solutions);
         Ok((CpuStorage::F32(out), l.shape().clone()))
     }
 
     fn bwd(&self, predictions: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
         let x: Vec<f32> = predictions.flatten_all()?.to_vec1()?;
-        let solutions = self.solve(&x)?;
+        let solutions = match take_cached(&self.last, &x) {
+            Some(s) => s,
+            None => self.solve(&x)?,
+        };
         let g: Vec<f32> = grad_res.flatten_all()?.to_vec1()?;
         let g = convert::f32_to_f64("inextensibility projection output gradient", &g).map_err(op_error)?;
         let back = self

@@ -187,3 +187,34 @@ fn the_inextensibility_op_has_the_gradient_of_its_finite_differences() {
             .is_err()
     );
 }
+
+#[test]
+fn keyed_calls_warm_start_from_the_previous_equilibrium_and_agree_with_cold_ones() {
+    let rest = weft_mesh::generators::sheet(6, 1.0).unwrap();
+    let v = rest.num_vertices();
+    let layer = Arc::new(QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap());
+    let op = QuasistaticProjection::new(layer);
+    let pred = |s: f32| -> Tensor {
+        let x: Vec<f32> = rest
+            .positions()
+            .iter()
+            .flat_map(|p| [s * p.x as f32, p.y as f32, 0.05 * (3.0 * p.x as f32).sin()])
+            .collect();
+        Tensor::from_vec(x, (1, v, 3), &Device::Cpu).unwrap()
+    };
+    let mu = Tensor::new(&[0.1f32], &Device::Cpu).unwrap();
+    // First call remembers example 7's equilibrium; the second starts from it.
+    op.apply_keyed(&pred(1.2), &mu, &[7]).unwrap();
+    let warm = op.apply_keyed(&pred(1.25), &mu, &[7]).unwrap();
+    let cold = op.apply(&pred(1.25), &mu).unwrap();
+    let diff = (warm - cold)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    assert!(diff < 1e-6, "warm and cold equilibria differ by {diff} m");
+    assert!(op.apply_keyed(&pred(1.2), &mu, &[1, 2]).is_err(), "one key per example");
+}

@@ -2,6 +2,14 @@
 //! Geng et al.: 2969 vertices, 8787 constraints) under a smooth stretch-plus-noise
 //! prediction. Measures SOCP forward / backward and quasistatic forward / backward.
 //!
+//! The quasistatic forward is measured with the Cholesky Newton (the default) and the
+//! Newton–Krylov solve, each cold (Newton from the prediction) and warm (from the
+//! equilibrium of a nearby prediction — the same example one training step earlier —
+//! moved by the change of prediction).
+//!
+//! The SOCP forward is also measured warm: from the solution and active set of the same
+//! example one training step earlier.
+//!
 //! The SOCP forward is measured with the default settings (reduced IPM, polish tried
 //! from a relative gap of 1e-3) and, as same-run references, with the polish only
 //! after the IPM has converged and with Clarabel as the conic solver.
@@ -10,7 +18,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Instant;
 use weft_proj::{
-    ConicSolver, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, ZeroLengthScaling,
+    ConicSolver, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, QuasistaticSolver, SocpSettings,
+    ZeroLengthScaling,
 };
 
 /// A network-like prediction: 15 % stretch along x, 5 % along y, a smooth bump and
@@ -37,6 +46,20 @@ fn bench(c: &mut Criterion) {
     let pred = prediction(&rest);
     let grad: Vec<f64> = (0..pred.len()).map(|i| (0.37 * i as f64).sin()).collect();
 
+    // One training step earlier: a smooth change of about 2 mm and 0.5 mm of noise.
+    let mut state: u64 = 0xC0FFEE;
+    let earlier: Vec<f64> = pred
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.001;
+            x + 0.002 * (0.01 * i as f64).sin() + noise
+        })
+        .collect();
+    let earlier_small: Vec<f64> = pred.iter().zip(&earlier).map(|(p, e)| p + 0.1 * (e - p)).collect();
     let start = Instant::now();
     let socp = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).expect("socp layer");
     eprintln!("socp layer construction: {:.1} ms", 1e3 * start.elapsed().as_secs_f64());
@@ -64,10 +87,33 @@ fn bench(c: &mut Criterion) {
         eprintln!("socp {name}: {report:?}");
         (name, layer)
     });
+    // A warm start: the solution of the same example one training step earlier, and one
+    // from a change ten times smaller (late in training, when the network moves little).
+    let (socp_earlier, _) = socp.forward(&earlier).expect("socp forward");
+    let (socp_earlier_small, _) = socp.forward(&earlier_small).expect("socp forward");
+    for (name, prev) in [("warm", &socp_earlier), ("warm small", &socp_earlier_small)] {
+        let (_, r) = socp.forward_from(&pred, Some(prev)).expect("socp forward");
+        eprintln!(
+            "socp {name}: {} IPM iterations (0: the polish certified the warm start), {:?} polish steps",
+            r.iterations, r.polish_iterations
+        );
+    }
     let mut group = c.benchmark_group("socp");
     group.sample_size(10);
     group.bench_function("forward", |b| {
         b.iter(|| socp.forward(black_box(&pred)).expect("forward"))
+    });
+    group.bench_function("forward_warm", |b| {
+        b.iter(|| {
+            socp.forward_from(black_box(&pred), Some(&socp_earlier))
+                .expect("forward")
+        })
+    });
+    group.bench_function("forward_warm_small", |b| {
+        b.iter(|| {
+            socp.forward_from(black_box(&pred), Some(&socp_earlier_small))
+                .expect("forward")
+        })
     });
     group.bench_function("backward", |b| {
         b.iter(|| socp.backward(&solution, black_box(&grad)).expect("backward"))
@@ -78,16 +124,95 @@ fn bench(c: &mut Criterion) {
     group.finish();
 
     let quasi = QuasistaticLayer::new(&rest, QuasistaticParams::default()).expect("quasistatic layer");
+    let krylov = QuasistaticLayer::new(
+        &rest,
+        QuasistaticParams {
+            solver: QuasistaticSolver::NewtonKrylov,
+            ..QuasistaticParams::default()
+        },
+    )
+    .expect("quasistatic layer");
     let mu = ZeroLengthScaling::Global(0.1);
     let (qsol, qreport) = quasi.forward(&pred, &mu).expect("quasistatic forward");
     eprintln!("quasistatic: {qreport:?}");
+    // Two warm starts: the earlier equilibrium as it is, and moved by the change of
+    // prediction.
+    let (prev, _) = quasi.forward(&earlier, &mu).expect("forward");
+    let start = prev.positions().to_vec();
+    let (prev_small, _) = quasi.forward(&earlier_small, &mu).expect("forward");
+    let start_small = prev_small.positions().to_vec();
+    let shifted: Vec<f64> = start
+        .iter()
+        .zip(pred.iter().zip(&earlier))
+        .map(|(x, (p, q))| x + p - q)
+        .collect();
+    for (name, layer, s) in [
+        ("cholesky warm", &quasi, Some(&start)),
+        ("cholesky warm shifted", &quasi, Some(&shifted)),
+        ("newton-krylov cold", &krylov, None),
+        ("newton-krylov warm", &krylov, Some(&start)),
+        ("cholesky warm small", &quasi, Some(&start_small)),
+        ("newton-krylov warm small", &krylov, Some(&start_small)),
+        ("newton-krylov warm shifted", &krylov, Some(&shifted)),
+    ] {
+        let (_, r) = layer
+            .forward_from(&pred, &mu, s.map(|v| v.as_slice()))
+            .expect("forward");
+        eprintln!(
+            "quasistatic {name}: {} Newton steps, {} factorisations, {} CG iterations, residual {:.1e} N",
+            r.newton.iterations, r.newton.factorizations, r.cg_iterations, r.newton.residual
+        );
+    }
     let mut group = c.benchmark_group("quasistatic");
     group.sample_size(20);
     group.bench_function("forward", |b| {
         b.iter(|| quasi.forward(black_box(&pred), &mu).expect("forward"))
     });
+    group.bench_function("forward_warm", |b| {
+        b.iter(|| {
+            quasi
+                .forward_from(black_box(&pred), &mu, Some(&start))
+                .expect("forward")
+        })
+    });
+    group.bench_function("forward_newton_krylov", |b| {
+        b.iter(|| krylov.forward(black_box(&pred), &mu).expect("forward"))
+    });
+    group.bench_function("forward_newton_krylov_warm", |b| {
+        b.iter(|| {
+            krylov
+                .forward_from(black_box(&pred), &mu, Some(&start))
+                .expect("forward")
+        })
+    });
+    group.bench_function("forward_warm_small", |b| {
+        b.iter(|| {
+            quasi
+                .forward_from(black_box(&pred), &mu, Some(&start_small))
+                .expect("forward")
+        })
+    });
+    group.bench_function("forward_newton_krylov_warm_small", |b| {
+        b.iter(|| {
+            krylov
+                .forward_from(black_box(&pred), &mu, Some(&start_small))
+                .expect("forward")
+        })
+    });
+    group.bench_function("forward_newton_krylov_warm_shifted", |b| {
+        b.iter(|| {
+            krylov
+                .forward_from(black_box(&pred), &mu, Some(&shifted))
+                .expect("forward")
+        })
+    });
     group.bench_function("backward", |b| {
         b.iter(|| quasi.backward(&qsol, black_box(&grad)).expect("backward"))
+    });
+    // The Newton–Krylov forward pass leaves no factor: its backward pass factorises.
+    let (ksol, _) = krylov.forward(&pred, &mu).expect("forward");
+    group.bench_function("backward_newton_krylov", |b| {
+        b.iter(|| krylov.backward(&ksol, black_box(&grad)).expect("backward"))
     });
     group.finish();
 }

@@ -43,6 +43,7 @@ mod batch;
 pub mod error;
 mod ipm;
 mod kkt;
+mod krylov;
 pub mod metrics;
 pub mod quasistatic;
 pub mod rest;
@@ -52,7 +53,8 @@ pub use axial::AxialSprings;
 pub use error::{Error, Result};
 pub use metrics::{StrainSummary, strain_summary};
 pub use quasistatic::{
-    QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution, ZeroLengthScaling,
+    QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution,
+    QuasistaticSolver, ZeroLengthScaling,
 };
 pub use rest::RestShape;
 pub use socp::{

@@ -29,11 +29,11 @@
 //! convergence and keeps the factor, so the backward pass is one pair of triangular
 //! solves.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use rayon::prelude::*;
-use weft_linalg::CholeskyFactor;
+use weft_linalg::{CholeskyFactor, SymmetricMatrix, SymmetricPattern};
 use weft_mesh::TriMesh;
 use weft_sim::energies::{Springs, ZeroLengthSprings};
 use weft_sim::{Energy, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
@@ -59,6 +59,23 @@ pub struct QuasistaticParams {
     /// `tolerance · k_L · (mean rest edge length)`.
     pub tolerance: f64,
     pub max_iterations: usize,
+    /// How Newton's linear systems are solved.
+    pub solver: QuasistaticSolver,
+}
+
+/// The linear solver inside the quasistatic layer's Newton iterations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QuasistaticSolver {
+    /// Sparse Cholesky of every Newton matrix (weft-sim's `NewtonSolver`, factorisations
+    /// reused while they contract the residual); the forward pass also factorises the
+    /// Hessian at `r*` for the backward pass.
+    #[default]
+    Cholesky,
+    /// Truncated Newton with block-Jacobi preconditioned conjugate gradients
+    /// (`crate::krylov`, Geng et al. §5); no factorisation in the forward pass — the
+    /// backward pass factorises the Hessian at `r*` when it is called.
+    NewtonKrylov,
 }
 
 impl Default for QuasistaticParams {
@@ -70,6 +87,7 @@ impl Default for QuasistaticParams {
             zero_length_stiffness: 1.0,
             tolerance: 1e-8,
             max_iterations: 100,
+            solver: QuasistaticSolver::Cholesky,
         }
     }
 }
@@ -126,7 +144,10 @@ pub struct QuasistaticReport {
     /// Both Newton phases together: iterations, residuals (N), energy (J), line-search
     /// halvings, diagonal shifts.
     pub newton: NewtonReport,
-    /// Wall time of the forward pass, including the adjoint factorisation (s).
+    /// Conjugate-gradient iterations over all Newton steps (Newton–Krylov only).
+    pub cg_iterations: usize,
+    /// Wall time of the forward pass, including the adjoint factorisation when the
+    /// Cholesky path makes it (s).
     pub time_seconds: f64,
 }
 
@@ -136,7 +157,8 @@ pub struct QuasistaticSolution {
     positions: Vec<f64>,
     prediction: Vec<f64>,
     mu: Vec<f64>,
-    factor: CholeskyFactor,
+    /// The Cholesky factor of the true Hessian at `r*`, when the forward pass made it.
+    factor: Option<CholeskyFactor>,
 }
 
 impl QuasistaticSolution {
@@ -171,6 +193,8 @@ pub struct QuasistaticLayer {
     newton: NewtonSettings,
     /// Newton solvers (pattern and symbolic Cholesky built) idle between calls.
     pool: Mutex<Vec<NewtonSolver>>,
+    /// The Hessian pattern of all terms, for the Newton–Krylov path.
+    pattern: Arc<SymmetricPattern>,
 }
 
 impl QuasistaticLayer {
@@ -221,6 +245,13 @@ impl QuasistaticLayer {
             params.bend_stiffness,
         )?;
         let axial = AxialSprings::new(&rest, params.axial_stiffness)?;
+        let n = rest.num_vertices();
+        let anchors = ZeroLengthSprings::new("zero-length springs to the prediction", vec![1.0; n], vec![0.0; 3 * n])?;
+        let terms: [&dyn Energy; 4] = [&edge, &bending, &axial, &anchors];
+        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(
+            n,
+            weft_sim::energy::checked_pairs(3 * n, &terms)?,
+        ));
         let mean_length = rest.rest_lengths().iter().sum::<f64>() / rest.rest_lengths().len() as f64;
         // Factorisations are reused across Newton steps while they keep contracting the
         // residual (Shamanskii): the factorisation is most of a step's cost, and near the
@@ -239,6 +270,7 @@ impl QuasistaticLayer {
             axial,
             newton,
             pool: Mutex::new(Vec::new()),
+            pattern,
         })
     }
 
@@ -266,32 +298,70 @@ impl QuasistaticLayer {
     }
 
     /// Equilibrium of the spring cloth tied to the prediction `pred` (flat `3 V`
-    /// coordinates) with zero-length scaling `mu` (Geng et al. §5).
+    /// coordinates) with zero-length scaling `mu` (Geng et al. §5), Newton started at
+    /// `pred`.
     pub fn forward(&self, pred: &[f64], mu: &ZeroLengthScaling) -> Result<(QuasistaticSolution, QuasistaticReport)> {
-        let start = Instant::now();
+        self.forward_from(pred, mu, None)
+    }
+
+    /// [`forward`](Self::forward) with Newton started at `start` instead of `pred` — in
+    /// training, the example's previous equilibrium moved by the change of its
+    /// prediction (a warm start). The minimiser does not depend on the start unless the
+    /// problem has several minima.
+    pub fn forward_from(
+        &self,
+        pred: &[f64],
+        mu: &ZeroLengthScaling,
+        start: Option<&[f64]>,
+    ) -> Result<(QuasistaticSolution, QuasistaticReport)> {
+        let started = Instant::now();
         self.rest.check_positions("prediction", pred)?;
+        if let Some(s) = start {
+            self.rest.check_positions("warm start", s)?;
+        }
         let n = self.num_vertices();
         let mu = mu.per_vertex(n)?;
         let base = self.zero_length_base();
         let weights: Vec<f64> = mu.iter().zip(&base).map(|(m, k)| m * k).collect();
         let anchors = ZeroLengthSprings::new("zero-length springs to the prediction", weights, pred.to_vec())?;
         let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
-
-        let pooled = self.pool.lock().ok().and_then(|mut p| p.pop());
-        let mut solver = match pooled {
-            Some(s) => s,
-            None => NewtonSolver::new(3 * n, &terms, vec![false; 3 * n])?,
+        let mut x = start.unwrap_or(pred).to_vec();
+        let (newton, cg_iterations, factor) = match self.params.solver {
+            QuasistaticSolver::Cholesky => {
+                let (report, factor) = self.with_solver(&terms, |solver| {
+                    let report = self.minimize(solver, &terms, &mut x)?;
+                    // Eq. 14 needs the true Hessian at r*; factorise it once here for backward.
+                    let factor = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
+                    Ok((report, factor))
+                })?;
+                let (factor, adjoint_shifts) = factor;
+                (report, 0, Some((factor, adjoint_shifts)))
+            }
+            QuasistaticSolver::NewtonKrylov => {
+                let mut hessian = SymmetricMatrix::zeros(self.pattern.clone());
+                let k = crate::krylov::minimize(
+                    &terms,
+                    &mut hessian,
+                    &mut x,
+                    self.newton.tolerance,
+                    self.newton.max_iterations,
+                    self.newton.tolerance / self.params.tolerance,
+                )?;
+                let report = NewtonReport {
+                    iterations: k.newton_iterations,
+                    residual: k.residual,
+                    initial_residual: k.initial_residual,
+                    energy: k.energy,
+                    line_search_halvings: k.line_search_halvings,
+                    regularizations: 0,
+                    factorizations: 0,
+                    time: started.elapsed(),
+                    residual_history: k.residual_history,
+                    residual_floor: 0.0,
+                };
+                (report, k.cg_iterations, None)
+            }
         };
-        let mut x = pred.to_vec();
-        let result = self.minimize(&mut solver, &terms, &mut x).and_then(|report| {
-            // Eq. 14 needs the true Hessian at r*; factorise it once here for backward.
-            let (factor, shifts) = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
-            Ok((report, factor, shifts))
-        });
-        if let Ok(mut pool) = self.pool.lock() {
-            pool.push(solver);
-        }
-        let (newton, factor, adjoint_shifts) = result?;
         check_output("quasistatic positions", &x)?;
         // A spring whose ends coincide exerts no force (its direction is undefined), so a
         // collapsed configuration is stationary although it is an energy maximum along
@@ -314,12 +384,15 @@ impl QuasistaticLayer {
         }
         // The adjoint solve (Eq. 14) needs the true Hessian at r*; an indefinite one means
         // r* is a saddle, and a shifted matrix would give the gradient of another problem.
-        if adjoint_shifts > 0 {
-            return Err(Error::NotAMinimum { shifts: adjoint_shifts });
-        }
+        let factor = match factor {
+            Some((_, shifts)) if shifts > 0 => return Err(Error::NotAMinimum { shifts }),
+            Some((f, _)) => Some(f),
+            None => None,
+        };
         let report = QuasistaticReport {
             newton,
-            time_seconds: start.elapsed().as_secs_f64(),
+            cg_iterations,
+            time_seconds: started.elapsed().as_secs_f64(),
         };
         Ok((
             QuasistaticSolution {
@@ -330,6 +403,24 @@ impl QuasistaticLayer {
             },
             report,
         ))
+    }
+
+    /// Runs `f` with a pooled Newton solver (pattern and symbolic Cholesky built once).
+    fn with_solver<T>(
+        &self,
+        terms: &[&dyn Energy],
+        f: impl FnOnce(&mut NewtonSolver) -> weft_sim::Result<T>,
+    ) -> Result<T> {
+        let pooled = self.pool.lock().ok().and_then(|mut p| p.pop());
+        let mut solver = match pooled {
+            Some(s) => s,
+            None => NewtonSolver::new(3 * self.num_vertices(), terms, vec![false; 3 * self.num_vertices()])?,
+        };
+        let result = f(&mut solver);
+        if let Ok(mut pool) = self.pool.lock() {
+            pool.push(solver);
+        }
+        Ok(result?)
     }
 
     /// Newton in two phases: with per-spring PSD projection (the definiteness fix of
@@ -373,7 +464,7 @@ impl QuasistaticLayer {
     pub fn backward(&self, solution: &QuasistaticSolution, grad_out: &[f64]) -> Result<QuasistaticGradient> {
         self.rest.check_positions("output gradient", grad_out)?;
         let n = self.num_vertices();
-        if solution.positions.len() != 3 * n || solution.factor.dim() != 3 * n {
+        if solution.positions.len() != 3 * n || solution.factor.as_ref().is_some_and(|f| f.dim() != 3 * n) {
             return Err(Error::LengthMismatch {
                 what: "forward state",
                 expected: 3 * n,
@@ -381,7 +472,32 @@ impl QuasistaticLayer {
             });
         }
         let mut eta = grad_out.to_vec();
-        solution.factor.solve_in_place(&mut eta);
+        match &solution.factor {
+            Some(f) => f.solve_in_place(&mut eta),
+            None => {
+                // The Newton–Krylov forward pass made no factor: factorise the true
+                // Hessian at r* now (Eq. 14), refusing a saddle as the forward pass does.
+                let weights: Vec<f64> = solution
+                    .mu
+                    .iter()
+                    .zip(self.zero_length_base())
+                    .map(|(m, k)| m * k)
+                    .collect();
+                let anchors = ZeroLengthSprings::new(
+                    "zero-length springs to the prediction",
+                    weights,
+                    solution.prediction.clone(),
+                )?;
+                let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+                let (factor, shifts) = self.with_solver(&terms, |solver| {
+                    solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
+                })?;
+                if shifts > 0 {
+                    return Err(Error::NotAMinimum { shifts });
+                }
+                factor.solve_in_place(&mut eta);
+            }
+        }
         let base = self.zero_length_base();
         let pred: Vec<f64> = (0..3 * n).map(|i| solution.mu[i / 3] * base[i / 3] * eta[i]).collect();
         let mu_per_vertex: Vec<f64> = (0..n)

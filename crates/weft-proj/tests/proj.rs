@@ -883,3 +883,79 @@ fn socp_heavy_stretch_is_polished_or_handed_over_tight() {
         }
     }
 }
+
+#[test]
+fn newton_krylov_reaches_the_cholesky_equilibrium_and_gradient_cold_and_warm() {
+    let mut rng = TestRng::new(70);
+    let rest = random_sheet(9, &mut rng);
+    let cholesky = QuasistaticLayer::new(&rest, tight_quasistatic()).unwrap();
+    let krylov = QuasistaticLayer::new(
+        &rest,
+        QuasistaticParams {
+            solver: weft_proj::QuasistaticSolver::NewtonKrylov,
+            ..tight_quasistatic()
+        },
+    )
+    .unwrap();
+    let pred = predict(&rest, 1.3, 0.03, &mut rng);
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    for mu in [1.0, 0.1, 0.01] {
+        let scaling = ZeroLengthScaling::Global(mu);
+        let (a, _) = cholesky.forward(&pred, &scaling).unwrap();
+        let (b, report) = krylov.forward(&pred, &scaling).unwrap();
+        assert!(report.cg_iterations > 0 && report.newton.factorizations == 0);
+        assert!(max_norm_rel_error(b.positions(), a.positions()) < 1e-9, "mu = {mu}");
+        // The backward pass factorises at r* itself and gives the same gradients.
+        let (ga, gb) = (cholesky.backward(&a, &g).unwrap(), krylov.backward(&b, &g).unwrap());
+        assert!(max_norm_rel_error(&gb.pred, &ga.pred) < 1e-7, "mu = {mu}");
+        assert_close!(gb.mu, ga.mu, rtol = 1e-7, atol = 1e-12);
+        // A warm start from a nearby prediction's equilibrium, moved by the change of
+        // prediction, reaches the same minimum in fewer Newton steps.
+        let nearby: Vec<f64> = pred.iter().map(|x| x + rng.uniform(-1e-3, 1e-3)).collect();
+        let (prev, _) = krylov.forward(&nearby, &scaling).unwrap();
+        let start: Vec<f64> = prev
+            .positions()
+            .iter()
+            .zip(pred.iter().zip(&nearby))
+            .map(|(x, (p, q))| x + p - q)
+            .collect();
+        let (warm, warm_report) = krylov.forward_from(&pred, &scaling, Some(&start)).unwrap();
+        assert!(max_norm_rel_error(warm.positions(), a.positions()) < 1e-9, "mu = {mu}");
+        assert!(
+            warm_report.newton.iterations < report.newton.iterations,
+            "mu = {mu}: warm {} vs cold {} Newton steps",
+            warm_report.newton.iterations,
+            report.newton.iterations
+        );
+    }
+}
+
+#[test]
+fn a_warm_started_socp_skips_the_interior_point_solve_and_finds_the_same_projection() {
+    let mut rng = TestRng::new(80);
+    let rest = random_sheet(9, &mut rng);
+    let layer = InextensibilityLayer::new(&rest, 0.1, SocpSettings::default()).unwrap();
+    let pred = predict(&rest, 1.3, 0.02, &mut rng);
+    let (cold, cold_report) = layer.forward(&pred).unwrap();
+    assert!(cold_report.iterations > 0);
+    // One training step later: the prediction moved by a fraction of a millimetre.
+    let next: Vec<f64> = pred.iter().map(|x| x + rng.uniform(-2e-4, 2e-4)).collect();
+    let (reference, _) = layer.forward(&next).unwrap();
+    let (warm, report) = layer.forward_from(&next, Some(&cold)).unwrap();
+    assert_eq!(report.iterations, 0, "the interior-point solve ran: {report:?}");
+    assert!(report.polish_iterations.is_some());
+    assert!(max_norm_rel_error(warm.positions(), reference.positions()) < 1e-9);
+    // The backward passes agree too.
+    let g = rng.vec(pred.len(), -1.0, 1.0);
+    let (a, b) = (
+        layer.backward(&reference, &g).unwrap(),
+        layer.backward(&warm, &g).unwrap(),
+    );
+    assert!(max_norm_rel_error(&b, &a) < 1e-7);
+    // A start from a far-away problem still ends at the right projection (via the cold
+    // solve if the polish cannot certify it).
+    let far = predict(&rest, 1.0, 0.0, &mut rng);
+    let (far_solution, _) = layer.forward(&far).unwrap();
+    let (again, _) = layer.forward_from(&next, Some(&far_solution)).unwrap();
+    assert!(max_norm_rel_error(again.positions(), reference.positions()) < 1e-9);
+}

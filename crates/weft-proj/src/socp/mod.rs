@@ -402,11 +402,8 @@ impl InextensibilityLayer {
         Ok((conic, polished, polish_seconds))
     }
 
-    /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
-    /// edge-length bounds (Geng et al. Eq. 1).
-    pub fn forward(&self, pred: &[f64]) -> Result<(SocpSolution, SocpReport)> {
-        let start = Instant::now();
-        self.rest.check_positions("prediction", pred)?;
+    /// The conic right-hand side `b` of a prediction (module docs).
+    fn rhs(&self, pred: &[f64]) -> Vec<f64> {
         let m = self.num_constraints();
         let ell = self.length_scale;
         let mut b = vec![0.0; 4 * m];
@@ -415,6 +412,59 @@ impl InextensibilityLayer {
             b[4 * e] = self.max_lengths[e] / ell;
             b[4 * e + 1..4 * e + 4].copy_from_slice(d.as_slice());
         }
+        b
+    }
+
+    /// [`forward`](Self::forward) warm-started from `previous`, the solution of a nearby
+    /// prediction (in training, the same example one step earlier): the polish (Newton on
+    /// the active-set conditions) starts from its positions and its active set, and
+    /// when it certifies the result the interior-point solve is skipped. Otherwise — the
+    /// active set changed too much, or the polish is off — this is the cold
+    /// [`forward`](Self::forward). Either way the answer is the projection of `pred`.
+    pub fn forward_from(&self, pred: &[f64], previous: Option<&SocpSolution>) -> Result<(SocpSolution, SocpReport)> {
+        let Some(prev) = previous.filter(|_| self.settings.polish) else {
+            return self.forward(pred);
+        };
+        let start = Instant::now();
+        self.rest.check_positions("prediction", pred)?;
+        self.rest.check_positions("previous solution", &prev.positions)?;
+        let m = self.num_constraints();
+        if prev.s.len() != 4 * m || prev.z.len() != 4 * m {
+            return Err(Error::LengthMismatch {
+                what: "previous solution's cone variables",
+                expected: 4 * m,
+                got: prev.s.len().min(prev.z.len()),
+            });
+        }
+        let b = self.rhs(pred);
+        let ell = self.length_scale;
+        let x0: Vec<f64> = prev.positions.iter().zip(pred).map(|(r, p)| (r - p) / ell).collect();
+        let polish_start = Instant::now();
+        match self.polish(&b, &x0, &prev.s, &prev.z) {
+            Some(polished) => {
+                let conic = ConicSolution {
+                    x: Vec::new(),
+                    s: Vec::new(),
+                    z: Vec::new(),
+                    status: "warm-start".into(),
+                    iterations: 0,
+                    seconds: 0.0,
+                    primal_residual: 0.0,
+                    dual_residual: 0.0,
+                };
+                let polish_seconds = polish_start.elapsed().as_secs_f64();
+                self.finish(pred, start, conic, Some(polished), polish_seconds, None)
+            }
+            None => self.forward(pred),
+        }
+    }
+
+    /// Projects the flat prediction `pred` (`3 V` coordinates, metres) onto the
+    /// edge-length bounds (Geng et al. Eq. 1).
+    pub fn forward(&self, pred: &[f64]) -> Result<(SocpSolution, SocpReport)> {
+        let start = Instant::now();
+        self.rest.check_positions("prediction", pred)?;
+        let b = self.rhs(pred);
         let (mut conic, early, mut polish_seconds) = match self.settings.solver {
             ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b, self.settings.tolerance)?,
             ConicSolver::Clarabel => (self.solve_clarabel(&b)?, None, 0.0),
@@ -458,6 +508,21 @@ impl InextensibilityLayer {
                 }
             }
         }
+        self.finish(pred, start, conic, polished, polish_seconds, handover_tolerance)
+    }
+
+    /// The solution and report of a forward pass from its conic and polished points.
+    fn finish(
+        &self,
+        pred: &[f64],
+        start: Instant,
+        conic: ConicSolution,
+        polished: Option<Polished>,
+        polish_seconds: f64,
+        handover_tolerance: Option<f64>,
+    ) -> Result<(SocpSolution, SocpReport)> {
+        let m = self.num_constraints();
+        let ell = self.length_scale;
         let (polish_iterations, active_system) = match &polished {
             Some(p) => (Some(p.iterations), Some(p.system.clone())),
             None => (None, None),
@@ -513,6 +578,19 @@ impl InextensibilityLayer {
             active_system,
         };
         Ok((solution, report))
+    }
+
+    /// [`forward_from`](Self::forward_from) over many predictions in parallel.
+    pub fn forward_batch_from<P: AsRef<[f64]> + Sync>(
+        &self,
+        preds: &[P],
+        previous: &[Option<&SocpSolution>],
+    ) -> Vec<Result<(SocpSolution, SocpReport)>> {
+        preds
+            .par_iter()
+            .zip(previous)
+            .map(|(p, prev)| self.forward_from(p.as_ref(), *prev))
+            .collect()
     }
 
     /// [`forward`](Self::forward) over many predictions in parallel (rayon over examples).

@@ -1,0 +1,254 @@
+//! Truncated Newton–Krylov minimisation (Geng et al. §5 solve their quasistatic problem
+//! with a preconditioned Newton–Krylov method): each Newton step solves `H d = −g` only
+//! approximately, by conjugate gradients preconditioned with the inverses of `H`'s
+//! `3 × 3` diagonal blocks, to a relative residual `η = min(½, √(‖g‖∞ / F))` with `F` the
+//! problem's force scale (the superlinear forcing of Nocedal & Wright, *Numerical
+//! Optimization*, §7.1; it depends on the gradient alone, so a warm start close to the
+//! answer is solved tightly from its first step), followed by an Armijo line search. No matrix is
+//! factorised, so a step costs a Hessian assembly and tens of sparse products, and a
+//! start near the answer (a warm start) costs one or two steps.
+//!
+//! CG needs a positive definite matrix. Far from the minimum the Hessian is the per-spring
+//! PSD projection (Teran et al. 2005), which the zero-length springs make definite; near it
+//! (within `10⁴ ×` the tolerance, as the Cholesky path) the true Hessian, for Newton's fast
+//! local convergence. CG stops at the first direction of non-positive curvature and the
+//! step uses the iterate so far (or the preconditioned gradient, if that was the first
+//! direction): a descent direction either way (Nocedal & Wright, *Numerical
+//! Optimization*, Alg. 7.1).
+
+use nalgebra::{Matrix3, Vector3};
+use weft_linalg::SymmetricMatrix;
+use weft_sim::Energy;
+use weft_sim::energy::{total_gradient, total_value};
+
+/// `H`'s `3 × 3` diagonal blocks, inverted.
+struct BlockJacobi {
+    inv: Vec<Matrix3<f64>>,
+}
+
+impl BlockJacobi {
+    fn new(h: &SymmetricMatrix) -> Self {
+        let n = h.dim() / 3;
+        let inv = (0..n)
+            .map(|v| {
+                let b = Matrix3::from_fn(|r, c| h.get(3 * v + r, 3 * v + c));
+                b.try_inverse().unwrap_or_else(|| {
+                    // A singular block (no stiffness at the vertex): scale by its diagonal.
+                    Matrix3::from_diagonal(&Vector3::from_fn(|i, _| {
+                        let d = b[(i, i)].abs();
+                        if d > 0.0 { 1.0 / d } else { 1.0 }
+                    }))
+                })
+            })
+            .collect();
+        Self { inv }
+    }
+
+    fn apply(&self, r: &[f64], z: &mut [f64]) {
+        for (v, m) in self.inv.iter().enumerate() {
+            let x = m * Vector3::new(r[3 * v], r[3 * v + 1], r[3 * v + 2]);
+            z[3 * v..3 * v + 3].copy_from_slice(x.as_slice());
+        }
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Preconditioned CG for `H x = b` from `x = 0`, to `‖r‖ ≤ rel_tol ‖b‖`; returns the
+/// iterations and whether it stopped at non-positive curvature.
+fn pcg(h: &SymmetricMatrix, m: &BlockJacobi, b: &[f64], x: &mut [f64], rel_tol: f64, max_iter: usize) -> (usize, bool) {
+    let n = b.len();
+    x.iter_mut().for_each(|v| *v = 0.0);
+    let mut r = b.to_vec();
+    let mut z = vec![0.0; n];
+    m.apply(&r, &mut z);
+    let mut p = z.clone();
+    let mut hp = vec![0.0; n];
+    let mut rz = dot(&r, &z);
+    let target = rel_tol * dot(b, b).sqrt();
+    for k in 0..max_iter {
+        h.mul_vec(&p, &mut hp);
+        let curvature = dot(&p, &hp);
+        if !(curvature > 0.0) {
+            if k == 0 {
+                // Non-positive curvature along the first direction: take the
+                // preconditioned gradient (a descent direction, M being SPD).
+                x.copy_from_slice(&z);
+            }
+            return (k, true);
+        }
+        let alpha = rz / curvature;
+        for i in 0..n {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * hp[i];
+        }
+        if dot(&r, &r).sqrt() <= target {
+            return (k + 1, false);
+        }
+        m.apply(&r, &mut z);
+        let rz_next = dot(&r, &z);
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+    }
+    (max_iter, false)
+}
+
+/// What [`minimize`] did.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct KrylovReport {
+    pub newton_iterations: usize,
+    pub cg_iterations: usize,
+    pub line_search_halvings: usize,
+    pub initial_residual: f64,
+    pub residual: f64,
+    pub energy: f64,
+    pub residual_history: Vec<f64>,
+}
+
+/// Armijo constant and the most step halvings before a step is given up.
+const ARMIJO: f64 = 1e-4;
+const MAX_HALVINGS: usize = 40;
+/// CG iterations per Newton step, at most.
+const MAX_CG: usize = 500;
+
+/// Minimises `Σ terms` from `x` until the largest gradient entry is at most `tolerance`;
+/// `hessian` holds the terms' pattern; `force_scale` (N) sets CG's forcing term. Fails with weft-sim's `NotConverged` after
+/// `max_iterations` Newton steps or when no step decreases the energy.
+pub(crate) fn minimize(
+    terms: &[&dyn Energy],
+    hessian: &mut SymmetricMatrix,
+    x: &mut [f64],
+    tolerance: f64,
+    max_iterations: usize,
+    force_scale: f64,
+) -> weft_sim::Result<KrylovReport> {
+    let n = x.len();
+    let mut grad = vec![0.0; n];
+    total_gradient(terms, x, &mut grad);
+    let residual_of = |g: &[f64]| weft_linalg::max_abs(g.iter().copied());
+    let mut report = KrylovReport {
+        initial_residual: residual_of(&grad),
+        ..KrylovReport::default()
+    };
+    let mut residual = report.initial_residual;
+    let mut energy = total_value(terms, x);
+    let mut dir = vec![0.0; n];
+    let mut trial = vec![0.0; n];
+    while residual > tolerance {
+        if report.newton_iterations >= max_iterations {
+            return Err(weft_sim::Error::NotConverged {
+                iterations: report.newton_iterations,
+                residual,
+                tolerance,
+            });
+        }
+        report.newton_iterations += 1;
+        hessian.set_zero();
+        let project = residual > 1e4 * tolerance;
+        for t in terms {
+            t.add_hessian(x, project, hessian);
+        }
+        let m = BlockJacobi::new(hessian);
+        // Floored so CG is never asked for more than round-off.
+        let eta = (residual / force_scale).sqrt().clamp(1e-10, 0.5);
+        let neg: Vec<f64> = grad.iter().map(|g| -g).collect();
+        let (its, _) = pcg(hessian, &m, &neg, &mut dir, eta, MAX_CG);
+        report.cg_iterations += its;
+        let slope = dot(&dir, &grad);
+        if !(slope < 0.0) {
+            // Round-off made the direction ascend: fall back to the negative gradient.
+            dir.copy_from_slice(&neg);
+        }
+        let slope = dot(&dir, &grad);
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..=MAX_HALVINGS {
+            for i in 0..n {
+                trial[i] = x[i] + alpha * dir[i];
+            }
+            let e = total_value(terms, &trial);
+            if e.is_finite() && e - energy <= ARMIJO * alpha * slope {
+                accepted = Some(e);
+                break;
+            }
+            alpha *= 0.5;
+            report.line_search_halvings += 1;
+        }
+        // Near the minimiser the energy's round-off hides the decrease; then accept the
+        // full step if it lowers the residual force (as weft-sim's Newton does).
+        let e = match accepted {
+            Some(e) => e,
+            None => {
+                for i in 0..n {
+                    trial[i] = x[i] + dir[i];
+                }
+                total_gradient(terms, &trial, &mut grad);
+                if residual_of(&grad) < residual {
+                    total_value(terms, &trial)
+                } else {
+                    return Err(weft_sim::Error::NotConverged {
+                        iterations: report.newton_iterations,
+                        residual,
+                        tolerance,
+                    });
+                }
+            }
+        };
+        x.copy_from_slice(&trial);
+        energy = e;
+        total_gradient(terms, x, &mut grad);
+        residual = residual_of(&grad);
+        if !residual.is_finite() {
+            return Err(weft_sim::Error::NonFinite {
+                what: "gradient",
+                dof: grad.iter().position(|g| !g.is_finite()).unwrap_or(0),
+            });
+        }
+        report.residual_history.push(residual);
+    }
+    report.residual = residual;
+    report.energy = energy;
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use weft_linalg::SymmetricPattern;
+
+    #[test]
+    fn pcg_solves_an_spd_system_and_reports_negative_curvature() {
+        // A 2-vertex SPD matrix: diagonal blocks 4I, coupling −I.
+        let pattern = std::sync::Arc::new(SymmetricPattern::from_vertex_pairs(2, [(0, 1)]));
+        let mut h = SymmetricMatrix::zeros(pattern.clone());
+        for i in 0..6 {
+            h.add(i, i, 4.0);
+        }
+        for c in 0..3 {
+            h.add(c, 3 + c, -1.0);
+        }
+        let b = [1.0, 2.0, 3.0, -1.0, 0.5, 0.0];
+        let m = BlockJacobi::new(&h);
+        let mut x = [0.0; 6];
+        let (_, negative) = pcg(&h, &m, &b, &mut x, 1e-12, 50);
+        assert!(!negative);
+        let mut hx = [0.0; 6];
+        h.mul_vec(&x, &mut hx);
+        for (a, b) in hx.iter().zip(&b) {
+            assert!((a - b).abs() < 1e-10);
+        }
+        // Negate it: the first direction has negative curvature.
+        let mut neg = SymmetricMatrix::zeros(pattern);
+        for i in 0..6 {
+            neg.add(i, i, -4.0);
+        }
+        let m = BlockJacobi::new(&neg);
+        let (its, negative) = pcg(&neg, &m, &b, &mut x, 1e-12, 50);
+        assert!(negative && its == 0);
+    }
+}
