@@ -252,16 +252,29 @@ pub struct DrapeOptimizers<'a> {
     pub mu: Option<(&'a Params, &'a mut crate::adam::Adam)>,
 }
 
-/// One epoch over `data` in shuffled batches (seeded by `seed`); the mean training loss
-/// (mm²). The layers warm-start every example from its solution of the previous epoch
-/// (keys: the examples' indices in `data`).
+/// What one training epoch did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpochReport {
+    /// Mean training loss (mm²) over the batches that trained.
+    pub mean_loss: f64,
+    /// Batches skipped because the postprocess failed on one of their examples (a saddle
+    /// equilibrium, a collapsed spring, a solve that did not converge): no step is taken
+    /// for them, and the first failure is kept.
+    pub skipped_batches: usize,
+    pub first_error: Option<String>,
+}
+
+/// One epoch over `data` in shuffled batches (seeded by `seed`). The layers warm-start
+/// every example from its solution of the previous epoch (keys: the examples' indices in
+/// `data`). A batch whose postprocess fails is skipped and counted; a non-finite loss is
+/// an error (the network diverged), as is an epoch in which every batch failed.
 pub fn train_epoch(
     model: &DrapeModel,
     opt: &mut DrapeOptimizers<'_>,
     data: &DrapeTensors,
     batch: usize,
     seed: u64,
-) -> Result<f64> {
+) -> Result<EpochReport> {
     let n = data.len();
     if batch == 0 || n == 0 {
         return Err(Error::InvalidParameter {
@@ -276,37 +289,97 @@ pub fn train_epoch(
     for i in (1..n).rev() {
         order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
     }
-    let mut total = 0.0;
+    let mut report = EpochReport {
+        mean_loss: 0.0,
+        skipped_batches: 0,
+        first_error: None,
+    };
+    let mut trained = 0;
     for chunk in order.chunks(batch) {
         let b = data.select(chunk)?;
-        let l = loss(&model.predict_keyed(&b.pose, &b.guess, Some(chunk))?, &b.truth)?;
-        let value = f64::from(l.to_scalar::<f32>()?);
-        if !value.is_finite() {
-            return Err(Error::NonFinite {
-                what: "drape training loss",
-                index: 0,
+        let step = model
+            .predict_keyed(&b.pose, &b.guess, Some(chunk))
+            .and_then(|r| loss(&r, &b.truth))
+            .and_then(|l| {
+                let value = f64::from(l.to_scalar::<f32>()?);
+                Ok((value, value.is_finite().then(|| l.backward()).transpose()?))
             });
-        }
-        let grads = l.backward()?;
+        let (value, grads) = match step {
+            Ok((value, Some(grads))) => (value, grads),
+            Ok((_, None)) => {
+                return Err(Error::NonFinite {
+                    what: "drape training loss",
+                    index: 0,
+                });
+            }
+            Err(e) => {
+                report.skipped_batches += 1;
+                report.first_error.get_or_insert_with(|| e.to_string());
+                continue;
+            }
+        };
         opt.net.step(opt.net_params, &grads)?;
         if let Some((params, adam)) = opt.mu.as_mut() {
             adam.step(params, &grads)?;
         }
-        total += value * chunk.len() as f64;
+        report.mean_loss += value * chunk.len() as f64;
+        trained += chunk.len();
     }
-    Ok(total / n as f64)
+    if trained == 0 {
+        return Err(Error::InvalidParameter {
+            name: "drape training epoch",
+            value: report.first_error.unwrap_or_default(),
+            reason: "the postprocess failed on every batch",
+        });
+    }
+    report.mean_loss /= trained as f64;
+    Ok(report)
 }
 
 /// `r*` of every example, in batches, as flat f64 per example (m).
 pub fn predict_all(model: &DrapeModel, data: &DrapeTensors, batch: usize) -> Result<Vec<Vec<f64>>> {
+    predict_each(model, data, batch)?
+        .into_iter()
+        .map(|r| {
+            r.map_err(|e| Error::InvalidParameter {
+                name: "drape prediction",
+                value: e,
+                reason: "the postprocess failed",
+            })
+        })
+        .collect()
+}
+
+/// `r*` of every example as flat f64 (m), or the postprocess's error for an example it
+/// failed on: a failing batch is retried example by example, so one bad example does not
+/// take its batch with it.
+pub fn predict_each(
+    model: &DrapeModel,
+    data: &DrapeTensors,
+    batch: usize,
+) -> Result<Vec<std::result::Result<Vec<f64>, String>>> {
     let n = data.len();
     let mut out = Vec::with_capacity(n);
     let idx: Vec<usize> = (0..n).collect();
+    let rows = |r: Tensor, k: usize| -> Result<Vec<std::result::Result<Vec<f64>, String>>> {
+        let r = r.to_dtype(DType::F64)?;
+        (0..k)
+            .map(|i| Ok(Ok(r.get(i)?.flatten_all()?.to_vec1::<f64>()?)))
+            .collect()
+    };
     for chunk in idx.chunks(batch.max(1)) {
         let b = data.select(chunk)?;
-        let r = model.predict(&b.pose, &b.guess)?.to_dtype(DType::F64)?;
-        for k in 0..chunk.len() {
-            out.push(r.get(k)?.flatten_all()?.to_vec1::<f64>()?);
+        match model.predict(&b.pose, &b.guess) {
+            Ok(r) => out.extend(rows(r, chunk.len())?),
+            Err(_) => {
+                for &i in chunk {
+                    let one = data.select(&[i])?;
+                    match model.predict(&one.pose, &one.guess) {
+                        Ok(r) => out.extend(rows(r, 1)?),
+                        Err(e) => out.push(Err(e.to_string())),
+                    }
+                }
+            }
         }
     }
     Ok(out)

@@ -26,7 +26,7 @@ use weft_nn::Device;
 use weft_nn::adam::{Adam, AdamSettings};
 use weft_nn::data::DrapeDataset;
 use weft_nn::drape::{
-    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, Mu, Postprocess, predict_all,
+    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, Mu, Postprocess, predict_each,
     sqrtmse_maxdist_mm, train_epoch,
 };
 use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
@@ -139,6 +139,11 @@ struct Progress {
     /// Per epoch: training loss (mm²), validation SqrtMSE (mm), mean μ.
     history: Vec<(f64, f64, Option<f64>)>,
     training_seconds: f64,
+    /// Training batches skipped because the layer failed on them, and the first failure.
+    #[serde(default)]
+    skipped_batches: usize,
+    #[serde(default)]
+    first_error: Option<String>,
 }
 
 /// A trained model, at its best validation weights.
@@ -165,14 +170,19 @@ fn mean_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
     })
 }
 
+/// Mean SqrtMSE (mm) over the examples the model's postprocess succeeds on.
 fn mean_sqrtmse(model: &DrapeModel, data: &DrapeTensors, batch: usize) -> anyhow::Result<f64> {
-    let pred = predict_all(model, data, batch)?;
+    let pred = predict_each(model, data, batch)?;
     let truth = data.truths()?;
-    let mut sum = 0.0;
+    let (mut sum, mut n) = (0.0, 0);
     for (p, t) in pred.iter().zip(&truth) {
-        sum += sqrtmse_maxdist_mm(p, t)?.0;
+        if let Ok(p) = p {
+            sum += sqrtmse_maxdist_mm(p, t)?.0;
+            n += 1;
+        }
     }
-    Ok(sum / pred.len().max(1) as f64)
+    anyhow::ensure!(n > 0, "the postprocess failed on every validation example");
+    Ok(sum / n as f64)
 }
 
 /// Trains (or resumes, or reloads) one model: `network-only` from scratch, the others from
@@ -271,8 +281,13 @@ fn fit(
             net: &mut adam,
             mu: learned.then_some((&mu_params, &mut mu_adam)),
         };
-        let loss = train_epoch(&model, &mut opt, train, config.batch, config.seed * 1000 + epoch as u64)
+        let epoch_report = train_epoch(&model, &mut opt, train, config.batch, config.seed * 1000 + epoch as u64)
             .with_context(|| format!("drape/{} epoch {epoch}", t.name))?;
+        let loss = epoch_report.mean_loss;
+        progress.skipped_batches += epoch_report.skipped_batches;
+        if progress.first_error.is_none() {
+            progress.first_error = epoch_report.first_error;
+        }
         progress.training_seconds += start.elapsed().as_secs_f64();
         bar.inc(train.len() as u64);
         let val = mean_sqrtmse(&model, validation, config.batch)?;
@@ -363,46 +378,72 @@ fn paper_learned_mu(start: &str) -> Option<f64> {
     }
 }
 
-/// Per-split scores of one method.
+/// Per-split scores of one method, over the examples its postprocess succeeded on.
 struct Scores {
     sqrtmse: f64,
     maxdist: f64,
     compression: f64,
     stretching: f64,
     seconds_per_example: f64,
+    /// Examples the postprocess failed on, and the first failure.
+    failed: usize,
+    first_error: Option<String>,
 }
 
+/// Scores `model` on `data`; returns the scores and, per scored example, its index in
+/// `data` and its prediction.
 fn score(
     model: &DrapeModel,
     data: &DrapeTensors,
     rest: &RestShape,
     k: f64,
     batch: usize,
-) -> anyhow::Result<(Scores, Vec<Vec<f64>>)> {
+) -> anyhow::Result<(Scores, Vec<(usize, Vec<f64>)>)> {
     let start = Instant::now();
-    let pred = predict_all(model, data, batch)?;
+    let pred = predict_each(model, data, batch)?;
     let seconds_per_example = start.elapsed().as_secs_f64() / pred.len().max(1) as f64;
     let truth = data.truths()?;
-    let n = pred.len().max(1) as f64;
     let mut s = Scores {
         sqrtmse: 0.0,
         maxdist: 0.0,
         compression: 0.0,
         stretching: 0.0,
         seconds_per_example,
+        failed: 0,
+        first_error: None,
     };
-    for (p, t) in pred.iter().zip(&truth) {
-        let (e, m) = sqrtmse_maxdist_mm(p, t)?;
-        s.sqrtmse += e / n;
-        s.maxdist += m / n;
+    let mut kept = Vec::with_capacity(pred.len());
+    for (i, (p, t)) in pred.into_iter().zip(&truth).enumerate() {
+        let p = match p {
+            Ok(p) => p,
+            Err(e) => {
+                s.failed += 1;
+                s.first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        let (e, m) = sqrtmse_maxdist_mm(&p, t)?;
+        s.sqrtmse += e;
+        s.maxdist += m;
         let (a, b) = (
-            weft_proj::strain_summary(rest, p, k)?,
+            weft_proj::strain_summary(rest, &p, k)?,
             weft_proj::strain_summary(rest, t, k)?,
         );
-        s.compression += 1e3 * (a.compression_energy - b.compression_energy).abs() / n;
-        s.stretching += 1e3 * (a.stretching_energy - b.stretching_energy).abs() / n;
+        s.compression += 1e3 * (a.compression_energy - b.compression_energy).abs();
+        s.stretching += 1e3 * (a.stretching_energy - b.stretching_energy).abs();
+        kept.push((i, p));
     }
-    Ok((s, pred))
+    anyhow::ensure!(
+        !kept.is_empty(),
+        "the postprocess failed on every example: {}",
+        s.first_error.clone().unwrap_or_default()
+    );
+    let n = kept.len() as f64;
+    s.sqrtmse /= n;
+    s.maxdist /= n;
+    s.compression /= n;
+    s.stretching /= n;
+    Ok((s, kept))
 }
 
 fn set_split(out: &mut ExperimentOutput, split: &str) {
@@ -485,6 +526,14 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     for t in &trainings {
         let f = fit(ctx, &root, t, &config, &layers, split("train"), split("validation"), v)
             .with_context(|| format!("training drape/{}", t.name))?;
+        if f.progress.skipped_batches > 0 {
+            out.failures.push(format!(
+                "drape/{}: {} training batches skipped because the layer failed on them; the first: {}",
+                t.name,
+                f.progress.skipped_batches,
+                f.progress.first_error.clone().unwrap_or_default()
+            ));
+        }
         fitted.push((t.name.clone(), f));
     }
     let network = &fitted[0].1.model;
@@ -565,6 +614,15 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         for (k_split, (name, data)) in splits.iter().enumerate() {
             let (s, pred) = score(model, data, &rest, k, config.batch).with_context(|| format!("scoring {method}"))?;
             bar.inc(data.len() as u64);
+            if s.failed > 0 {
+                out.failures.push(format!(
+                    "drape/{method}/{name}: the postprocess failed on {} of {} examples, which are left out of its \
+                     scores; the first: {}",
+                    s.failed,
+                    data.len(),
+                    s.first_error.clone().unwrap_or_default()
+                ));
+            }
             let timing = Timing::new(s.seconds_per_example, gt);
             let paper = paper_errors(method);
             let energies = paper_energies(method);
@@ -689,25 +747,54 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     Ok(out)
 }
 
-/// Test-split predictions `r*` of a method beside the ground truth and the poses.
-fn write_predictions(ctx: &EvalContext, method: &str, data: &DrapeTensors, pred: &[Vec<f64>]) -> anyhow::Result<()> {
+/// Test-split predictions `r*` of a method beside the ground truth and the poses (the
+/// examples its postprocess succeeded on, with their indices in the split).
+fn write_predictions(
+    ctx: &EvalContext,
+    method: &str,
+    data: &DrapeTensors,
+    pred: &[(usize, Vec<f64>)],
+) -> anyhow::Result<()> {
     let dir = ctx.out.join("predictions").join("drape").join(SCENE);
     std::fs::create_dir_all(&dir)?;
-    let v = pred.first().map_or(0, |p| p.len() / 3);
+    let v = pred.first().map_or(0, |p| p.1.len() / 3);
     let shape = vec![pred.len(), v, 3];
+    let truths = data.truths()?;
+    let poses = data.poses()?;
+    let index: Vec<i64> = pred.iter().map(|(i, _)| *i as i64).collect();
     let mut meta = std::collections::HashMap::new();
     meta.insert(
         "units".into(),
         "positions (r*, the method's output) and ground_truth (r_T) [examples, vertices, 3] in metres, the `test` \
-         split of the drape dataset, vertices as in its sleeve.obj; pose [examples, 3] in radians"
+         split of the drape dataset, vertices as in its sleeve.obj; pose [examples, 3] in radians; example_index \
+         [examples]: each example's index in the split"
             .into(),
     );
     crate::output::write_safetensors(
         &dir.join(format!("{method}.safetensors")),
         &[
-            crate::output::Array::f64("positions", shape.clone(), &pred.concat()),
-            crate::output::Array::f64("ground_truth", shape, &data.truths()?.concat()),
-            crate::output::Array::f64("pose", vec![pred.len(), 3], &data.poses()?),
+            crate::output::Array::f64(
+                "positions",
+                shape.clone(),
+                &pred.iter().flat_map(|p| p.1.iter().copied()).collect::<Vec<_>>(),
+            ),
+            crate::output::Array::f64(
+                "ground_truth",
+                shape,
+                &pred
+                    .iter()
+                    .flat_map(|(i, _)| truths[*i].iter().copied())
+                    .collect::<Vec<_>>(),
+            ),
+            crate::output::Array::f64(
+                "pose",
+                vec![pred.len(), 3],
+                &pred
+                    .iter()
+                    .flat_map(|(i, _)| poses[3 * i..3 * i + 3].iter().copied())
+                    .collect::<Vec<_>>(),
+            ),
+            crate::output::Array::i64("example_index", &index),
         ],
         meta,
     )
