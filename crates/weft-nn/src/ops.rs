@@ -585,7 +585,7 @@ impl InextensibilityProjection {
             .collect::<candle_core::Result<_>>()?;
         if let (Some(keys), Ok(mut previous)) = (&self.keys, self.previous.lock()) {
             for (k, s) in keys.iter().zip(&solutions) {
-                previous.insert(*k, s.clone());
+                previous.insert(*k, s.warm_start());
             }
         }
         Ok(solutions)

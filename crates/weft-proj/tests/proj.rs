@@ -941,7 +941,7 @@ fn a_warm_started_socp_skips_the_interior_point_solve_and_finds_the_same_project
     // One training step later: the prediction moved by a fraction of a millimetre.
     let next: Vec<f64> = pred.iter().map(|x| x + rng.uniform(-2e-4, 2e-4)).collect();
     let (reference, _) = layer.forward(&next).unwrap();
-    let (warm, report) = layer.forward_from(&next, Some(&cold)).unwrap();
+    let (warm, report) = layer.forward_from(&next, Some(&cold.warm_start())).unwrap();
     assert_eq!(report.iterations, 0, "the interior-point solve ran: {report:?}");
     assert!(report.polish_iterations.is_some());
     assert!(max_norm_rel_error(warm.positions(), reference.positions()) < 1e-9);

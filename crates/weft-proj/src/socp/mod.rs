@@ -215,6 +215,19 @@ pub struct SocpSolution {
 }
 
 impl SocpSolution {
+    /// What [`InextensibilityLayer::forward_from`] needs of this solution — positions and
+    /// cone variables — without the backward pass's factorised active-edge system, which
+    /// is megabytes on a paper-size mesh (a store of one start per training example must
+    /// not keep it).
+    pub fn warm_start(&self) -> SocpSolution {
+        SocpSolution {
+            positions: self.positions.clone(),
+            s: self.s.clone(),
+            z: self.z.clone(),
+            active_system: None,
+        }
+    }
+
     /// Projected positions `r*`, flat `[x0, y0, z0, …]`, vertex order of the input.
     pub fn positions(&self) -> &[f64] {
         &self.positions
