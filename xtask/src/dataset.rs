@@ -816,6 +816,36 @@ mod tests {
     }
 
     #[test]
+    fn drape_chunks_split_into_geng_sized_training_validation_and_test_sets() {
+        for (size, want) in [
+            (Size::Quick, (16, 4, 4)),
+            (Size::Standard, (1000, 200, 200)),
+            (Size::Paper, (8000, 200, 200)),
+        ] {
+            let spec = DatasetSpec::new(drape::NAME, size).unwrap();
+            assert_eq!(
+                spec.stored_frames(),
+                spec.frames,
+                "a drape chunk stores its examples only"
+            );
+            let n = spec.sequences;
+            let examples = |s| (0..n).filter(|&i| spec.split.of_sequence(i, n) == s).count() * spec.frames;
+            assert_eq!(
+                (examples("train"), examples("validation"), examples("test")),
+                want,
+                "{size:?}"
+            );
+            // In index order: every training chunk before every validation chunk before every test chunk.
+            let order: Vec<&str> = (0..n).map(|i| spec.split.of_sequence(i, n)).collect();
+            let mut sorted = order.clone();
+            sorted.sort_by_key(|s| ["train", "validation", "test"].iter().position(|t| t == s));
+            assert_eq!(order, sorted);
+        }
+        // Other datasets store their initial state too.
+        assert_eq!(DatasetSpec::new("limb", Size::Quick).unwrap().stored_frames(), 9);
+    }
+
+    #[test]
     fn sequence_seeds_differ_across_indices_and_dataset_seeds() {
         let mut seeds: Vec<u64> = (0..100)
             .flat_map(|i| [sequence_seed(0, i), sequence_seed(1, i)])

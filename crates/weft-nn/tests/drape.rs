@@ -149,3 +149,52 @@ fn training_through_the_inextensibility_layer_lowers_the_training_loss() {
     });
     assert!(after < 0.9 * before, "training loss {before} → {after} mm²");
 }
+
+#[test]
+fn a_failing_example_is_left_out_of_predictions_and_its_batch_skipped_in_training() {
+    let (d, data) = examples();
+    let v = d.sleeve().num_vertices();
+    // Example 1's pose overflows the network to a non-finite prediction, which the
+    // quasistatic op refuses; the others are fine.
+    let mut pose: Vec<f64> = data.poses().unwrap();
+    pose[3..6].copy_from_slice(&[1e38, -1e38, 1e38]);
+    let guess: Vec<f64> = data
+        .guess
+        .flatten_all()
+        .unwrap()
+        .to_dtype(candle_core::DType::F64)
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let truth: Vec<f64> = data.truths().unwrap().concat();
+    let bad = DrapeTensors::new(&pose, &guess, &truth, v, &Device::Cpu).unwrap();
+    let mut net_params = Params::new(&Device::Cpu, 21);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+    let model = DrapeModel {
+        net,
+        post: Postprocess::Quasistatic {
+            op: quasistatic(&d),
+            mu: Mu::Fixed(0.1),
+        },
+    };
+    let each = weft_nn::drape::predict_each(&model, &bad, 4).unwrap();
+    assert_eq!(each.len(), bad.len());
+    assert!(each[1].is_err(), "the overflowing example must fail");
+    assert!(each.iter().enumerate().all(|(i, r)| i == 1 || r.is_ok()));
+    // Training one example per batch: that batch is skipped and counted, the rest train.
+    let mut adam = Adam::new(&net_params, AdamSettings::default()).unwrap();
+    let mut opt = DrapeOptimizers {
+        net_params: &net_params,
+        net: &mut adam,
+        mu: None,
+    };
+    let report = train_epoch(&model, &mut opt, &bad, 1, 0).unwrap();
+    assert_eq!(report.skipped_batches, 1);
+    assert!(report.first_error.is_some() && report.mean_loss.is_finite());
+    // Without a postprocess the same example is a non-finite loss: an error, not a skip.
+    let plain = DrapeModel {
+        net: model.net.clone(),
+        post: Postprocess::None,
+    };
+    assert!(train_epoch(&plain, &mut opt, &bad, 1, 0).is_err());
+}
