@@ -388,21 +388,11 @@ impl Manifest {
     }
 }
 
-/// The code version recorded in manifests: the crate version and, when run from a git
-/// checkout, the commit (with `-dirty` for uncommitted changes).
+/// The code version recorded in manifests and results: the crate version and, when built
+/// from a git checkout, the commit (with `-dirty` for uncommitted changes). Fixed at build
+/// time by `build.rs`, so it names the code this binary runs.
 pub fn code_version() -> String {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let git = std::process::Command::new("git")
-        .args(["describe", "--always", "--dirty", "--abbrev=12"])
-        .current_dir(&root)
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
-    match git {
-        Some(g) if !g.is_empty() => format!("{} ({g})", env!("CARGO_PKG_VERSION")),
-        _ => env!("CARGO_PKG_VERSION").to_string(),
-    }
+    env!("WEFT_CODE_VERSION").to_string()
 }
 
 pub fn run(args: DatasetArgs) -> anyhow::Result<()> {

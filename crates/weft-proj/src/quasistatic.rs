@@ -297,6 +297,17 @@ impl QuasistaticLayer {
             .collect()
     }
 
+    /// The zero-length springs tying each vertex to its prediction, vertex i with stiffness
+    /// μ_i k_i (the E_Z of Geng et al. §5; k_i from [`zero_length_base`](Self::zero_length_base)).
+    fn anchors(&self, pred: &[f64], mu: &[f64]) -> Result<ZeroLengthSprings> {
+        let weights: Vec<f64> = mu.iter().zip(self.zero_length_base()).map(|(m, k)| m * k).collect();
+        Ok(ZeroLengthSprings::new(
+            "zero-length springs to the prediction",
+            weights,
+            pred.to_vec(),
+        )?)
+    }
+
     /// Equilibrium of the spring cloth tied to the prediction `pred` (flat `3 V`
     /// coordinates) with zero-length scaling `mu` (Geng et al. §5), Newton started at
     /// `pred`.
@@ -321,9 +332,7 @@ impl QuasistaticLayer {
         }
         let n = self.num_vertices();
         let mu = mu.per_vertex(n)?;
-        let base = self.zero_length_base();
-        let weights: Vec<f64> = mu.iter().zip(&base).map(|(m, k)| m * k).collect();
-        let anchors = ZeroLengthSprings::new("zero-length springs to the prediction", weights, pred.to_vec())?;
+        let anchors = self.anchors(pred, &mu)?;
         let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
         let mut x = start.unwrap_or(pred).to_vec();
         let (newton, cg_iterations, factor) = match self.params.solver {
@@ -477,17 +486,7 @@ impl QuasistaticLayer {
             None => {
                 // The Newton–Krylov forward pass made no factor: factorise the true
                 // Hessian at r* now (Eq. 14), refusing a saddle as the forward pass does.
-                let weights: Vec<f64> = solution
-                    .mu
-                    .iter()
-                    .zip(self.zero_length_base())
-                    .map(|(m, k)| m * k)
-                    .collect();
-                let anchors = ZeroLengthSprings::new(
-                    "zero-length springs to the prediction",
-                    weights,
-                    solution.prediction.clone(),
-                )?;
+                let anchors = self.anchors(&solution.prediction, &solution.mu)?;
                 let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
                 let (factor, shifts) = self.with_solver(&terms, |solver| {
                     solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)

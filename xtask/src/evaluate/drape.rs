@@ -154,7 +154,7 @@ struct Fitted {
     mu: Option<Vec<f64>>,
 }
 
-fn mean_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
+fn learned_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
     Ok(match post {
         Postprocess::Quasistatic {
             mu: mu @ Mu::Learned(_),
@@ -291,7 +291,7 @@ fn fit(
         progress.training_seconds += start.elapsed().as_secs_f64();
         bar.inc(train.len() as u64);
         let val = mean_sqrtmse(&model, validation, config.batch)?;
-        let mu = mean_mu(&model.post)?.map(|m| m.iter().sum::<f64>() / m.len() as f64);
+        let mu = learned_mu(&model.post)?.map(|m| m.iter().sum::<f64>() / m.len() as f64);
         progress.history.push((loss, val, mu));
         progress.epochs_done = epoch + 1;
         if val < progress.best_validation_sqrtmse_mm {
@@ -318,7 +318,7 @@ fn fit(
     if learned {
         weft_nn::checkpoint::load_params(&mu_dir(&dir.join("best")), &mu_params)?;
     }
-    let mu = mean_mu(&model.post)?;
+    let mu = learned_mu(&model.post)?;
     Ok(Fitted { model, progress, mu })
 }
 
@@ -661,19 +661,17 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             }
         }
         if let Some(f) = f {
-            if method != "network-only" || config.pretrain_epochs > 0 {
-                let per_example =
-                    f.progress.training_seconds / (f.progress.epochs_done.max(1) * split("train").len()).max(1) as f64;
-                out.record(
-                    SCENE,
-                    method,
-                    "training-seconds-per-example",
-                    per_example,
-                    "s",
-                    Timing::default(),
-                );
-                set_split(&mut out, "train");
-            }
+            let per_example =
+                f.progress.training_seconds / (f.progress.epochs_done.max(1) * split("train").len()).max(1) as f64;
+            out.record(
+                SCENE,
+                method,
+                "training-seconds-per-example",
+                per_example,
+                "s",
+                Timing::default(),
+            );
+            set_split(&mut out, "train");
         }
         error_rows.push(error_row);
         energy_rows.push(energy_row);
