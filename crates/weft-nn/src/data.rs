@@ -1,5 +1,6 @@
 //! Reading the pipeline's datasets (`cargo xtask dataset`, layout in docs/DATASETS.md)
-//! into f64 frames: the cloth scenes (with Tan et al.'s frame split), `nnwarp` and `limb`.
+//! into f64 frames: the cloth scenes (with Tan et al.'s frame split), `nnwarp`, `limb` and
+//! `drape`.
 //!
 //! A dataset directory holds `manifest.json`, `scene.toml`, `rest.obj` and one
 //! `seq-NNNNN.safetensors` per sequence with `positions` `[F, V, 3]`, `controls`
@@ -14,12 +15,70 @@ use weft_sim::ClothScene;
 
 use crate::error::{Error, Result};
 
-/// A dataset directory's `manifest.json`, parsed, and its path.
-fn read_manifest(dir: &Path) -> Result<(PathBuf, serde_json::Value)> {
+/// A dataset directory's `manifest.json`, parsed and checked to be a `weft-dataset/1`
+/// manifest of `dataset` (any dataset for `None`), and its path.
+fn read_manifest(dir: &Path, dataset: Option<&str>) -> Result<(PathBuf, serde_json::Value)> {
     let path = dir.join("manifest.json");
     let text = std::fs::read_to_string(&path).map_err(|e| io_error(&path, e))?;
-    let manifest = serde_json::from_str(&text).map_err(|e| data_error(&path, e.to_string()))?;
+    let manifest: serde_json::Value = serde_json::from_str(&text).map_err(|e| data_error(&path, e.to_string()))?;
+    if manifest["format"] != "weft-dataset/1" || dataset.is_some_and(|d| manifest["dataset"] != d) {
+        let what = dataset.map_or(String::new(), |d| format!(" {d}"));
+        return Err(data_error(&path, format!("not a weft-dataset/1{what} manifest")));
+    }
     Ok((path, manifest))
+}
+
+/// One file the manifest lists (a sequence, or a chunk of examples), opened.
+struct Listed<'a> {
+    /// Its position in the dataset (the manifest's `index`).
+    index: usize,
+    /// `train`, `validation` or `test`.
+    split: &'a str,
+    path: PathBuf,
+    tensors: SafeTensors<'a>,
+    /// The file's string metadata (empty when it has none).
+    metadata: std::collections::HashMap<String, String>,
+}
+
+impl Listed<'_> {
+    /// Metadata entry `key`, parsed as JSON.
+    fn meta<T: serde::de::DeserializeOwned>(&self, key: &str) -> Result<T> {
+        let text = self
+            .metadata
+            .get(key)
+            .ok_or_else(|| data_error(&self.path, format!("metadata lacks {key}")))?;
+        serde_json::from_str(text).map_err(|e| data_error(&self.path, format!("metadata {key}: {e}")))
+    }
+}
+
+/// Calls `each` on every file `manifest` lists in `dir`, in order, one file in memory at a
+/// time.
+fn for_each_listed(
+    dir: &Path,
+    manifest_path: &Path,
+    manifest: &serde_json::Value,
+    mut each: impl FnMut(Listed<'_>) -> Result<()>,
+) -> Result<()> {
+    let listed = manifest["sequences"]
+        .as_array()
+        .ok_or_else(|| data_error(manifest_path, "no sequence list"))?;
+    for (k, entry) in listed.iter().enumerate() {
+        let rel = entry["path"]
+            .as_str()
+            .ok_or_else(|| data_error(manifest_path, format!("entry {k} has no path")))?;
+        let path = dir.join(rel);
+        let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+        let tensors = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+        let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
+        each(Listed {
+            index: entry["index"].as_u64().map_or(k, |i| i as usize),
+            split: entry["split"].as_str().unwrap_or("train"),
+            metadata: meta.metadata().clone().unwrap_or_default(),
+            path,
+            tensors,
+        })?;
+    }
+    Ok(())
 }
 
 /// Tan et al. §VI-A: of every 17 consecutive frames the first 12 train and the other 5
@@ -145,10 +204,7 @@ fn f64_array(path: &Path, st: &SafeTensors, name: &str, shape_tail: &[usize]) ->
 impl ClothDataset {
     /// Reads the dataset in `dir` (every sequence listed in its manifest).
     pub fn load(dir: &Path) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir)?;
-        if manifest["format"] != "weft-dataset/1" {
-            return Err(data_error(&manifest_path, "not a weft-dataset/1 manifest"));
-        }
+        let (manifest_path, manifest) = read_manifest(dir, None)?;
         let name = manifest["dataset"].as_str().unwrap_or_default().to_string();
         let scene_path = dir.join("scene.toml");
         let scene_text = std::fs::read_to_string(&scene_path).map_err(|e| io_error(&scene_path, e))?;
@@ -156,54 +212,42 @@ impl ClothDataset {
         let rest_path = dir.join("rest.obj");
         let rest = weft_mesh::io::read_obj(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
         let v = rest.num_vertices();
-        let listed = manifest["sequences"]
-            .as_array()
-            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
         let mut grasp: Option<Vec<usize>> = None;
-        let mut sequences = Vec::with_capacity(listed.len());
-        for entry in listed {
-            let rel = entry["path"]
-                .as_str()
-                .ok_or_else(|| data_error(&manifest_path, "a sequence without a path"))?;
-            let path = dir.join(rel);
-            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
-            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let g: Vec<usize> = meta
-                .metadata()
-                .as_ref()
-                .and_then(|m| m.get("grasp_vertices"))
-                .and_then(|s| serde_json::from_str(s).ok())
-                .ok_or_else(|| data_error(&path, "metadata lacks grasp_vertices"))?;
+        let mut sequences = Vec::new();
+        for_each_listed(dir, &manifest_path, &manifest, |file| {
+            let path = &file.path;
+            let g: Vec<usize> = file.meta("grasp_vertices")?;
             if g.iter().any(|&i| i >= v) {
-                return Err(data_error(&path, "a grasped vertex is outside the rest mesh"));
+                return Err(data_error(path, "a grasped vertex is outside the rest mesh"));
             }
             match &grasp {
-                Some(prev) if *prev != g => return Err(data_error(&path, "grasped vertices differ between sequences")),
+                Some(prev) if *prev != g => return Err(data_error(path, "grasped vertices differ between sequences")),
                 _ => grasp = Some(g.clone()),
             }
-            let (frames, positions) = f64_array(&path, &st, "positions", &[v, 3])?;
-            let (cf, controls) = f64_array(&path, &st, "controls", &[g.len(), 3])?;
+            let st = &file.tensors;
+            let (frames, positions) = f64_array(path, st, "positions", &[v, 3])?;
+            let (cf, controls) = f64_array(path, st, "controls", &[g.len(), 3])?;
             let labels = st
                 .tensor("labels")
-                .map_err(|e| data_error(&path, format!("array labels: {e}")))?
+                .map_err(|e| data_error(path, format!("array labels: {e}")))?
                 .data()
                 .to_vec();
             if cf != frames || labels.len() != frames {
                 return Err(data_error(
-                    &path,
+                    path,
                     "positions, controls and labels disagree on the frame count",
                 ));
             }
             sequences.push(ClothSequence {
-                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
+                index: file.index,
                 positions,
                 controls,
                 labels,
                 num_vertices: v,
                 num_grasped: g.len(),
             });
-        }
+            Ok(())
+        })?;
         Ok(Self {
             dir: dir.to_path_buf(),
             name,
@@ -253,70 +297,48 @@ fn vec3_of(path: &Path, v: &serde_json::Value, key: &str) -> Result<nalgebra::Ve
 impl WarpDataset {
     /// Reads every sequence of the dataset in `dir`, keeping `material`'s registration.
     pub fn load(dir: &Path, material: &str) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir)?;
-        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "nnwarp" {
-            return Err(data_error(&manifest_path, "not a weft-dataset/1 nnwarp manifest"));
-        }
+        let (manifest_path, manifest) = read_manifest(dir, Some("nnwarp"))?;
         let rest_path = dir.join("rest.node");
         let body = weft_mesh::io::read_tetgen(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
         let v = body.num_vertices();
-        let listed = manifest["sequences"]
-            .as_array()
-            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
         let mut anchors: Option<Vec<usize>> = None;
-        let mut sequences = Vec::with_capacity(listed.len());
-        for entry in listed {
-            let path = dir.join(entry["path"].as_str().unwrap_or_default());
-            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
-            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let meta = meta
-                .metadata()
-                .clone()
-                .ok_or_else(|| data_error(&path, "no metadata"))?;
-            let get = |key: &str| {
-                meta.get(key)
-                    .cloned()
-                    .ok_or_else(|| data_error(&path, format!("metadata lacks {key}")))
-            };
-            let a: Vec<usize> = serde_json::from_str(&get("anchors")?).map_err(|e| data_error(&path, e.to_string()))?;
+        let mut sequences = Vec::new();
+        for_each_listed(dir, &manifest_path, &manifest, |file| {
+            let path = &file.path;
+            let a: Vec<usize> = file.meta("anchors")?;
             if a.iter().any(|&i| i >= v) {
-                return Err(data_error(&path, "an anchor is outside the body"));
+                return Err(data_error(path, "an anchor is outside the body"));
             }
             match &anchors {
-                Some(prev) if *prev != a => return Err(data_error(&path, "anchors differ between sequences")),
+                Some(prev) if *prev != a => return Err(data_error(path, "anchors differ between sequences")),
                 _ => anchors = Some(a),
             }
-            let field: serde_json::Value =
-                serde_json::from_str(&get("field")?).map_err(|e| data_error(&path, e.to_string()))?;
+            let field: serde_json::Value = file.meta("field")?;
             let field = match field["kind"].as_str() {
-                Some("directional") => {
-                    weft_sim::warp::FieldDirection::Directional(vec3_of(&path, &field, "direction")?)
-                }
+                Some("directional") => weft_sim::warp::FieldDirection::Directional(vec3_of(path, &field, "direction")?),
                 Some("circular") => weft_sim::warp::FieldDirection::Circular {
-                    center: vec3_of(&path, &field, "center")?,
-                    axis: vec3_of(&path, &field, "axis")?,
+                    center: vec3_of(path, &field, "center")?,
+                    axis: vec3_of(path, &field, "axis")?,
                 },
-                _ => return Err(data_error(&path, "field kind is neither directional nor circular")),
+                _ => return Err(data_error(path, "field kind is neither directional nor circular")),
             };
-            let poisson: f64 = get("poisson")?
-                .parse()
-                .map_err(|e| data_error(&path, format!("poisson: {e}")))?;
-            let (f, linear) = f64_array(&path, &st, "linear", &[v, 3])?;
-            let (fm, nonlinear) = f64_array(&path, &st, material, &[v, 3])?;
+            let poisson: f64 = file.meta("poisson")?;
+            let (f, linear) = f64_array(path, &file.tensors, "linear", &[v, 3])?;
+            let (fm, nonlinear) = f64_array(path, &file.tensors, material, &[v, 3])?;
             if f != fm {
-                return Err(data_error(&path, "linear and registered frames disagree in number"));
+                return Err(data_error(path, "linear and registered frames disagree in number"));
             }
             let split = |x: Vec<f64>| x.chunks_exact(3 * v).map(<[f64]>::to_vec).collect::<Vec<_>>();
             sequences.push(WarpSequence {
-                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
-                split: entry["split"].as_str().unwrap_or("train").to_string(),
+                index: file.index,
+                split: file.split.to_string(),
                 field,
                 poisson,
                 linear: split(linear),
                 nonlinear: split(nonlinear),
             });
-        }
+            Ok(())
+        })?;
         Ok(Self {
             dir: dir.to_path_buf(),
             body,
@@ -350,37 +372,30 @@ pub struct LimbDataset {
 impl LimbDataset {
     /// Reads every sequence of the `limb` dataset in `dir`.
     pub fn load(dir: &Path) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir)?;
-        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "limb" {
-            return Err(data_error(&manifest_path, "not a weft-dataset/1 limb manifest"));
-        }
+        let (manifest_path, manifest) = read_manifest(dir, Some("limb"))?;
         let rest_path = dir.join("rest.obj");
         let rest = weft_mesh::io::read_obj(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
         let v = rest.num_vertices();
-        let listed = manifest["sequences"]
-            .as_array()
-            .ok_or_else(|| data_error(&manifest_path, "no sequence list"))?;
-        let mut sequences = Vec::with_capacity(listed.len());
-        for entry in listed {
-            let path = dir.join(entry["path"].as_str().unwrap_or_default());
-            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
-            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let (f, skinned) = f64_array(&path, &st, "skinned", &[v, 3])?;
-            let (fs, simulated) = f64_array(&path, &st, "simulated", &[v, 3])?;
+        let mut sequences = Vec::new();
+        for_each_listed(dir, &manifest_path, &manifest, |file| {
+            let path = &file.path;
+            let (f, skinned) = f64_array(path, &file.tensors, "skinned", &[v, 3])?;
+            let (fs, simulated) = f64_array(path, &file.tensors, "simulated", &[v, 3])?;
             if f != fs || f < 2 {
                 return Err(data_error(
-                    &path,
+                    path,
                     "skinned and simulated frames disagree, or fewer than two",
                 ));
             }
             let frames = |x: Vec<f64>| x.chunks_exact(3 * v).map(<[f64]>::to_vec).collect::<Vec<_>>();
             sequences.push(LimbSequence {
-                index: entry["index"].as_u64().unwrap_or(sequences.len() as u64) as usize,
-                split: entry["split"].as_str().unwrap_or("train").to_string(),
+                index: file.index,
+                split: file.split.to_string(),
                 skinned: frames(skinned),
                 simulated: frames(simulated),
             });
-        }
+            Ok(())
+        })?;
         if sequences.is_empty() {
             return Err(data_error(&manifest_path, "the dataset has no sequence"));
         }
@@ -423,43 +438,35 @@ pub struct DrapeDataset {
 impl DrapeDataset {
     /// Reads every chunk of the `drape` dataset in `dir`.
     pub fn load(dir: &Path) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir)?;
-        if manifest["format"] != "weft-dataset/1" || manifest["dataset"] != "drape" {
-            return Err(data_error(&manifest_path, "not a weft-dataset/1 drape manifest"));
-        }
+        let (manifest_path, manifest) = read_manifest(dir, Some("drape"))?;
         let read = |name: &str| -> Result<TriMesh> {
             let p = dir.join(name);
             weft_mesh::io::read_obj(&p).map_err(|e| data_error(&p, e.to_string()))
         };
         let (sleeve, body) = (read("sleeve.obj")?, read("body.obj")?);
         let v = sleeve.num_vertices();
-        let listed = manifest["sequences"]
-            .as_array()
-            .ok_or_else(|| data_error(&manifest_path, "no chunk list"))?;
         let mut examples = Vec::new();
-        for entry in listed {
-            let path = dir.join(entry["path"].as_str().unwrap_or_default());
-            let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
-            let st = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
-            let (f, pose) = f64_array(&path, &st, "pose", &[3])?;
-            let (fg, guess) = f64_array(&path, &st, "guess", &[v, 3])?;
-            let (ft, truth) = f64_array(&path, &st, "truth", &[v, 3])?;
+        for_each_listed(dir, &manifest_path, &manifest, |file| {
+            let path = &file.path;
+            let (f, pose) = f64_array(path, &file.tensors, "pose", &[3])?;
+            let (fg, guess) = f64_array(path, &file.tensors, "guess", &[v, 3])?;
+            let (ft, truth) = f64_array(path, &file.tensors, "truth", &[v, 3])?;
             if f != fg || f != ft {
                 return Err(data_error(
-                    &path,
+                    path,
                     "pose, guess and truth hold different numbers of examples",
                 ));
             }
-            let split = entry["split"].as_str().unwrap_or("train").to_string();
             for k in 0..f {
                 examples.push(DrapeExample {
-                    split: split.clone(),
+                    split: file.split.to_string(),
                     pose: [pose[3 * k], pose[3 * k + 1], pose[3 * k + 2]],
                     guess: guess[3 * v * k..3 * v * (k + 1)].to_vec(),
                     truth: truth[3 * v * k..3 * v * (k + 1)].to_vec(),
                 });
             }
-        }
+            Ok(())
+        })?;
         if examples.is_empty() {
             return Err(data_error(&manifest_path, "the dataset has no example"));
         }

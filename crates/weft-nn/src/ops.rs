@@ -329,6 +329,42 @@ fn store_cached<S>(cache: &ForwardCache<S>, inputs: Vec<f32>, solutions: Vec<S>)
     }
 }
 
+/// Per-example warm starts of a projection op: the last solution (or what a warm start
+/// needs of it) found for each example key, shared by the op's clones.
+#[derive(Debug)]
+struct WarmStarts<S>(Arc<std::sync::Mutex<std::collections::HashMap<usize, S>>>);
+
+impl<S> Default for WarmStarts<S> {
+    fn default() -> Self {
+        Self(Arc::default())
+    }
+}
+
+impl<S> Clone for WarmStarts<S> {
+    fn clone(&self) -> Self {
+        Self(Arc::clone(&self.0))
+    }
+}
+
+impl<S: Clone> WarmStarts<S> {
+    /// The stored start of each of `keys` (none without keys: a cold batch of `n`).
+    fn starts(&self, keys: Option<&[usize]>, n: usize) -> Vec<Option<S>> {
+        match (keys, self.0.lock()) {
+            (Some(keys), Ok(map)) => keys.iter().map(|k| map.get(k).cloned()).collect(),
+            _ => vec![None; n],
+        }
+    }
+
+    /// Remembers `values[b]` for `keys[b]` (nothing without keys).
+    fn remember(&self, keys: Option<&[usize]>, values: impl Iterator<Item = S>) {
+        if let (Some(keys), Ok(mut map)) = (keys, self.0.lock()) {
+            for (k, v) in keys.iter().zip(values) {
+                map.insert(*k, v);
+            }
+        }
+    }
+}
+
 /// `keys` as the op's example keys, one per batch entry of `predictions`.
 fn example_keys(what: &'static str, predictions: &Tensor, keys: &[usize]) -> crate::error::Result<Arc<Vec<usize>>> {
     if keys.len() != predictions.dim(0)? {
@@ -357,7 +393,7 @@ fn example_keys(what: &'static str, predictions: &Tensor, keys: &[usize]) -> cra
 pub struct QuasistaticProjection {
     layer: Arc<weft_proj::QuasistaticLayer>,
     keys: Option<Arc<Vec<usize>>>,
-    previous: Arc<std::sync::Mutex<std::collections::HashMap<usize, Vec<f64>>>>,
+    previous: WarmStarts<Vec<f64>>,
     last: ForwardCache<weft_proj::quasistatic::QuasistaticSolution>,
 }
 
@@ -366,7 +402,7 @@ impl QuasistaticProjection {
         Self {
             layer,
             keys: None,
-            previous: Arc::default(),
+            previous: WarmStarts::default(),
             last: Arc::default(),
         }
     }
@@ -424,10 +460,9 @@ impl QuasistaticProjection {
     ) -> candle_core::Result<Vec<weft_proj::quasistatic::QuasistaticSolution>> {
         let x = convert::f32_to_f64("quasistatic projection input", predictions).map_err(op_error)?;
         let preds = examples(&x, self.layer.num_vertices());
-        let starts: Vec<Option<Vec<f64>>> = match (&self.keys, self.previous.lock()) {
-            (Some(keys), Ok(previous)) => keys.iter().map(|k| previous.get(k).cloned()).collect(),
-            _ => vec![None; preds.len()],
-        };
+        let starts = self
+            .previous
+            .starts(self.keys.as_deref().map(Vec::as_slice), preds.len());
         let scaling = Self::scaling(mu);
         let solutions: Vec<_> = preds
             .par_iter()
@@ -439,11 +474,10 @@ impl QuasistaticProjection {
                     .map_err(op_error)
             })
             .collect::<candle_core::Result<_>>()?;
-        if let (Some(keys), Ok(mut previous)) = (&self.keys, self.previous.lock()) {
-            for (k, s) in keys.iter().zip(&solutions) {
-                previous.insert(*k, s.positions().to_vec());
-            }
-        }
+        self.previous.remember(
+            self.keys.as_deref().map(Vec::as_slice),
+            solutions.iter().map(|s| s.positions().to_vec()),
+        );
         Ok(solutions)
     }
 
@@ -521,7 +555,7 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
 pub struct InextensibilityProjection {
     layer: Arc<weft_proj::InextensibilityLayer>,
     keys: Option<Arc<Vec<usize>>>,
-    previous: Arc<std::sync::Mutex<std::collections::HashMap<usize, weft_proj::SocpSolution>>>,
+    previous: WarmStarts<weft_proj::SocpSolution>,
     last: ForwardCache<weft_proj::SocpSolution>,
 }
 
@@ -530,7 +564,7 @@ impl InextensibilityProjection {
         Self {
             layer,
             keys: None,
-            previous: Arc::default(),
+            previous: WarmStarts::default(),
             last: Arc::default(),
         }
     }
@@ -572,10 +606,9 @@ impl InextensibilityProjection {
     fn solve(&self, predictions: &[f32]) -> candle_core::Result<Vec<weft_proj::SocpSolution>> {
         let x = convert::f32_to_f64("inextensibility projection input", predictions).map_err(op_error)?;
         let preds = examples(&x, self.layer.num_vertices());
-        let previous: Vec<Option<weft_proj::SocpSolution>> = match (&self.keys, self.previous.lock()) {
-            (Some(keys), Ok(previous)) => keys.iter().map(|k| previous.get(k).cloned()).collect(),
-            _ => vec![None; preds.len()],
-        };
+        let previous = self
+            .previous
+            .starts(self.keys.as_deref().map(Vec::as_slice), preds.len());
         let starts: Vec<Option<&weft_proj::SocpSolution>> = previous.iter().map(Option::as_ref).collect();
         let solutions: Vec<weft_proj::SocpSolution> = self
             .layer
@@ -583,11 +616,10 @@ impl InextensibilityProjection {
             .into_iter()
             .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
             .collect::<candle_core::Result<_>>()?;
-        if let (Some(keys), Ok(mut previous)) = (&self.keys, self.previous.lock()) {
-            for (k, s) in keys.iter().zip(&solutions) {
-                previous.insert(*k, s.warm_start());
-            }
-        }
+        self.previous.remember(
+            self.keys.as_deref().map(Vec::as_slice),
+            solutions.iter().map(weft_proj::SocpSolution::warm_start),
+        );
         Ok(solutions)
     }
 }
