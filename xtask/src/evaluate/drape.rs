@@ -452,6 +452,31 @@ fn set_split(out: &mut ExperimentOutput, split: &str) {
     }
 }
 
+/// How far the kinematic guess r̃(θ) alone is from the truth on each split: the size of what
+/// the network's offsets have to supply, and how much it varies from pose to pose.
+fn guess_note(dataset: &DrapeDataset) -> anyhow::Result<String> {
+    let mut parts = Vec::new();
+    for split in SPLITS {
+        let errors: Vec<f64> = dataset
+            .examples
+            .iter()
+            .filter(|e| e.split == split)
+            .map(|e| sqrtmse_maxdist_mm(&e.guess, &e.truth).map(|(s, _)| s))
+            .collect::<Result<_, _>>()?;
+        let n = errors.len().max(1) as f64;
+        let mean = errors.iter().sum::<f64>() / n;
+        let sd = (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let (lo, hi) = errors
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| (a.min(e), b.max(e)));
+        parts.push(format!("{split} {mean:.2} ± {sd:.2} mm (range {lo:.2}–{hi:.2})"));
+    }
+    Ok(format!(
+        "drape: the kinematic guess r̃(θ) alone against the truth, SqrtMSE over examples: {}",
+        parts.join("; ")
+    ))
+}
+
 pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("drape", ctx.size);
     let root = ctx.out.join("drape");
@@ -598,6 +623,8 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         config.quasistatic.axial_stiffness,
         config.quasistatic.zero_length_stiffness,
     ));
+
+    out.notes.push(guess_note(&dataset)?);
 
     // Score every method on every split.
     let mut error_rows = Vec::new();
