@@ -21,9 +21,9 @@ use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Variant, score_sequenc
 use weft_nn::data::{LimbDataset, LimbSequence};
 use weft_nn::graph::NormalizedAdjacency;
 
-use super::EvalContext;
 use super::paper::Table;
 use super::results::{ExperimentOutput, LinePlot, Series, Timing};
+use super::{EvalContext, mean_sd};
 use crate::dataset::Size;
 use crate::report::render::{View, error_colors, error_png};
 use crate::train::{AltconvArgs, TrainCommand};
@@ -146,14 +146,6 @@ struct Errors {
     last: Option<(Vec<f64>, Vec<f64>)>,
     /// Every sequence's roll-out surfaces, flattened `[steps, V, 3]` each.
     surfaces: Vec<Vec<f64>>,
-}
-
-fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
-    let v: Vec<f64> = samples.collect();
-    let n = v.len().max(1) as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
-    (mean, var.sqrt())
 }
 
 /// The `q` quantile of `samples` (nearest rank).

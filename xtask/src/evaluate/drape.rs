@@ -463,9 +463,7 @@ fn guess_note(dataset: &DrapeDataset) -> anyhow::Result<String> {
             .filter(|e| e.split == split)
             .map(|e| sqrtmse_maxdist_mm(&e.guess, &e.truth).map(|(s, _)| s))
             .collect::<Result<_, _>>()?;
-        let n = errors.len().max(1) as f64;
-        let mean = errors.iter().sum::<f64>() / n;
-        let sd = (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let (mean, sd) = super::mean_sd(errors.iter().copied());
         let (lo, hi) = errors
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| (a.min(e), b.max(e)));

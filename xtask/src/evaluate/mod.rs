@@ -157,6 +157,15 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
 
 /// Copies the report to `dest` with its provenance: the command, and which experiments it
 /// ran and which it took from earlier runs cached in the same output directory.
+/// Mean and (population) standard deviation of `samples`; (0, 0) for none.
+pub(crate) fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = samples.collect();
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}
+
 fn publish(out: &Path, dest: &Path, ran: &[&str], outputs: &[ExperimentOutput]) -> anyhow::Result<()> {
     let reused: Vec<&str> = outputs
         .iter()
