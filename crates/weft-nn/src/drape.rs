@@ -352,11 +352,33 @@ pub fn predict_all(model: &DrapeModel, data: &DrapeTensors, batch: usize) -> Res
 
 /// `r*` of every example as flat f64 (m), or the postprocess's error for an example it
 /// failed on: a failing batch is retried example by example, so one bad example does not
-/// take its batch with it.
+/// take its batch with it. Every layer solve starts cold.
 pub fn predict_each(
     model: &DrapeModel,
     data: &DrapeTensors,
     batch: usize,
+) -> Result<Vec<std::result::Result<Vec<f64>, String>>> {
+    predict_each_from(model, data, batch, None)
+}
+
+/// [`predict_each`] with example `i` keyed `first_key + i`, so each layer solve starts from
+/// that key's previous solution (training's per-epoch validation pass: the same 200
+/// examples every epoch, under weights that changed by one epoch). Keys must not collide
+/// with the training examples' (`0..n_train`), which share the layers' warm-start store.
+pub fn predict_each_keyed(
+    model: &DrapeModel,
+    data: &DrapeTensors,
+    batch: usize,
+    first_key: usize,
+) -> Result<Vec<std::result::Result<Vec<f64>, String>>> {
+    predict_each_from(model, data, batch, Some(first_key))
+}
+
+fn predict_each_from(
+    model: &DrapeModel,
+    data: &DrapeTensors,
+    batch: usize,
+    first_key: Option<usize>,
 ) -> Result<Vec<std::result::Result<Vec<f64>, String>>> {
     let n = data.len();
     let mut out = Vec::with_capacity(n);
@@ -367,14 +389,15 @@ pub fn predict_each(
             .map(|i| Ok(Ok(r.get(i)?.flatten_all()?.to_vec1::<f64>()?)))
             .collect()
     };
+    let keys = |chunk: &[usize]| first_key.map(|k0| chunk.iter().map(|i| k0 + i).collect::<Vec<_>>());
     for chunk in idx.chunks(batch.max(1)) {
         let b = data.select(chunk)?;
-        match model.predict(&b.pose, &b.guess) {
+        match model.predict_keyed(&b.pose, &b.guess, keys(chunk).as_deref()) {
             Ok(r) => out.extend(rows(r, chunk.len())?),
             Err(_) => {
                 for &i in chunk {
                     let one = data.select(&[i])?;
-                    match model.predict(&one.pose, &one.guess) {
+                    match model.predict_keyed(&one.pose, &one.guess, keys(&[i]).as_deref()) {
                         Ok(r) => out.extend(rows(r, 1)?),
                         Err(e) => out.push(Err(e.to_string())),
                     }

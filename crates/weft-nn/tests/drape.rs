@@ -198,3 +198,47 @@ fn a_failing_example_is_left_out_of_predictions_and_its_batch_skipped_in_trainin
     };
     assert!(train_epoch(&plain, &mut opt, &bad, 1, 0).is_err());
 }
+
+/// The per-epoch validation pass warm-starts each layer solve from the same example's
+/// previous solution (under other weights); model selection relies on it reaching the
+/// cold solve's answer.
+#[test]
+fn keyed_predictions_started_from_another_models_solutions_match_cold_ones() {
+    let (d, data) = examples();
+    let v = d.sleeve().num_vertices();
+    let layer = Arc::new(InextensibilityLayer::new(d.sleeve(), 0.1, SocpSettings::default()).unwrap());
+    let posts = [
+        Postprocess::Quasistatic {
+            op: quasistatic(&d),
+            mu: Mu::Fixed(0.1),
+        },
+        Postprocess::Inextensibility(InextensibilityProjection::new(layer)),
+    ];
+    for post in posts {
+        // Two networks sharing one layer op, hence one warm-start store.
+        let model = |seed| {
+            let mut params = Params::new(&Device::Cpu, seed);
+            DrapeModel {
+                net: DrapeNet::new(&mut params, &DrapeNetConfig::default(), v).unwrap(),
+                post: post.clone(),
+            }
+        };
+        let (a, b) = (model(31), model(32));
+        let flat = |r: Vec<Result<Vec<f64>, String>>| -> Vec<f64> { r.into_iter().flat_map(|x| x.unwrap()).collect() };
+        let max_diff = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max);
+        let a_warm = flat(weft_nn::drape::predict_each_keyed(&a, &data, 4, 100).unwrap());
+        let b_cold = flat(weft_nn::drape::predict_each(&b, &data, 4).unwrap());
+        // `b` starts from `a`'s solutions, which are far from its own answers.
+        let b_warm = flat(weft_nn::drape::predict_each_keyed(&b, &data, 4, 100).unwrap());
+        let apart = max_diff(&a_warm, &b_cold);
+        let warm_vs_cold = max_diff(&b_warm, &b_cold);
+        assert!(
+            apart > 1e-3,
+            "the two networks predict nearly the same cloth ({apart} m)"
+        );
+        assert!(
+            warm_vs_cold < 1e-5,
+            "warm-started solves differ from cold ones by {warm_vs_cold} m"
+        );
+    }
+}

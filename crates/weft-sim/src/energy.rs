@@ -6,7 +6,8 @@
 //! to positive semi-definite *per element* so that Newton's direction is always a
 //! descent direction (Teran et al. 2005; Tan et al. Eq. 4 is solved this way).
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::allocator::Allocator;
+use nalgebra::{Const, DefaultAllocator, DimDiff, DimSub, SMatrix, SVector, U1};
 use weft_linalg::SymmetricMatrix;
 
 /// A term of a total potential over flat positions `x` (3 DOFs per vertex).
@@ -145,38 +146,35 @@ pub fn scatter_hessian<const D: usize>(verts: &[usize], local: &SMatrix<f64, D, 
 
 /// Projects a symmetric matrix onto the positive semi-definite cone by clamping its
 /// negative eigenvalues to zero (Teran, Sifakis, Irving, Fedkiw 2005, §4).
-pub fn project_psd<const D: usize>(m: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D> {
-    // nalgebra's fixed-size eigen solver needs type-level dimension bounds that do not
-    // compose with const generics; the dynamic one costs an allocation, negligible
-    // beside the eigen-decomposition itself.
-    let dm = nalgebra::DMatrix::from_fn(D, D, |i, j| 0.5 * (m[(i, j)] + m[(j, i)]));
+///
+/// Fixed-size, so the one implementation serves every element block (`9 × 9` membrane
+/// and `∂P/∂F`, `12 × 12` hinge) without a heap matrix per call.
+pub fn project_psd<const D: usize>(m: &SMatrix<f64, D, D>) -> SMatrix<f64, D, D>
+where
+    Const<D>: DimSub<U1>,
+    DefaultAllocator: Allocator<DimDiff<Const<D>, U1>>,
+{
+    let sym = 0.5 * (m + m.transpose());
     // Fast path: most element blocks are already PSD; a Cholesky of a tiny positive
     // shift (rigid modes make the blocks singular) proves it far cheaper than an
     // eigen-decomposition.
     let scale = (0..D)
-        .map(|i| dm[(i, i)].abs())
+        .map(|i| sym[(i, i)].abs())
         .fold(0.0, f64::max)
         .max(f64::MIN_POSITIVE);
-    let shifted = &dm + nalgebra::DMatrix::identity(D, D) * (1e-12 * scale);
+    let mut shifted = sym;
+    for i in 0..D {
+        shifted[(i, i)] += 1e-12 * scale;
+    }
     if shifted.cholesky().is_some() {
         return *m;
     }
-    let eig = dm.symmetric_eigen();
+    let eig = sym.symmetric_eigen();
     if eig.eigenvalues.iter().all(|&l| l >= 0.0) {
         return *m;
     }
-    let mut out = SMatrix::<f64, D, D>::zeros();
-    for (k, &l) in eig.eigenvalues.iter().enumerate() {
-        if l > 0.0 {
-            let v = eig.eigenvectors.column(k);
-            for i in 0..D {
-                for j in 0..D {
-                    out[(i, j)] += l * v[i] * v[j];
-                }
-            }
-        }
-    }
-    out
+    let clamped = eig.eigenvalues.map(|l| l.max(0.0));
+    eig.eigenvectors * SMatrix::<f64, D, D>::from_diagonal(&clamped) * eig.eigenvectors.transpose()
 }
 
 /// All vertex pairs of an element (for [`Energy::hessian_pairs`]).

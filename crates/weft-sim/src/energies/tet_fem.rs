@@ -341,20 +341,6 @@ fn signed_singular_values(F: &Matrix3<f64>) -> Vector3<f64> {
     s
 }
 
-/// [`crate::energy::project_psd`] for the `9 × 9` `∂P/∂F`, without allocation and with a
-/// fast path: a matrix that passes a Cholesky test is already positive definite and is
-/// returned as is (the common case away from compression), otherwise its negative
-/// eigenvalues are clamped to zero (Teran et al. 2005).
-fn project_psd_9(m: &SMatrix<f64, 9, 9>) -> SMatrix<f64, 9, 9> {
-    let sym = 0.5 * (m + m.transpose());
-    if sym.cholesky().is_some() {
-        return sym;
-    }
-    let eig = sym.symmetric_eigen();
-    let clamped = eig.eigenvalues.map(|l| l.max(0.0));
-    eig.eigenvectors * SMatrix::<f64, 9, 9>::from_diagonal(&clamped) * eig.eigenvectors.transpose()
-}
-
 /// Elements processed per parallel batch (bounds the scratch memory to a few MB).
 const BATCH: usize = 4096;
 
@@ -502,7 +488,7 @@ impl TetElasticity {
         let mut A = self.material.stress_derivative(&self.lame, &F);
         if project && self.material != Material::Linear {
             // Linear elasticity's ∂P/∂F is constant and PSD for μ > 0, λ ≥ 0.
-            A = project_psd_9(&A);
+            A = crate::energy::project_psd(&A);
         }
         // G maps the 12 nodal DOFs to vec(F): ∂F_ij/∂x_{a,i} = b_a[j].
         let mut G = SMatrix::<f64, 9, 12>::zeros();
