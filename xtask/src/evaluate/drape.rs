@@ -78,10 +78,15 @@ pub fn training_config(size: Size) -> DrapeTrainingConfig {
             DrapeNetConfig::default()
         },
         pretrain_epochs: if quick { 30 } else { 200 },
-        finetune_epochs: if quick { 3 } else { 10 },
+        // Five: in the first standard run (10 epochs, docs/DRAPE.md) the fixed-layer
+        // models kept epochs 1, 1 and 2, and the whole evaluation must fit one
+        // three-hour session with its dataset.
+        finetune_epochs: if quick { 3 } else { 5 },
         batch: if quick { 4 } else { 16 },
         learning_rate: 1e-3,
-        mu_learning_rate: 0.05,
+        // At 0.05, μ started at 1 was still falling after 10 epochs (0.128); at 0.1 it
+        // can cover the same distance in the five epochs.
+        mu_learning_rate: 0.1,
         epsilon: 0.1,
         quasistatic: QuasistaticParams::default(),
         seed: 1,
