@@ -84,8 +84,8 @@ pub fn training_config(size: Size) -> DrapeTrainingConfig {
         finetune_epochs: if quick { 3 } else { 5 },
         batch: if quick { 4 } else { 16 },
         learning_rate: 1e-3,
-        // At 0.05, μ started at 1 was still falling after 10 epochs (0.128); at 0.1 it
-        // can cover the same distance in the five epochs.
+        // At 0.05, μ started at 1 was still falling after 10 epochs (0.128). At 0.1 over
+        // five epochs it falls to 0.171 (docs/DRAPE.md): the loss is nearly flat in μ.
         mu_learning_rate: 0.1,
         epsilon: 0.1,
         quasistatic: QuasistaticParams::default(),
@@ -178,8 +178,8 @@ fn learned_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
 /// Mean SqrtMSE (mm) over the validation examples the model's postprocess succeeds on,
 /// for model selection. The layers warm-start each example from its solution of the
 /// previous epoch (keys after the `n_train` training examples'): the equilibrium is the
-/// same to the solver's tolerance, and the pass costs about half of a cold one. The
-/// reported scores ([`score`]) are cold solves.
+/// same to the solver's tolerance, and a warm quasistatic solve costs 0.47–0.70 of a cold
+/// one (docs/BENCHMARKS.md). The reported scores ([`score`]) are cold solves.
 fn validation_sqrtmse(model: &DrapeModel, data: &DrapeTensors, batch: usize, n_train: usize) -> anyhow::Result<f64> {
     let pred = predict_each_keyed(model, data, batch, n_train)?;
     let truth = data.truths()?;
