@@ -28,6 +28,76 @@ pub enum TrainCommand {
     Nnwarp(NnwarpArgs),
     /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
     Altconv(AltconvArgs),
+    /// Geng et al.'s pose → cloth network on the `drape` dataset, alone or trained through
+    /// the inextensibility or the quasistatic layer (fixed or learned μ).
+    Drape(DrapeArgs),
+}
+
+/// The layer a drape model is trained through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DrapeLayer {
+    /// The network alone (`network-only`).
+    None,
+    /// The inextensibility SOCP (edges at most 1 + ε their rest length).
+    Socp,
+    /// The quasistatic spring layer with zero-length springs of stiffness μ to the prediction.
+    Quasistatic,
+}
+
+/// How μ of the quasistatic layer is learned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LearnMu {
+    /// One μ for the whole sleeve.
+    Global,
+    /// One μ_i per vertex.
+    PerVertex,
+}
+
+#[derive(Args)]
+pub struct DrapeArgs {
+    /// A `drape` dataset directory written by `cargo xtask dataset drape`.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Where the model is written: `config.json`, `progress.json` (per epoch the training
+    /// loss, validation SqrtMSE, μ and the spread of μ's gradient over batches), the
+    /// checkpoints `best` and `last` (`*-mu` beside them with a learned μ) and
+    /// `scores.json` (the kept model on the validation and test splits).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The layer after the network, in training and in the scores.
+    #[arg(long, value_enum, default_value = "none")]
+    pub layer: DrapeLayer,
+    /// μ of the quasistatic layer, or where a learned μ starts.
+    #[arg(long, default_value_t = 0.1)]
+    pub mu: f64,
+    /// Learn μ (as log μ, with its own Adam at the configuration's `mu_learning_rate`).
+    #[arg(long, value_enum)]
+    pub learn_mu: Option<LearnMu>,
+    /// A drape model directory whose best network weights training starts from (the
+    /// evaluation fine-tunes every layer from `network-only`).
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// Epochs to train in all (default: the configuration's `pretrain_epochs` (200) from
+    /// scratch, `finetune_epochs` (5) with --init). With --resume, a model trained for
+    /// fewer epochs is continued up to this many.
+    #[arg(long)]
+    pub epochs: Option<usize>,
+    /// Training configuration (JSON; omitted fields keep the standard evaluation's values):
+    /// `net` ({"hidden": [64, 256], "offset_scale": 0.01}), `batch` (16), `learning_rate`
+    /// (1e-3), `mu_learning_rate` (0.1), `epsilon` (0.1), `quasistatic`, `seed` (1).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Continue the model in --out (same configuration, layer and --init).
+    #[arg(long)]
+    pub resume: bool,
+    /// After training, score the kept network on the validation split with the quasistatic
+    /// layer at each of these fixed μ (comma-separated, e.g. 0.01,0.1,1): the loss as a
+    /// function of μ alone, written to `mu-scan.json`.
+    #[arg(long, value_delimiter = ',')]
+    pub scan_mu: Vec<f64>,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Args)]
@@ -131,7 +201,182 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
         TrainCommand::Embed(args) => embed(args),
         TrainCommand::Nnwarp(args) => nnwarp(args),
         TrainCommand::Altconv(args) => altconv(args),
+        TrainCommand::Drape(args) => drape(args),
     }
+}
+
+fn drape(args: DrapeArgs) -> anyhow::Result<()> {
+    use crate::evaluate::drape::{DrapeTrainingConfig, Layer, Layers, Plan, fit, score};
+    let config: DrapeTrainingConfig = match &args.config {
+        Some(p) => {
+            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("parsing {}", p.display()))?
+        }
+        None => DrapeTrainingConfig::default(),
+    };
+    if config.batch == 0 {
+        bail!("batch must be at least 1");
+    }
+    if !(args.mu > 0.0 && args.mu.is_finite()) {
+        bail!("--mu must be positive and finite, not {}", args.mu);
+    }
+    if let Some(m) = args.scan_mu.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
+        bail!("--scan-mu values must be positive and finite, not {m}");
+    }
+    let layer = match (args.layer, args.learn_mu) {
+        (DrapeLayer::None, None) => Layer::None,
+        (DrapeLayer::Socp, None) => Layer::Socp,
+        (DrapeLayer::Quasistatic, None) => Layer::Quasistatic(args.mu),
+        (DrapeLayer::Quasistatic, Some(learn)) => Layer::LearnedMu {
+            start: args.mu,
+            per_vertex: learn == LearnMu::PerVertex,
+        },
+        (_, Some(_)) => bail!("--learn-mu needs --layer quasistatic"),
+    };
+    let epochs = args.epochs.unwrap_or(if args.init.is_some() {
+        config.finetune_epochs
+    } else {
+        config.pretrain_epochs
+    });
+    if args.out.join("config.json").exists() && !args.resume {
+        bail!(
+            "{} already holds a model; pass --resume to continue it or choose another --out",
+            args.out.display()
+        );
+    }
+    let dataset =
+        weft_nn::data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+    let device = weft_nn::Device::Cpu;
+    let split = |name: &str| {
+        dataset
+            .tensors(name, &device)
+            .with_context(|| format!("the {name} split of {}", args.data.display()))
+    };
+    let (train, validation, test) = (split("train")?, split("validation")?, split("test")?);
+    anyhow::ensure!(
+        !train.is_empty() && !validation.is_empty(),
+        "{} needs training and validation examples (it has {} and {})",
+        args.data.display(),
+        train.len(),
+        validation.len()
+    );
+    let v = dataset.sleeve.num_vertices();
+    let layers = Layers::new(&dataset.sleeve, &config)?;
+    let name = args
+        .out
+        .file_name()
+        .map_or("model".into(), |n| n.to_string_lossy().into_owned());
+    eprintln!(
+        "drape/{name}: {layer}, {} training and {} validation examples on {v} vertices, {epochs} epochs",
+        train.len(),
+        validation.len()
+    );
+    let plan = Plan {
+        name: &name,
+        layer,
+        init: args.init.as_deref(),
+        epochs,
+        quiet: args.quiet,
+        retrain_on_mismatch: false,
+    };
+    let fitted = fit(&args.out, &plan, &config, &layers, &train, &validation, v)?;
+    let p = &fitted.progress;
+    if p.skipped_batches > 0 {
+        eprintln!(
+            "drape/{name}: {} training batches skipped because the layer failed on them; the first: {}",
+            p.skipped_batches,
+            p.first_error.clone().unwrap_or_default()
+        );
+    }
+    if let Some(last) = p.history.last() {
+        eprintln!(
+            "drape/{name}: after epoch {}: training loss {:.4} mm², validation SqrtMSE {:.4} mm{}",
+            p.epochs_done,
+            last.loss_mm2,
+            last.validation_sqrtmse_mm,
+            last.mu.map_or(String::new(), |m| format!(", μ {m:.4}"))
+        );
+    }
+    // The kept model, scored with cold solves as the evaluation scores it.
+    let rest = weft_proj::RestShape::new(&dataset.sleeve)?;
+    let k = config.quasistatic.stretch_stiffness;
+    let mut scores = serde_json::Map::new();
+    for (split, data) in [("validation", &validation), ("test", &test)] {
+        if data.is_empty() {
+            continue;
+        }
+        let (s, _) = score(&fitted.model, data, &rest, k, config.batch)?;
+        eprintln!(
+            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
+            p.best_epoch.unwrap_or(0),
+            s.sqrtmse,
+            s.maxdist,
+            s.failed
+        );
+        scores.insert(
+            split.into(),
+            serde_json::json!({
+                "sqrtmse-mm": s.sqrtmse,
+                "maxdist-mm": s.maxdist,
+                "compression-energy-error": s.compression,
+                "stretching-energy-error": s.stretching,
+                "failed": s.failed,
+            }),
+        );
+    }
+    let mu = fitted
+        .mu
+        .as_ref()
+        .map(|m| m.iter().sum::<f64>() / m.len().max(1) as f64);
+    write_atomic(
+        &args.out.join("scores.json"),
+        &serde_json::to_string_pretty(&serde_json::json!({
+            "kept_epoch": p.best_epoch,
+            "epochs": p.epochs_done,
+            "kept_mu_mean": mu,
+            "scores": scores,
+        }))?,
+    )?;
+    if !args.scan_mu.is_empty() {
+        // The same cold solves as the scores: the loss (mean squared SqrtMSE, mm²) and the
+        // SqrtMSE of the kept network as μ alone varies.
+        let truth = validation.truths()?;
+        let mut scan = Vec::with_capacity(args.scan_mu.len());
+        for &m in &args.scan_mu {
+            let (s, kept) = score(
+                &layers.at_fixed_mu(&fitted.model.net, m),
+                &validation,
+                &rest,
+                k,
+                config.batch,
+            )?;
+            let mut loss = 0.0;
+            for (i, p) in &kept {
+                loss += weft_nn::drape::sqrtmse_maxdist_mm(p, &truth[*i])?.0.powi(2);
+            }
+            loss /= kept.len() as f64;
+            eprintln!(
+                "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {loss:.5} mm² ({} examples failed)",
+                s.sqrtmse, s.failed
+            );
+            scan.push(serde_json::json!({
+                "mu": m,
+                "validation_sqrtmse_mm": s.sqrtmse,
+                "validation_loss_mm2": loss,
+                "failed": s.failed,
+            }));
+        }
+        write_atomic(
+            &args.out.join("mu-scan.json"),
+            &serde_json::to_string_pretty(&serde_json::json!({
+                "kept_epoch": p.best_epoch,
+                "kept_mu_mean": mu,
+                "scan": scan,
+            }))?,
+        )?;
+    }
+    eprintln!("model → {}", args.out.display());
+    Ok(())
 }
 
 fn read_config(args: &EmbedArgs) -> anyhow::Result<EmbedTrainingConfig> {

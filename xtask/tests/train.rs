@@ -183,3 +183,106 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     assert!(!cloth.status.success());
     assert!(String::from_utf8_lossy(&cloth.stderr).contains("not a volumetric scene"));
 }
+
+fn progress(model: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(model.join("progress.json")).unwrap()).unwrap()
+}
+
+/// `cargo xtask train drape`: a learned-μ model continued with a larger `--epochs` ends where
+/// an uninterrupted run does (its μ and Adam state restored; only the layer's warm starts,
+/// kept in memory, begin cold after the restart), every epoch records μ and the spread of
+/// its gradient, and a model directory is not continued under another μ.
+#[test]
+fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
+    let root = scratch("drape");
+    let data = root.join("data");
+    let out = xtask(&["dataset", "drape", "--size", "quick", "--quiet"], &[("--out", &data)]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let config = root.join("config.json");
+    std::fs::write(
+        &config,
+        r#"{"net": {"hidden": [16, 32], "offset_scale": 0.01}, "batch": 4}"#,
+    )
+    .unwrap();
+    let net = root.join("net");
+    let run = |model: &Path, extra: &[&str]| {
+        let mut args = vec!["train", "drape", "--quiet"];
+        args.extend_from_slice(extra);
+        xtask(&args, &[("--data", &data), ("--config", &config), ("--out", model)])
+    };
+    let out = run(&net, &["--epochs", "20"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mu = ["--layer", "quasistatic", "--learn-mu", "global", "--mu", "1"];
+    let with = |epochs: &'static str, resume: bool| {
+        let mut a = mu.to_vec();
+        a.extend(["--init", net.to_str().unwrap(), "--epochs", epochs]);
+        if resume {
+            a.push("--resume");
+        }
+        a
+    };
+    let (whole, split) = (root.join("whole"), root.join("split"));
+    assert!(run(&whole, &with("3", false)).status.success());
+    assert!(run(&split, &with("2", false)).status.success());
+    assert!(
+        !run(&split, &with("3", false)).status.success(),
+        "continued without --resume"
+    );
+    let out = run(&split, &with("3", true));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (a, b) = (progress(&whole), progress(&split));
+    assert_eq!(b["epochs_done"], 3);
+    let record = |p: &serde_json::Value, e: usize, key: &str| p["history"][e][key].as_f64().unwrap();
+    for e in 0..3 {
+        let (ma, mb) = (record(&a, e, "mu"), record(&b, e, "mu"));
+        assert!(
+            (ma - mb).abs() <= 1e-3 * ma,
+            "epoch {e}: μ {ma} uninterrupted, {mb} continued"
+        );
+        assert!(a["history"][e]["mu_gradient"]["batches"].as_u64() == Some(4));
+    }
+    // μ moved from its start: the continued run really trained it.
+    assert!((record(&b, 2, "mu") - 1.0).abs() > 0.05);
+    let scores: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(split.join("scores.json")).unwrap()).unwrap();
+    assert!(scores["scores"]["test"]["sqrtmse-mm"].as_f64().unwrap().is_finite());
+    // Another μ start in the same directory is refused, not mixed into it.
+    let mut other = with("4", true);
+    other[5] = "0.5";
+    let out = run(&split, &other);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("another configuration"));
+    // --scan-mu scores the kept network at fixed μ: at the model's own μ it reproduces the
+    // validation score, and another μ changes it.
+    let fixed = root.join("fixed");
+    let args = [
+        "--layer",
+        "quasistatic",
+        "--mu",
+        "0.5",
+        "--epochs",
+        "1",
+        "--scan-mu",
+        "0.5,2",
+    ];
+    let mut a = args.to_vec();
+    a.extend(["--init", net.to_str().unwrap()]);
+    let out = run(&fixed, &a);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(fixed.join(f)).unwrap()).unwrap()
+    };
+    let (scores, scan) = (read("scores.json"), read("mu-scan.json"));
+    let at = |i: usize, key: &str| scan["scan"][i][key].as_f64().unwrap();
+    let validation = scores["scores"]["validation"]["sqrtmse-mm"].as_f64().unwrap();
+    assert!((at(0, "validation_sqrtmse_mm") - validation).abs() <= 1e-9 * validation);
+    assert!((at(1, "validation_sqrtmse_mm") - validation).abs() > 1e-6 * validation);
+    // The loss is the mean of squared per-example errors: at least the squared mean.
+    assert!(at(0, "validation_loss_mm2") >= validation * validation * (1.0 - 1e-12));
+    let mut bad = a.clone();
+    bad[7] = "0.5,0";
+    let out = run(&root.join("bad"), &bad);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--scan-mu"));
+    let _ = std::fs::remove_dir_all(&root);
+}

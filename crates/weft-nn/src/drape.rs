@@ -262,6 +262,36 @@ pub struct EpochReport {
     /// for them, and the first failure is kept.
     pub skipped_batches: usize,
     pub first_error: Option<String>,
+    /// With a learned μ: how the gradient of the batch loss in `log μ` (averaged over its
+    /// entries when μ is per vertex) varied over the epoch's batches. Adam moves `log μ`
+    /// by about `lr · mean / sd` per step on average, so a ratio near zero is why a
+    /// learned μ drifts slowly (docs/DRAPE.md).
+    pub mu_gradient: Option<GradientStats>,
+}
+
+/// Mean and standard deviation over an epoch's batches of one gradient (per batch, mm²
+/// per unit of the parameter).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GradientStats {
+    pub mean: f64,
+    pub sd: f64,
+    pub batches: usize,
+}
+
+impl GradientStats {
+    fn of(values: &[f64]) -> Option<Self> {
+        let n = values.len();
+        if n == 0 {
+            return None;
+        }
+        let mean = values.iter().sum::<f64>() / n as f64;
+        let var = values.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n.max(2) - 1) as f64;
+        Some(Self {
+            mean,
+            sd: var.sqrt(),
+            batches: n,
+        })
+    }
 }
 
 /// One epoch over `data` in shuffled batches (seeded by `seed`). The layers warm-start
@@ -293,8 +323,10 @@ pub fn train_epoch(
         mean_loss: 0.0,
         skipped_batches: 0,
         first_error: None,
+        mu_gradient: None,
     };
     let mut trained = 0;
+    let mut mu_grads = Vec::new();
     for chunk in order.chunks(batch) {
         let b = data.select(chunk)?;
         let step = model
@@ -320,6 +352,15 @@ pub fn train_epoch(
         };
         opt.net.step(opt.net_params, &grads)?;
         if let Some((params, adam)) = opt.mu.as_mut() {
+            if let Postprocess::Quasistatic {
+                mu: Mu::Learned(log_mu),
+                ..
+            } = &model.post
+            {
+                if let Some(g) = grads.get(log_mu) {
+                    mu_grads.push(f64::from(g.mean_all()?.to_scalar::<f32>()?));
+                }
+            }
             adam.step(params, &grads)?;
         }
         report.mean_loss += value * chunk.len() as f64;
@@ -333,6 +374,7 @@ pub fn train_epoch(
         });
     }
     report.mean_loss /= trained as f64;
+    report.mu_gradient = GradientStats::of(&mu_grads);
     Ok(report)
 }
 

@@ -84,6 +84,68 @@ fn the_mu_gradient_of_the_training_loss_matches_finite_differences() {
     }
 }
 
+/// The epoch report's μ-gradient statistics are the per-batch gradients of the loss in
+/// log μ: with the parameters held (a vanishing learning rate), one batch of every example
+/// reports the whole loss's gradient (checked against finite differences) and no spread,
+/// and two equal batches report the same mean (the loss is a mean over examples).
+#[test]
+fn the_epoch_reports_the_per_batch_mu_gradient() {
+    let (d, data) = examples();
+    let v = d.sleeve().num_vertices();
+    let mut net_params = Params::new(&Device::Cpu, 5);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+    let mut mu_params = Params::new(&Device::Cpu, 6);
+    let mu = Mu::learned(&mut mu_params, 0.1, None).unwrap();
+    let model = DrapeModel {
+        net,
+        post: Postprocess::Quasistatic {
+            op: quasistatic(&d),
+            mu,
+        },
+    };
+    let held = AdamSettings {
+        learning_rate: 1e-30,
+        ..AdamSettings::default()
+    };
+    let (mut adam, mut mu_adam) = (
+        Adam::new(&net_params, held).unwrap(),
+        Adam::new(&mu_params, held).unwrap(),
+    );
+    let mut epoch = |batch: usize| {
+        let mut opt = DrapeOptimizers {
+            net_params: &net_params,
+            net: &mut adam,
+            mu: Some((&mu_params, &mut mu_adam)),
+        };
+        train_epoch(&model, &mut opt, &data, batch, 0)
+            .unwrap()
+            .mu_gradient
+            .unwrap()
+    };
+    let whole = epoch(data.len());
+    let halves = epoch(data.len() / 2);
+    let var = &mu_params.vars()["mu.log"];
+    let base: f32 = var.as_tensor().to_vec1::<f32>().unwrap()[0];
+    let at = |h: f32| -> f64 {
+        var.set(&Tensor::new(&[base + h], &Device::Cpu).unwrap()).unwrap();
+        let l = loss(&model.predict(&data.pose, &data.guess).unwrap(), &data.truth).unwrap();
+        f64::from(l.to_scalar::<f32>().unwrap())
+    };
+    let h = 0.02;
+    let fd = (at(h) - at(-h)) / (2.0 * f64::from(h));
+    assert_eq!((whole.batches, whole.sd), (1, 0.0));
+    assert!(fd.abs() > 1e-3, "the μ gradient is zero: {fd}");
+    assert!(
+        (whole.mean - fd).abs() <= 0.02 * fd.abs(),
+        "one batch: {whole:?}, finite differences {fd}"
+    );
+    assert_eq!(halves.batches, 2);
+    assert!(
+        (halves.mean - whole.mean).abs() <= 1e-3 * whole.mean.abs(),
+        "two batches {halves:?} against one {whole:?}"
+    );
+}
+
 /// Trains the network alone for `epochs`, then with `post` for as many, returning the
 /// training loss with the postprocess before and after its training.
 fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params) -> Postprocess) -> (f64, f64) {

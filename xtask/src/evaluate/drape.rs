@@ -26,7 +26,7 @@ use weft_nn::Device;
 use weft_nn::adam::{Adam, AdamSettings};
 use weft_nn::data::DrapeDataset;
 use weft_nn::drape::{
-    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, Mu, Postprocess, predict_each,
+    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, GradientStats, Mu, Postprocess, predict_each,
     predict_each_keyed, sqrtmse_maxdist_mm, train_epoch,
 };
 use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
@@ -47,9 +47,11 @@ const FIXED_MU: [(f64, &str); 3] = [(1.0, "mu1"), (0.1, "mu0.1"), (0.01, "mu0.01
 /// Starts of the learned global μ (Geng et al. §6.2); the method row starts at 0.1.
 const MU_STARTS: [(f64, &str); 3] = [(1.0, "1"), (0.1, "0.1"), (0.01, "0.01")];
 
-/// Everything that decides a trained model (a model directory trained under another
-/// configuration is retrained).
+/// Everything that decides a trained model but its number of epochs (a model directory
+/// trained under another configuration is retrained; one trained for fewer epochs is
+/// continued). Omitted fields in a `--config` file keep the standard size's values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DrapeTrainingConfig {
     pub net: DrapeNetConfig,
     /// Epochs of `network-only`.
@@ -64,6 +66,12 @@ pub struct DrapeTrainingConfig {
     pub epsilon: f64,
     pub quasistatic: QuasistaticParams,
     pub seed: u64,
+}
+
+impl Default for DrapeTrainingConfig {
+    fn default() -> Self {
+        training_config(Size::Standard)
+    }
 }
 
 pub fn training_config(size: Size) -> DrapeTrainingConfig {
@@ -95,7 +103,7 @@ pub fn training_config(size: Size) -> DrapeTrainingConfig {
 
 /// What follows the network in a method.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-enum Layer {
+pub enum Layer {
     None,
     Socp,
     Quasistatic(f64),
@@ -106,6 +114,21 @@ enum Layer {
     },
 }
 
+impl std::fmt::Display for Layer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Self::None => write!(f, "no layer"),
+            Self::Socp => write!(f, "the inextensibility (SOCP) layer"),
+            Self::Quasistatic(mu) => write!(f, "the quasistatic layer at μ = {mu}"),
+            Self::LearnedMu { start, per_vertex } => write!(
+                f,
+                "the quasistatic layer with a learned {} μ from {start}",
+                if per_vertex { "per-vertex" } else { "global" }
+            ),
+        }
+    }
+}
+
 /// A model to train: its directory name and layer.
 struct Training {
     name: String,
@@ -113,12 +136,35 @@ struct Training {
 }
 
 /// The layers of the experiment, built once.
-struct Layers {
+pub struct Layers {
     socp: Arc<InextensibilityLayer>,
     quasistatic: Arc<QuasistaticLayer>,
 }
 
 impl Layers {
+    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingConfig) -> anyhow::Result<Self> {
+        Ok(Self {
+            socp: Arc::new(InextensibilityLayer::new(
+                sleeve,
+                config.epsilon,
+                SocpSettings::default(),
+            )?),
+            quasistatic: Arc::new(QuasistaticLayer::new(sleeve, config.quasistatic)?),
+        })
+    }
+
+    /// `net` followed by the quasistatic layer at a fixed `mu`: how the loss of a trained
+    /// network depends on μ alone (`cargo xtask train drape --scan-mu`).
+    pub fn at_fixed_mu(&self, net: &weft_nn::drape::DrapeNet, mu: f64) -> DrapeModel {
+        DrapeModel {
+            net: net.clone(),
+            post: Postprocess::Quasistatic {
+                op: QuasistaticProjection::new(self.quasistatic.clone()),
+                mu: Mu::Fixed(mu),
+            },
+        }
+    }
+
     fn postprocess(&self, layer: Layer, mu_params: &mut Params, v: usize) -> anyhow::Result<Postprocess> {
         Ok(match layer {
             Layer::None => Postprocess::None,
@@ -137,26 +183,51 @@ impl Layers {
 
 /// Progress of a model's training, rewritten after every epoch.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-struct Progress {
-    epochs_done: usize,
-    best_epoch: Option<usize>,
-    best_validation_sqrtmse_mm: f64,
-    /// Per epoch: training loss (mm²), validation SqrtMSE (mm), mean μ.
-    history: Vec<(f64, f64, Option<f64>)>,
-    training_seconds: f64,
+pub struct Progress {
+    pub epochs_done: usize,
+    pub best_epoch: Option<usize>,
+    pub best_validation_sqrtmse_mm: f64,
+    pub history: Vec<EpochRecord>,
+    pub training_seconds: f64,
     /// Training batches skipped because the layer failed on them, and the first failure.
     #[serde(default)]
-    skipped_batches: usize,
+    pub skipped_batches: usize,
     #[serde(default)]
-    first_error: Option<String>,
+    pub first_error: Option<String>,
+}
+
+/// One epoch of a model's training.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EpochRecord {
+    /// Mean training loss over the epoch's batches (mm²).
+    pub loss_mm2: f64,
+    /// Validation SqrtMSE after the epoch (mm).
+    pub validation_sqrtmse_mm: f64,
+    /// A learned μ after the epoch (its mean over vertices if per vertex).
+    pub mu: Option<f64>,
+    /// The per-batch gradient of the loss in log μ over the epoch (mm²).
+    pub mu_gradient: Option<GradientStats>,
 }
 
 /// A trained model, at its best validation weights.
-struct Fitted {
-    model: DrapeModel,
-    progress: Progress,
+pub struct Fitted {
+    pub model: DrapeModel,
+    pub progress: Progress,
     /// μ of a learned-μ model (global value, or the per-vertex values).
-    mu: Option<Vec<f64>>,
+    pub mu: Option<Vec<f64>>,
+}
+
+/// How a model is trained: its layer, where its weights start, for how many epochs.
+pub struct Plan<'a> {
+    pub name: &'a str,
+    pub layer: Layer,
+    /// A model directory whose best network weights the training starts from.
+    pub init: Option<&'a Path>,
+    pub epochs: usize,
+    pub quiet: bool,
+    /// A directory trained under another configuration is retrained (the evaluation)
+    /// rather than refused (`cargo xtask train drape`).
+    pub retrain_on_mismatch: bool,
 }
 
 fn learned_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
@@ -194,42 +265,69 @@ fn validation_sqrtmse(model: &DrapeModel, data: &DrapeTensors, batch: usize, n_t
     Ok(sum / n as f64)
 }
 
-/// Trains (or resumes, or reloads) one model: `network-only` from scratch, the others from
-/// `network-only`'s best weights.
+/// What decides a model directory's training, bar the epochs: the configuration without
+/// its epoch counts, the layer and the starting weights (by content, so a retrained
+/// `network-only` retrains the models started from it, and another path to the same
+/// model does not).
+fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> anyhow::Result<serde_json::Value> {
+    let mut config = serde_json::to_value(config)?;
+    if let Some(c) = config.as_object_mut() {
+        c.remove("pretrain_epochs");
+        c.remove("finetune_epochs");
+    }
+    let init = match init {
+        Some(dir) => {
+            let weights = dir.join("best").join("params.safetensors");
+            Some(
+                crate::output::sha256_file(&weights)
+                    .with_context(|| format!("reading the starting weights {}", weights.display()))?,
+            )
+        }
+        None => None,
+    };
+    Ok(serde_json::json!({"config": config, "layer": layer, "init_weights_sha256": init}))
+}
+
+/// Trains, continues (up to `plan.epochs`) or reloads one model in `dir`; keeps the weights
+/// of its best validation SqrtMSE, epoch 0 (the starting weights) included.
 #[allow(clippy::too_many_arguments)]
-fn fit(
-    ctx: &EvalContext,
-    root: &Path,
-    t: &Training,
+pub fn fit(
+    dir: &Path,
+    plan: &Plan<'_>,
     config: &DrapeTrainingConfig,
     layers: &Layers,
     train: &DrapeTensors,
     validation: &DrapeTensors,
     v: usize,
 ) -> anyhow::Result<Fitted> {
-    let dir = root.join("models").join(&t.name);
-    let stamp = serde_json::json!({"config": config, "layer": t.layer});
+    let stamp = stamp(config, plan.layer, plan.init)?;
     let stamp_path = dir.join("config.json");
     if stamp_path.exists() {
         let stored: Option<serde_json::Value> = std::fs::read_to_string(&stamp_path)
             .ok()
             .and_then(|s| serde_json::from_str(&s).ok());
         if stored.as_ref() != Some(&stamp) {
+            anyhow::ensure!(
+                plan.retrain_on_mismatch,
+                "{} was trained under another configuration, layer or --init (its config.json); continue it with \
+                 the same ones or choose another --out",
+                dir.display()
+            );
             eprintln!(
                 "drape: {} was trained under another configuration; retraining it",
                 dir.display()
             );
-            std::fs::remove_dir_all(&dir)?;
+            std::fs::remove_dir_all(dir)?;
         }
     }
-    std::fs::create_dir_all(&dir)?;
+    std::fs::create_dir_all(dir)?;
     write_json(&stamp_path, &stamp)?;
     let device = Device::Cpu;
     let mut net_params = Params::new(&device, config.seed);
     let net = DrapeNet::new(&mut net_params, &config.net, v)?;
     let mut mu_params = Params::new(&device, config.seed + 1);
-    let post = layers.postprocess(t.layer, &mut mu_params, v)?;
-    let learned = matches!(t.layer, Layer::LearnedMu { .. });
+    let post = layers.postprocess(plan.layer, &mut mu_params, v)?;
+    let learned = matches!(plan.layer, Layer::LearnedMu { .. });
     let adam_settings = AdamSettings {
         learning_rate: config.learning_rate,
         ..AdamSettings::default()
@@ -242,16 +340,11 @@ fn fit(
             ..AdamSettings::default()
         },
     )?;
-    let pretrained = t.layer != Layer::None;
-    if pretrained {
-        weft_nn::checkpoint::load_params(&root.join("models").join("network-only").join("best"), &net_params)
-            .context("loading network-only's weights")?;
+    if let Some(init) = plan.init {
+        weft_nn::checkpoint::load_params(&init.join("best"), &net_params)
+            .with_context(|| format!("loading the starting weights of {}", init.display()))?;
     }
-    let epochs = if pretrained {
-        config.finetune_epochs
-    } else {
-        config.pretrain_epochs
-    };
+    let epochs = plan.epochs;
     let progress_path = dir.join("progress.json");
     let mut progress: Progress = std::fs::read(&progress_path)
         .ok()
@@ -278,9 +371,9 @@ fn fit(
         )?;
     }
     let bar = progress_bar(
-        ctx.quiet,
+        plan.quiet,
         (epochs.saturating_sub(progress.epochs_done) * train.len()) as u64,
-        &format!("drape/{}", t.name),
+        &format!("drape/{}", plan.name),
         "examples",
     )?;
     for epoch in progress.epochs_done..epochs {
@@ -291,17 +384,22 @@ fn fit(
             mu: learned.then_some((&mu_params, &mut mu_adam)),
         };
         let epoch_report = train_epoch(&model, &mut opt, train, config.batch, config.seed * 1000 + epoch as u64)
-            .with_context(|| format!("drape/{} epoch {epoch}", t.name))?;
+            .with_context(|| format!("drape/{} epoch {epoch}", plan.name))?;
         let loss = epoch_report.mean_loss;
         progress.skipped_batches += epoch_report.skipped_batches;
         if progress.first_error.is_none() {
-            progress.first_error = epoch_report.first_error;
+            progress.first_error = epoch_report.first_error.clone();
         }
         progress.training_seconds += start.elapsed().as_secs_f64();
         bar.inc(train.len() as u64);
         let val = validation_sqrtmse(&model, validation, config.batch, train.len())?;
         let mu = learned_mu(&model.post)?.map(|m| m.iter().sum::<f64>() / m.len() as f64);
-        progress.history.push((loss, val, mu));
+        progress.history.push(EpochRecord {
+            loss_mm2: loss,
+            validation_sqrtmse_mm: val,
+            mu,
+            mu_gradient: epoch_report.mu_gradient,
+        });
         progress.epochs_done = epoch + 1;
         if val < progress.best_validation_sqrtmse_mm {
             progress.best_validation_sqrtmse_mm = val;
@@ -388,20 +486,20 @@ fn paper_learned_mu(start: &str) -> Option<f64> {
 }
 
 /// Per-split scores of one method, over the examples its postprocess succeeded on.
-struct Scores {
-    sqrtmse: f64,
-    maxdist: f64,
-    compression: f64,
-    stretching: f64,
-    seconds_per_example: f64,
+pub struct Scores {
+    pub sqrtmse: f64,
+    pub maxdist: f64,
+    pub compression: f64,
+    pub stretching: f64,
+    pub seconds_per_example: f64,
     /// Examples the postprocess failed on, and the first failure.
-    failed: usize,
-    first_error: Option<String>,
+    pub failed: usize,
+    pub first_error: Option<String>,
 }
 
 /// Scores `model` on `data`; returns the scores and, per scored example, its index in
 /// `data` and its prediction.
-fn score(
+pub fn score(
     model: &DrapeModel,
     data: &DrapeTensors,
     rest: &RestShape,
@@ -506,14 +604,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let split = |name: &str| &splits.iter().find(|(s, _)| *s == name).expect("split").1;
     let config = training_config(ctx.size);
     write_json(&root.join("config.json"), &config)?;
-    let layers = Layers {
-        socp: Arc::new(InextensibilityLayer::new(
-            &dataset.sleeve,
-            config.epsilon,
-            SocpSettings::default(),
-        )?),
-        quasistatic: Arc::new(QuasistaticLayer::new(&dataset.sleeve, config.quasistatic)?),
-    };
+    let layers = Layers::new(&dataset.sleeve, &config)?;
     let rest = RestShape::new(&dataset.sleeve)?;
     let k = config.quasistatic.stretch_stiffness;
 
@@ -556,8 +647,30 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     }
     let mut fitted = Vec::new();
     for t in &trainings {
-        let f = fit(ctx, &root, t, &config, &layers, split("train"), split("validation"), v)
-            .with_context(|| format!("training drape/{}", t.name))?;
+        let models = root.join("models");
+        let network_only = models.join("network-only");
+        let plan = Plan {
+            name: &t.name,
+            layer: t.layer,
+            init: (t.layer != Layer::None).then_some(network_only.as_path()),
+            epochs: if t.layer == Layer::None {
+                config.pretrain_epochs
+            } else {
+                config.finetune_epochs
+            },
+            quiet: ctx.quiet,
+            retrain_on_mismatch: true,
+        };
+        let f = fit(
+            &models.join(&t.name),
+            &plan,
+            &config,
+            &layers,
+            split("train"),
+            split("validation"),
+            v,
+        )
+        .with_context(|| format!("training drape/{}", t.name))?;
         if f.progress.skipped_batches > 0 {
             out.failures.push(format!(
                 "drape/{}: {} training batches skipped because the layer failed on them; the first: {}",
@@ -749,7 +862,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             .progress
             .history
             .iter()
-            .filter_map(|h| h.2.map(|m| format!("{m:.4}")))
+            .filter_map(|h| h.mu.map(|m| format!("{m:.4}")))
             .collect();
         mu_rows.push(vec![
             format!("{start}"),
