@@ -54,3 +54,18 @@ fn quick_projection_evaluation_passes_the_report_check_and_tampering_fails_it() 
     assert!(String::from_utf8_lossy(&out.stderr).contains("reusing"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The committed report in `docs/results` passes the check as a published report (its
+/// predictions are not committed), and fails the full check for exactly that reason.
+#[test]
+fn the_published_report_passes_the_published_check() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/results");
+    let out = Command::new(XTASK)
+        .args(["check-report", "--published"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (ok, err) = check(&dir);
+    assert!(!ok && err.contains("predictions"), "{err}");
+}

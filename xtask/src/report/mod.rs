@@ -189,6 +189,11 @@ fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Ta
 pub struct CheckArgs {
     /// A directory written by `cargo xtask evaluate`.
     dir: std::path::PathBuf,
+    /// The directory is a published report (`evaluate --publish`, e.g. `docs/results`): its
+    /// `PROVENANCE.md` must exist, and the predictions, which are not committed, are not
+    /// required.
+    #[arg(long)]
+    published: bool,
 }
 
 /// `cargo xtask check-report DIR`: every output exists and parses, every record has every
@@ -231,8 +236,15 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         !html.contains("src=\"plots/") && !html.contains("src=\"renders/"),
         "index.html links files instead of embedding them"
     );
+    if args.published {
+        let t = std::fs::read_to_string(dir.join("PROVENANCE.md")).context("reading PROVENANCE.md")?;
+        ensure!(t.contains("cargo xtask"), "PROVENANCE.md names no command");
+    }
     let mut files = 0;
     for sub in ["plots", "renders", "predictions"] {
+        if args.published && sub == "predictions" && !dir.join(sub).exists() {
+            continue;
+        }
         for path in walk(&dir.join(sub))? {
             let bytes = std::fs::read(&path)?;
             match path.extension().and_then(|e| e.to_str()) {
@@ -262,8 +274,10 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
             files += 1;
         }
     }
-    // Every experiment/scene/method with an error metric has its predictions.
-    for r in records.iter().filter(|r| {
+    // Every experiment/scene/method with an error metric has its predictions (a published
+    // report leaves them out).
+    let predictions = !args.published || dir.join("predictions").exists();
+    for r in records.iter().filter(|_| predictions).filter(|r| {
         r.metric == "m-rms"
             || r.metric == "sqrt-mse"
             || (r.metric == "error-mm-rollout10" && r.split.as_deref() == Some("test"))
