@@ -61,7 +61,9 @@ pub struct DrapeArgs {
     /// Where the model is written: `config.json`, `progress.json` (per epoch the training
     /// loss, validation SqrtMSE, μ and the spread of μ's gradient over batches), the
     /// checkpoints `best` and `last` (`*-mu` beside them with a learned μ) and
-    /// `scores.json` (the kept model on the validation and test splits).
+    /// `scores.json` (the kept model on the validation and test splits, and the second
+    /// half of training: the validation error's scatter, the last μ, the strength of its
+    /// gradient against its noise).
     #[arg(long)]
     pub out: PathBuf,
     /// The layer after the network, in training and in the scores.
@@ -328,33 +330,58 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         .mu
         .as_ref()
         .map(|m| m.iter().sum::<f64>() / m.len().max(1) as f64);
+    // Where training settles, over its second half: how much the validation error scatters
+    // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
+    // (the median over epochs of |mean| / sd of the per-batch gradient).
+    let late = &p.history[p.history.len() / 2..];
+    let (val_mean, val_sd) = crate::evaluate::mean_sd(late.iter().map(|h| h.validation_sqrtmse_mm));
+    let mut signal: Vec<f64> = late
+        .iter()
+        .filter_map(|h| h.mu_gradient)
+        .filter(|g| g.sd > 0.0)
+        .map(|g| g.mean.abs() / g.sd)
+        .collect();
+    signal.sort_by(f64::total_cmp);
+    let second_half = serde_json::json!({
+        "epochs": [p.history.len() / 2 + 1, p.history.len()],
+        "validation_sqrtmse_mm_mean": val_mean,
+        "validation_sqrtmse_mm_sd": val_sd,
+        "last_mu": late.last().and_then(|h| h.mu),
+        "mu_gradient_mean_over_sd_median": signal.get(signal.len() / 2),
+    });
+    if late.len() > 1 {
+        eprintln!(
+            "drape/{name}: epochs {}-{}: validation SqrtMSE {val_mean:.4} ± {val_sd:.4} mm{}",
+            p.history.len() / 2 + 1,
+            p.history.len(),
+            signal
+                .get(signal.len() / 2)
+                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
+        );
+    }
     write_atomic(
         &args.out.join("scores.json"),
         &serde_json::to_string_pretty(&serde_json::json!({
             "kept_epoch": p.best_epoch,
             "epochs": p.epochs_done,
             "kept_mu_mean": mu,
+            "second_half": second_half,
             "scores": scores,
         }))?,
     )?;
     if !args.scan_mu.is_empty() {
         // The same cold solves as the scores: the loss (mean squared SqrtMSE, mm²) and the
         // SqrtMSE of the kept network as μ alone varies.
-        let truth = validation.truths()?;
         let mut scan = Vec::with_capacity(args.scan_mu.len());
         for &m in &args.scan_mu {
-            let (s, kept) = score(
+            let (s, _) = score(
                 &layers.at_fixed_mu(&fitted.model.net, m),
                 &validation,
                 &rest,
                 k,
                 config.batch,
             )?;
-            let mut loss = 0.0;
-            for (i, p) in &kept {
-                loss += weft_nn::drape::sqrtmse_maxdist_mm(p, &truth[*i])?.0.powi(2);
-            }
-            loss /= kept.len() as f64;
+            let loss = s.loss_mm2;
             eprintln!(
                 "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {loss:.5} mm² ({} examples failed)",
                 s.sqrtmse, s.failed

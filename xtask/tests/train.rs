@@ -246,6 +246,21 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     let scores: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(split.join("scores.json")).unwrap()).unwrap();
     assert!(scores["scores"]["test"]["sqrtmse-mm"].as_f64().unwrap().is_finite());
+    // The second-half summary is the history's: epochs 2-3 of 3, their validation mean,
+    // the last μ, and the upper median of |mean|/sd of μ's gradient.
+    let half = &scores["second_half"];
+    assert_eq!(half["epochs"], serde_json::json!([2, 3]));
+    let val = (record(&b, 1, "validation_sqrtmse_mm") + record(&b, 2, "validation_sqrtmse_mm")) / 2.0;
+    assert!((half["validation_sqrtmse_mm_mean"].as_f64().unwrap() - val).abs() <= 1e-12 * val);
+    assert_eq!(half["last_mu"].as_f64(), Some(record(&b, 2, "mu")));
+    let signal = |e: usize| {
+        let g = &b["history"][e]["mu_gradient"];
+        g["mean"].as_f64().unwrap().abs() / g["sd"].as_f64().unwrap()
+    };
+    assert_eq!(
+        half["mu_gradient_mean_over_sd_median"].as_f64(),
+        Some(signal(1).max(signal(2)))
+    );
     // Another μ start in the same directory is refused, not mixed into it.
     let mut other = with("4", true);
     other[5] = "0.5";

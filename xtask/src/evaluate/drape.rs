@@ -157,13 +157,17 @@ impl Layers {
 
     /// `net` followed by the quasistatic layer at a fixed `mu`: how the loss of a trained
     /// network depends on μ alone (`cargo xtask train drape --scan-mu`).
-    pub fn at_fixed_mu(&self, net: &weft_nn::drape::DrapeNet, mu: f64) -> DrapeModel {
+    pub fn at_fixed_mu(&self, net: &DrapeNet, mu: f64) -> DrapeModel {
         DrapeModel {
             net: net.clone(),
-            post: Postprocess::Quasistatic {
-                op: QuasistaticProjection::new(self.quasistatic.clone()),
-                mu: Mu::Fixed(mu),
-            },
+            post: self.quasistatic(Mu::Fixed(mu)),
+        }
+    }
+
+    fn quasistatic(&self, mu: Mu) -> Postprocess {
+        Postprocess::Quasistatic {
+            op: QuasistaticProjection::new(self.quasistatic.clone()),
+            mu,
         }
     }
 
@@ -171,14 +175,10 @@ impl Layers {
         Ok(match layer {
             Layer::None => Postprocess::None,
             Layer::Socp => Postprocess::Inextensibility(InextensibilityProjection::new(self.socp.clone())),
-            Layer::Quasistatic(mu) => Postprocess::Quasistatic {
-                op: QuasistaticProjection::new(self.quasistatic.clone()),
-                mu: Mu::Fixed(mu),
-            },
-            Layer::LearnedMu { start, per_vertex } => Postprocess::Quasistatic {
-                op: QuasistaticProjection::new(self.quasistatic.clone()),
-                mu: Mu::learned(mu_params, start, per_vertex.then_some(v))?,
-            },
+            Layer::Quasistatic(mu) => self.quasistatic(Mu::Fixed(mu)),
+            Layer::LearnedMu { start, per_vertex } => {
+                self.quasistatic(Mu::learned(mu_params, start, per_vertex.then_some(v))?)
+            }
         })
     }
 }
@@ -390,7 +390,7 @@ pub fn fit(
         let loss = epoch_report.mean_loss;
         progress.skipped_batches += epoch_report.skipped_batches;
         if progress.first_error.is_none() {
-            progress.first_error = epoch_report.first_error.clone();
+            progress.first_error = epoch_report.first_error;
         }
         progress.training_seconds += start.elapsed().as_secs_f64();
         bar.inc(train.len() as u64);
@@ -490,6 +490,8 @@ fn paper_learned_mu(start: &str) -> Option<f64> {
 /// Per-split scores of one method, over the examples its postprocess succeeded on.
 pub struct Scores {
     pub sqrtmse: f64,
+    /// The training loss's measure: the mean of the squared per-example SqrtMSE (mm²).
+    pub loss_mm2: f64,
     pub maxdist: f64,
     pub compression: f64,
     pub stretching: f64,
@@ -514,6 +516,7 @@ pub fn score(
     let truth = data.truths()?;
     let mut s = Scores {
         sqrtmse: 0.0,
+        loss_mm2: 0.0,
         maxdist: 0.0,
         compression: 0.0,
         stretching: 0.0,
@@ -533,6 +536,7 @@ pub fn score(
         };
         let (e, m) = sqrtmse_maxdist_mm(&p, t)?;
         s.sqrtmse += e;
+        s.loss_mm2 += e * e;
         s.maxdist += m;
         let (a, b) = (
             weft_proj::strain_summary(rest, &p, k)?,
@@ -549,6 +553,7 @@ pub fn score(
     );
     let n = kept.len() as f64;
     s.sqrtmse /= n;
+    s.loss_mm2 /= n;
     s.maxdist /= n;
     s.compression /= n;
     s.stretching /= n;
