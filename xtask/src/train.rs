@@ -1,36 +1,109 @@
-//! `cargo xtask train`: training the neural models on pipeline datasets.
-//!
-//! A model directory holds `config.json` (the training configuration), `normalization.json`
-//! (the ACAP feature normalisation, fitted on the training frames), `checkpoint/` (the
-//! latest epoch: both networks' parameters and optimiser states and `progress.json`) and
-//! `log.csv` (mean losses per epoch). A checkpoint is written after every epoch into a
-//! fresh directory that then replaces the old one by a rename, so an interrupted run
-//! resumes (`--resume`) from its last complete epoch and continues bit for bit.
+//! `cargo xtask train`: argument parsing for training weft-nn's models on pipeline
+//! datasets. Every model trains through `weft_nn::trainer::Trainer` (one epoch loop,
+//! validation-only model selection, a checkpoint each epoch, bit-identical resume); the
+//! drivers that read a dataset and write a model directory are weft-nn's `train_model`
+//! functions. A model directory holds the configuration, what was fitted on the training
+//! split (normalisation, scaling, standardisation) and the trainer's run: `training.json`,
+//! `train.log`, `best/` and `last/` checkpoints.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
-use weft_nn::checkpoint;
-use weft_nn::data::ClothDataset;
-use weft_nn::embed_training::{
-    EmbedData, EmbedModel, EmbedTrainingConfig, LossTerms, Progress, optimizers, train_epoch,
-};
 
-use crate::output::progress_bar;
+use crate::output::TrainProgress;
+
+const EMBED_CONFIG: &str = "\
+Configuration file (--config, JSON; omitted fields keep their defaults):
+  autoencoder      {\"conv_layers\": 2, \"latent\": 128}: graph convolutions (1-16), latent width
+  latent_hidden    [256, 256]: hidden widths of the latent simulator (1-65536 each)
+  weights          {\"recon\": 1, \"vert\": 1, \"ephys\": 0.5, \"sim\": 1, \"mphys\": 0.5} (>= 0)
+  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
+  batch            8 windows per step
+  epochs           [30, 30, 10]: epochs of stages 1, 2, 3 (0 skips a stage)
+  seed             0
+  phys_scale       \"curvature\" | \"inertial\": how L_phys is scaled against L_vert
+  ephys_warmup     0: stage-1 epochs over which lambda_ephys ramps from 0
+  schedule         {\"decay\": {\"kind\": \"constant\"}, \"warmup_epochs\": 0,
+                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
+                   decay kinds: constant | exponential {per_epoch} | reduce-on-plateau {factor, patience}
+Validation: the last two training frames of every 17 (frames 10 and 11 mod 17).";
+
+const NNWARP_CONFIG: &str = "\
+Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
+  hidden           []: hidden widths (empty: the paper's, 2 x 16, 3 x 16 for StVK; 1-4096 each)
+  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
+  batch            1024 node pairs per step
+  epochs           10
+  seed             0
+  schedule         as for every model: decay (constant | exponential | reduce-on-plateau),
+                   warmup_epochs, clip_grad_norm, early_stopping_patience
+Validation: the pairs of the dataset's validation sequences.";
+
+const ALTCONV_CONFIG: &str = "\
+Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
+  hidden           [32, 64, 128, 64, 32]: cell widths (1-4096 each, at most 64 cells)
+  steps            20 teacher-forced steps per sequence (sequences need steps + 1 frames)
+  epochs           60
+  batch            2 sequences per step
+  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
+  seed             0
+  schedule         {\"decay\": {\"kind\": \"exponential\", \"per_epoch\": 0.995}, \"warmup_epochs\": 0,
+                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
+Validation: Eq. 12 teacher-forced on the dataset's validation sequences.";
+
+const DRAPE_CONFIG: &str = "\
+Configuration file (--config, JSON; omitted fields keep the standard evaluation's values,
+unknown ones are refused):
+  net              {\"hidden\": [64, 256], \"offset_scale\": 0.01}
+  pretrain_epochs  200 (network-only)      finetune_epochs  5 (with --init)
+  batch            16                      learning_rate    1e-3
+  mu_learning_rate 0.1 (Adam on log mu)    epsilon          0.1 (inextensibility bound)
+  quasistatic      the quasistatic layer's spring stiffnesses
+  seed             1
+  schedule         decay (constant | exponential | reduce-on-plateau), warmup_epochs,
+                   clip_grad_norm, early_stopping_patience
+Validation: mean SqrtMSE over the dataset's validation examples.";
 
 #[derive(Subcommand)]
 pub enum TrainCommand {
     /// Tan et al.'s mesh embedding and latent simulator, in three stages (§VI-A).
+    #[command(after_help = EMBED_CONFIG)]
     Embed(EmbedArgs),
     /// NNWarp's node-wise correction MLP for one material, on the `nnwarp` dataset (§5).
+    #[command(after_help = NNWARP_CONFIG)]
     Nnwarp(NnwarpArgs),
     /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
+    #[command(after_help = ALTCONV_CONFIG)]
     Altconv(AltconvArgs),
     /// Geng et al.'s pose → cloth network on the `drape` dataset, alone or trained through
     /// the inextensibility or the quasistatic layer (fixed or learned μ).
+    #[command(after_help = DRAPE_CONFIG)]
     Drape(DrapeArgs),
+}
+
+/// Flags every `train` command takes.
+#[derive(Args, Clone, Default)]
+pub struct Common {
+    /// Training configuration (JSON; the fields are listed below).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Epochs (overrides the configuration; for `embed`, of every stage run). With
+    /// --resume, a model trained for fewer epochs is continued up to this many.
+    #[arg(long)]
+    pub epochs: Option<usize>,
+    /// Seed of the initial weights and the epoch order (overrides the configuration).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Base learning rate (overrides the configuration).
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Continue the model in --out (same configuration; the epochs may grow).
+    #[arg(long)]
+    pub resume: bool,
+    /// No progress bars and no epoch lines (they are in the model's train.log).
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// The layer a drape model is trained through.
@@ -58,12 +131,11 @@ pub struct DrapeArgs {
     /// A `drape` dataset directory written by `cargo xtask dataset drape`.
     #[arg(long)]
     pub data: PathBuf,
-    /// Where the model is written: `config.json`, `progress.json` (per epoch the training
-    /// loss, validation SqrtMSE, μ and the spread of μ's gradient over batches), the
-    /// checkpoints `best` and `last` (`*-mu` beside them with a learned μ) and
-    /// `scores.json` (the kept model on the validation and test splits, and the second
-    /// half of training: the validation error's scatter, the last μ, the strength of its
-    /// gradient against its noise).
+    /// Where the model is written: `config.json`, the trainer's run (`training.json`: per
+    /// epoch the training loss, validation SqrtMSE, μ and the spread of μ's gradient over
+    /// batches; `best/`, `last/`, `train.log`) and `scores.json` (the kept model on the
+    /// validation and test splits, and the second half of training: the validation
+    /// error's scatter, the last μ, the strength of its gradient against its noise).
     #[arg(long)]
     pub out: PathBuf,
     /// The layer after the network, in training and in the scores.
@@ -76,30 +148,17 @@ pub struct DrapeArgs {
     #[arg(long, value_enum)]
     pub learn_mu: Option<LearnMu>,
     /// A drape model directory whose best network weights training starts from (the
-    /// evaluation fine-tunes every layer from `network-only`).
+    /// evaluation fine-tunes every layer from `network-only`). Epochs default to the
+    /// configuration's `finetune_epochs` with it, `pretrain_epochs` without.
     #[arg(long)]
     pub init: Option<PathBuf>,
-    /// Epochs to train in all (default: the configuration's `pretrain_epochs` (200) from
-    /// scratch, `finetune_epochs` (5) with --init). With --resume, a model trained for
-    /// fewer epochs is continued up to this many.
-    #[arg(long)]
-    pub epochs: Option<usize>,
-    /// Training configuration (JSON; omitted fields keep the standard evaluation's values):
-    /// `net` ({"hidden": [64, 256], "offset_scale": 0.01}), `batch` (16), `learning_rate`
-    /// (1e-3), `mu_learning_rate` (0.1), `epsilon` (0.1), `quasistatic`, `seed` (1).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Continue the model in --out (same configuration, layer and --init).
-    #[arg(long)]
-    pub resume: bool,
     /// After training, score the kept network on the validation split with the quasistatic
     /// layer at each of these fixed μ (comma-separated, e.g. 0.01,0.1,1): the loss as a
     /// function of μ alone, written to `mu-scan.json`.
     #[arg(long, value_delimiter = ',')]
     pub scan_mu: Vec<f64>,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub common: Common,
 }
 
 #[derive(Args)]
@@ -108,25 +167,15 @@ pub struct AltconvArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// The model: alt (Alt-ConvLSTM), convlstm-cp-dy, convlstm-np-dy, convlstm-cp-y or
-    /// convlstm-np-y.
+    /// convlstm-np-y. After training, the roll-out error on the test sequences (up to 50
+    /// steps) beside skinning alone is printed and written to `scores.json`.
     #[arg(long, default_value = "alt")]
     pub model: String,
-    /// Training configuration (JSON; omitted fields keep their defaults): `hidden`
-    /// ([32, 64, 128, 64, 32]), `steps` (20 teacher-forced steps per sequence), `epochs`
-    /// (60), `batch` (2 sequences), `adam` (lr 1e-3), `lr_decay` (0.995 per epoch), `seed`.
-    /// After training, the roll-out error on the test sequences (up to 50 steps) beside
-    /// skinning alone is printed and written to `scores.json`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
     /// Where the model is written.
     #[arg(long)]
     pub out: PathBuf,
-    /// Continue from the model directory's last checkpoint.
-    #[arg(long)]
-    pub resume: bool,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub common: Common,
 }
 
 /// The nonlinear materials an NNWarp network is trained for.
@@ -156,19 +205,11 @@ pub struct NnwarpArgs {
     /// The material whose registered shapes the network learns.
     #[arg(long, value_enum)]
     pub material: WarpMaterial,
-    /// Training configuration (JSON; omitted fields keep their defaults): `hidden`
-    /// (empty: 2 × 16, 3 × 16 for StVK), `adam`, `batch` (1024), `epochs` (10), `seed`.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
     /// Where the model is written.
     #[arg(long)]
     pub out: PathBuf,
-    /// Continue from the model directory's last checkpoint.
-    #[arg(long)]
-    pub resume: bool,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub common: Common,
 }
 
 #[derive(Args)]
@@ -176,11 +217,6 @@ pub struct EmbedArgs {
     /// A cloth dataset directory written by `cargo xtask dataset`.
     #[arg(long)]
     pub data: PathBuf,
-    /// Training configuration (JSON; any field omitted keeps its default). Defaults:
-    /// 2 graph convolutions, 128-D latent, λ = (recon 1, vert 1, ephys 0.5, sim 1,
-    /// mphys 0.5), Adam lr 1e-3, batch 8, epochs [30, 30, 10], seed 0.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
     /// The "[46] + L_vert" baseline: λ_ephys = λ_mphys = 0 (overrides the configuration).
     #[arg(long)]
     pub no_pb: bool,
@@ -190,12 +226,46 @@ pub struct EmbedArgs {
     /// Where the model is written.
     #[arg(long)]
     pub out: PathBuf,
-    /// Continue from the model directory's last checkpoint.
-    #[arg(long)]
-    pub resume: bool,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Reads a JSON configuration file, or the default.
+fn read_config<T: serde::de::DeserializeOwned + Default>(path: Option<&Path>) -> anyhow::Result<T> {
+    match path {
+        Some(p) => {
+            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("parsing the configuration {}", p.display()))
+        }
+        None => Ok(T::default()),
+    }
+}
+
+impl Common {
+    /// Applies `--seed`, `--lr` and `--epochs` to a configuration's fields.
+    fn apply(&self, seed: &mut u64, lr: &mut f64, epochs: &mut [usize]) {
+        if let Some(s) = self.seed {
+            *seed = s;
+        }
+        if let Some(l) = self.lr {
+            *lr = l;
+        }
+        if let Some(e) = self.epochs {
+            epochs.iter_mut().for_each(|x| *x = e);
+        }
+    }
+}
+
+/// Refuses to overwrite a model unless asked to continue it.
+fn check_out(out: &Path, resume: bool) -> anyhow::Result<()> {
+    let holds = out.join("config.json").exists() || out.join("training.json").exists();
+    if holds && !resume {
+        bail!(
+            "{} already holds a model; pass --resume to continue it or choose another --out",
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
@@ -208,17 +278,14 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use crate::evaluate::drape::{DrapeTrainingConfig, Layer, Layers, Plan, fit, score};
-    let config: DrapeTrainingConfig = match &args.config {
-        Some(p) => {
-            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("parsing {}", p.display()))?
-        }
-        None => DrapeTrainingConfig::default(),
-    };
-    if config.batch == 0 {
-        bail!("batch must be at least 1");
-    }
+    use crate::evaluate::drape::score;
+    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
+    let c = &args.common;
+    let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
+    let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
+    c.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
+    [config.pretrain_epochs, config.finetune_epochs] = epochs;
+    config.validate()?;
     if !(args.mu > 0.0 && args.mu.is_finite()) {
         bail!("--mu must be positive and finite, not {}", args.mu);
     }
@@ -235,17 +302,12 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         },
         (_, Some(_)) => bail!("--learn-mu needs --layer quasistatic"),
     };
-    let epochs = args.epochs.unwrap_or(if args.init.is_some() {
+    let epochs = if args.init.is_some() {
         config.finetune_epochs
     } else {
         config.pretrain_epochs
-    });
-    if args.out.join("config.json").exists() && !args.resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            args.out.display()
-        );
-    }
+    };
+    check_out(&args.out, c.resume)?;
     let dataset =
         weft_nn::data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let device = weft_nn::Device::Cpu;
@@ -278,25 +340,26 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         layer,
         init: args.init.as_deref(),
         epochs,
-        quiet: args.quiet,
         retrain_on_mismatch: false,
     };
-    let fitted = fit(&args.out, &plan, &config, &layers, &train, &validation, v)?;
-    let p = &fitted.progress;
-    if p.skipped_batches > 0 {
+    let mut progress = TrainProgress::new(c.quiet, &format!("drape/{name}"))?;
+    let fitted = fit(
+        &args.out,
+        &plan,
+        &config,
+        &layers,
+        &train,
+        &validation,
+        v,
+        &mut progress,
+    )?;
+    drop(progress);
+    let p = &fitted.state;
+    let (skipped, first) = p.skipped();
+    if skipped > 0 {
         eprintln!(
-            "drape/{name}: {} training batches skipped because the layer failed on them; the first: {}",
-            p.skipped_batches,
-            p.first_error.clone().unwrap_or_default()
-        );
-    }
-    if let Some(last) = p.history.last() {
-        eprintln!(
-            "drape/{name}: after epoch {}: training loss {:.4} mm², validation SqrtMSE {:.4} mm{}",
-            p.epochs_done,
-            last.loss_mm2,
-            last.validation_sqrtmse_mm,
-            last.mu.map_or(String::new(), |m| format!(", μ {m:.4}"))
+            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
+            first.unwrap_or_default()
         );
     }
     // The kept model, scored with cold solves as the evaluation scores it.
@@ -310,10 +373,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         let (s, _) = score(&fitted.model, data, &rest, k, config.batch)?;
         eprintln!(
             "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
-            p.best_epoch.unwrap_or(0),
-            s.sqrtmse,
-            s.maxdist,
-            s.failed
+            p.best_epoch, s.sqrtmse, s.maxdist, s.failed
         );
         scores.insert(
             split.into(),
@@ -334,19 +394,19 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
     // (the median over epochs of |mean| / sd of the per-batch gradient).
     let late = &p.history[p.history.len() / 2..];
-    let (val_mean, val_sd) = crate::evaluate::mean_sd(late.iter().map(|h| h.validation_sqrtmse_mm));
+    let (val_mean, val_sd) = crate::evaluate::mean_sd(late.iter().map(|h| h.validation));
     let mut signal: Vec<f64> = late
         .iter()
-        .filter_map(|h| h.mu_gradient)
-        .filter(|g| g.sd > 0.0)
-        .map(|g| g.mean.abs() / g.sd)
+        .filter_map(|h| Some((*h.extra.get("mu_gradient_mean")?, *h.extra.get("mu_gradient_sd")?)))
+        .filter(|(_, sd)| *sd > 0.0)
+        .map(|(mean, sd)| mean.abs() / sd)
         .collect();
     signal.sort_by(f64::total_cmp);
     let second_half = serde_json::json!({
         "epochs": [p.history.len() / 2 + 1, p.history.len()],
         "validation_sqrtmse_mm_mean": val_mean,
         "validation_sqrtmse_mm_sd": val_sd,
-        "last_mu": late.last().and_then(|h| h.mu),
+        "last_mu": late.last().and_then(|h| h.extra.get("mu")),
         "mu_gradient_mean_over_sd_median": signal.get(signal.len() / 2),
     });
     if late.len() > 1 {
@@ -406,319 +466,97 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn read_config(args: &EmbedArgs) -> anyhow::Result<EmbedTrainingConfig> {
-    let mut config = match &args.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
-        }
-        None => EmbedTrainingConfig::default(),
-    };
+fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
+    crate::output::write_text(path, text)
+}
+
+fn embed(args: EmbedArgs) -> anyhow::Result<()> {
+    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    let c = &args.common;
+    let mut config: EmbedTrainingConfig = read_config(c.config.as_deref())?;
     if args.no_pb {
         config.weights.ephys = 0.0;
         config.weights.mphys = 0.0;
     }
-    if config.batch == 0 {
-        bail!("batch must be at least 1");
-    }
-    Ok(config)
-}
-
-fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))
-}
-
-/// Saves both networks and `progress` as `out/checkpoint`, replacing the previous one by
-/// a directory rename.
-fn save_checkpoint(
-    out: &Path,
-    model: &EmbedModel,
-    adams: (&weft_nn::adam::Adam, &weft_nn::adam::Adam),
-    progress: Progress,
-) -> anyhow::Result<()> {
-    let fresh = out.join("checkpoint.partial");
-    if fresh.exists() {
-        std::fs::remove_dir_all(&fresh)?;
-    }
-    // `progress.json` is the one record of where training stands.
-    let none = serde_json::Value::Null;
-    checkpoint::save(&fresh.join("autoencoder"), &model.autoencoder_params, adams.0, &none)?;
-    checkpoint::save(&fresh.join("simulator"), &model.simulator_params, adams.1, &none)?;
-    write_atomic(&fresh.join("progress.json"), &serde_json::to_string_pretty(&progress)?)?;
-    swap_in(&fresh, &out.join("checkpoint"))
-}
-
-/// Replaces the directory `current` by `fresh` through renames, so that an interruption
-/// leaves either the old or the new one whole (or both, as `current` and `*.old`).
-fn swap_in(fresh: &Path, current: &Path) -> anyhow::Result<()> {
-    let old = current.with_extension("old");
-    if current.exists() {
-        std::fs::rename(current, &old)?;
-    }
-    std::fs::rename(fresh, current)?;
-    if old.exists() {
-        std::fs::remove_dir_all(&old)?;
-    }
-    Ok(())
-}
-
-fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    let config = read_config(&args)?;
+    c.apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
+    config.validate()?;
     if let Some(&s) = args.stages.iter().find(|s| !(1..=3).contains(*s)) {
         bail!("stage {s} does not exist (stages are 1, 2 and 3)");
     }
-    let config_path = args.out.join("config.json");
-    if args.out.join("checkpoint").exists() && !args.resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            args.out.display()
-        );
-    }
-    std::fs::create_dir_all(&args.out)?;
-    let dataset = ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+    check_out(&args.out, c.resume)?;
+    let dataset =
+        weft_nn::data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let name = dataset.name.clone();
     let data = EmbedData::new(dataset)?;
-    let mut model = EmbedModel::new(config.clone(), &data)?;
-    let (mut ae_adam, mut sim_adam) = optimizers(&model, config.adam)?;
-    let mut start = Progress {
-        stage: *args.stages.first().unwrap_or(&1),
-        epoch: 0,
-    };
-    if args.resume && args.out.join("checkpoint").exists() {
-        let stored: EmbedTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
-        if !stored.trains_like(&config) {
-            bail!(
-                "the configuration differs from the one {} was trained with; resume with the same --config and flags",
-                args.out.display()
-            );
-        }
-        let ck = args.out.join("checkpoint");
-        checkpoint::load(&ck.join("autoencoder"), &model.autoencoder_params, &mut ae_adam)?;
-        checkpoint::load(&ck.join("simulator"), &model.simulator_params, &mut sim_adam)?;
-        start = serde_json::from_str(&std::fs::read_to_string(ck.join("progress.json"))?)?;
-        eprintln!("resuming at stage {}, epoch {}", start.stage, start.epoch);
-    } else {
-        write_atomic(&config_path, &serde_json::to_string_pretty(&config)?)?;
-        write_atomic(
-            &args.out.join("normalization.json"),
-            &serde_json::to_string_pretty(&data.normalization)?,
-        )?;
-        let mut log = std::fs::File::create(args.out.join("log.csv"))?;
-        writeln!(log, "stage,epoch,recon,vert,ephys,sim,mphys,total")?;
-    }
-    model.config = config.clone();
     eprintln!(
-        "{name}: {} training windows, {} vertices, {} + {} parameters",
+        "{name}: {} training and {} validation windows, {} vertices; L_phys scale {:?} {:.4e} m²/J (inertial \
+         Δt²/m̄ {:.4e}, curvature 1/mean diag H {:.4e})",
         data.train_windows.len(),
+        data.validation_windows.len(),
         data.num_vertices(),
-        model.autoencoder_params.num_parameters(),
-        model.simulator_params.num_parameters()
-    );
-    eprintln!(
-        "L_phys scale: {:?} {:.4e} m²/J (inertial Δt²/m̄ {:.4e}, curvature 1/mean diag H {:.4e})",
         config.phys_scale,
         data.phys_scale(config.phys_scale),
         data.inertial_scale,
         data.curvature_scale
     );
-    for &stage in &args.stages {
-        if stage < start.stage {
-            continue;
-        }
-        let epochs = config.epochs[stage as usize - 1];
-        let first = if stage == start.stage { start.epoch } else { 0 };
-        let batches = data.train_windows.len().div_ceil(config.batch) as u64;
-        let bar = progress_bar(
-            args.quiet,
-            (epochs - first.min(epochs)) as u64 * batches,
-            &format!("stage {stage}"),
-            "batches",
-        )?;
-        for epoch in first..epochs {
-            let progress = Progress { stage, epoch };
-            let mean = train_epoch(
-                &model,
-                &data,
-                (&mut ae_adam, &mut sim_adam),
-                progress,
-                |t: &LossTerms| {
-                    bar.set_message(format!(
-                        "recon {:.3e} vert {:.3e} ephys {:.3e} sim {:.3e} mphys {:.3e}",
-                        t.recon, t.vert, t.ephys, t.sim, t.mphys
-                    ));
-                    bar.inc(1);
-                },
-            )?;
-            save_checkpoint(
-                &args.out,
-                &model,
-                (&ae_adam, &sim_adam),
-                Progress {
-                    stage,
-                    epoch: epoch + 1,
-                },
-            )?;
-            let mut log = std::fs::OpenOptions::new()
-                .append(true)
-                .open(args.out.join("log.csv"))?;
-            writeln!(
-                log,
-                "{stage},{epoch},{},{},{},{},{},{}",
-                mean.recon, mean.vert, mean.ephys, mean.sim, mean.mphys, mean.total
-            )?;
-        }
-        bar.finish_and_clear();
-        // The next stage starts at its first epoch.
-        start = Progress {
-            stage: stage + 1,
-            epoch: 0,
-        };
+    let mut progress = TrainProgress::new(c.quiet, &format!("embed/{name}"))?;
+    let (_, states) = train_model(&args.out, &data, &config, &args.stages, &mut progress)?;
+    drop(progress);
+    for (stage, s) in states {
+        eprintln!(
+            "{name}: stage {stage}: kept epoch {} of {}, validation loss {:.4e}",
+            s.best_epoch, s.epochs_done, s.best_validation
+        );
     }
     eprintln!("model → {}", args.out.display());
     Ok(())
 }
 
-/// `cargo xtask train nnwarp`: pairs from the dataset's train and validation splits,
-/// standardised on the training pairs, one checkpoint per epoch.
-/// After a single-network model's epoch: its checkpoint swapped in atomically
-/// (`out/checkpoint`, with the epoch count) and `log_line` appended to `out/log.csv`.
-fn end_epoch(
-    out: &Path,
-    params: &weft_nn::params::Params,
-    adam: &weft_nn::adam::Adam,
-    epoch: usize,
-    log_line: &str,
-) -> anyhow::Result<()> {
-    let fresh = out.join("checkpoint.partial");
-    if fresh.exists() {
-        std::fs::remove_dir_all(&fresh)?;
-    }
-    checkpoint::save(&fresh, params, adam, &serde_json::json!({ "epoch": epoch + 1 }))?;
-    swap_in(&fresh, &out.join("checkpoint"))?;
-    let mut log = std::fs::OpenOptions::new().append(true).open(out.join("log.csv"))?;
-    writeln!(log, "{log_line}")?;
-    Ok(())
-}
-
 fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{
-        AltConvNet, AltConvTrainingConfig, Scaling, SequenceTensors, Variant, mean_error, train_epoch,
-    };
+    use weft_nn::altconv::{AltConvTrainingConfig, Variant, train_model};
+    let c = &args.common;
     let variant = Variant::from_name(&args.model)?;
-    let mut config: AltConvTrainingConfig = match &args.config {
-        Some(p) => {
-            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("parsing {}", p.display()))?
-        }
-        None => AltConvTrainingConfig::default(),
+    let mut config: AltConvTrainingConfig = match &c.config {
+        Some(_) => read_config(c.config.as_deref())?,
+        None => AltConvTrainingConfig::new(variant),
     };
     config.variant = variant;
-    if config.batch == 0 || config.epochs == 0 || config.steps == 0 {
-        bail!("batch, epochs and steps must be at least 1");
-    }
-    let ck = args.out.join("checkpoint");
-    let resuming = args.resume && ck.exists();
-    if ck.exists() && !args.resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            args.out.display()
-        );
-    }
+    c.apply(
+        &mut config.seed,
+        &mut config.adam.learning_rate,
+        std::slice::from_mut(&mut config.epochs),
+    );
+    config.validate()?;
+    check_out(&args.out, c.resume)?;
     let dataset =
         weft_nn::data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
-    let device = weft_nn::Device::Cpu;
-    let tensors = |split: &str| -> anyhow::Result<Vec<SequenceTensors>> {
-        dataset
-            .split(split)
-            .map(|s| {
-                anyhow::ensure!(
-                    s.skinned.len() > config.steps,
-                    "sequence {} has {} frames, fewer than the {} steps trained plus the initial one",
-                    s.index,
-                    s.skinned.len(),
-                    config.steps
-                );
-                Ok(SequenceTensors::new(s, config.steps + 1, &device)?)
-            })
-            .collect()
-    };
-    let train = tensors("train")?;
-    let validation = tensors("validation")?;
-    anyhow::ensure!(!train.is_empty(), "the dataset's train split holds no sequence");
-    let adj = weft_nn::graph::NormalizedAdjacency::new(&dataset.rest)?;
-    std::fs::create_dir_all(&args.out)?;
-    let config_path = args.out.join("config.json");
-    if resuming {
-        let stored: AltConvTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
-        if stored != config {
-            bail!(
-                "the configuration differs from the one {} was trained with; resume with the same --config",
-                args.out.display()
-            );
-        }
-    } else {
-        write_atomic(&config_path, &serde_json::to_string_pretty(&config)?)?;
-        let mut log = std::fs::File::create(args.out.join("log.csv"))?;
-        writeln!(log, "epoch,train,validation")?;
-    }
-    let scaling_path = args.out.join("scaling.json");
-    let scaling: Scaling = if resuming {
-        serde_json::from_str(&std::fs::read_to_string(&scaling_path)?)
-            .with_context(|| format!("reading {}", scaling_path.display()))?
-    } else {
-        let s = Scaling::fit(&train, variant, config.steps)?;
-        write_atomic(&scaling_path, &serde_json::to_string_pretty(&s)?)?;
-        s
-    };
-    let mut params = weft_nn::params::Params::new(&device, config.seed);
-    let net = AltConvNet::new(&mut params, variant, &config.hidden)?.with_scaling(scaling);
-    let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
-    let mut first = 0;
-    if resuming {
-        let state = checkpoint::load(&ck, &params, &mut adam)?;
-        first = state["epoch"].as_u64().context("checkpoint lacks its epoch")? as usize;
-        eprintln!("resuming after epoch {first}");
-    }
     eprintln!(
-        "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices, {} parameters",
+        "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices",
         variant.name(),
-        train.len(),
-        validation.len(),
+        dataset.split("train").count(),
+        dataset.split("validation").count(),
         config.steps,
         dataset.rest.num_vertices(),
-        params.num_parameters()
     );
-    let batches = train.len().div_ceil(config.batch) as u64;
-    let bar = progress_bar(
-        args.quiet,
-        (config.epochs.saturating_sub(first)) as u64 * batches,
-        "altconv",
-        "batches",
-    )?;
-    for epoch in first..config.epochs {
-        let loss = train_epoch(&net, &params, &mut adam, &adj, &train, &config, epoch, |l| {
-            bar.set_message(format!("epoch {epoch} loss {:.2} mm", 1e3 * l));
-            bar.inc(1);
-        })?;
-        let val = if validation.is_empty() {
-            f64::NAN
-        } else {
-            mean_error(&net, &adj, &validation, config.steps, true)?
-        };
-        end_epoch(&args.out, &params, &adam, epoch, &format!("{epoch},{loss},{val}"))?;
-    }
-    bar.finish_and_clear();
+    let mut progress = TrainProgress::new(c.quiet, &format!("altconv/{}", variant.name()))?;
+    let trained = train_model(&args.out, &dataset, &config, &mut progress)?;
+    drop(progress);
+    eprintln!(
+        "altconv/{}: kept epoch {} of {}, validation {:.3} mm",
+        variant.name(),
+        trained.state.best_epoch,
+        trained.state.epochs_done,
+        1e3 * trained.state.best_validation
+    );
     // Where the model stands on unseen motions: the roll-out against skinning alone.
     let test: Vec<_> = dataset.split("test").collect();
     if let Some(frames) = test.iter().map(|s| s.skinned.len()).min() {
         let horizon = (frames - 1).min(50);
         let mut scores = serde_json::Map::new();
-        for (name, model) in [("skinning", None), (variant.name(), Some(&net))] {
+        for (name, model) in [("skinning", None), (variant.name(), Some(&trained.net))] {
             let mut sum = (0.0, 0usize);
             for s in &test {
-                let e = weft_nn::altconv::score_sequence(model, &adj, s, horizon)?;
+                let e = weft_nn::altconv::score_sequence(model, &trained.adj, s, horizon)?;
                 sum.0 += e.rollout.iter().flatten().sum::<f64>();
                 sum.1 += e.rollout.iter().map(Vec::len).sum::<usize>();
             }
@@ -739,20 +577,9 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
 }
 
 fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
-    use weft_nn::nnwarp::{
-        Standardization, WarpMlp, WarpTrainingConfig, collect_pairs, hidden_layers, mean_loss, pair_tensors,
-        train_epoch,
-    };
-    let mut config: WarpTrainingConfig = match &args.config {
-        Some(p) => {
-            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("parsing {}", p.display()))?
-        }
-        None => WarpTrainingConfig::default(),
-    };
-    if config.batch == 0 || config.epochs == 0 {
-        bail!("batch and epochs must be at least 1");
-    }
+    use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
+    let c = &args.common;
+    let mut config: WarpTrainingConfig = read_config(c.config.as_deref())?;
     let material = args.material.key();
     if !config.material.is_empty() && config.material != material {
         bail!(
@@ -760,85 +587,22 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
             config.material
         );
     }
-    config.material = material.to_string();
-    if config.hidden.is_empty() {
-        config.hidden = hidden_layers(material);
-    }
-    let config_path = args.out.join("config.json");
-    let resuming = args.resume && args.out.join("checkpoint").exists();
-    if args.out.join("checkpoint").exists() && !args.resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            args.out.display()
-        );
-    }
+    c.apply(
+        &mut config.seed,
+        &mut config.adam.learning_rate,
+        std::slice::from_mut(&mut config.epochs),
+    );
+    config.validate()?;
+    check_out(&args.out, c.resume)?;
     let dataset = weft_nn::data::WarpDataset::load(&args.data, material)
         .with_context(|| format!("loading {}", args.data.display()))?;
-    let (train_x, train_y) = collect_pairs(&dataset, "train")?;
-    let (val_x, val_y) = collect_pairs(&dataset, "validation")?;
-    anyhow::ensure!(!train_x.is_empty(), "the dataset's train split holds no pairs");
-    std::fs::create_dir_all(&args.out)?;
-    let standardization = if resuming {
-        let stored: WarpTrainingConfig = serde_json::from_str(&std::fs::read_to_string(&config_path)?)?;
-        if stored != config {
-            bail!(
-                "the configuration differs from the one {} was trained with; resume with the same --config",
-                args.out.display()
-            );
-        }
-        serde_json::from_str(&std::fs::read_to_string(args.out.join("standardization.json"))?)?
-    } else {
-        let s = Standardization::fit(&train_x, &train_y)?;
-        write_atomic(&config_path, &serde_json::to_string_pretty(&config)?)?;
-        write_atomic(
-            &args.out.join("standardization.json"),
-            &serde_json::to_string_pretty(&s)?,
-        )?;
-        let mut log = std::fs::File::create(args.out.join("log.csv"))?;
-        writeln!(log, "epoch,train,validation")?;
-        s
-    };
-    let device = weft_nn::Device::Cpu;
-    let (x, y) = pair_tensors(&train_x, &train_y, &standardization, &device)?;
-    let (vx, vy) = pair_tensors(&val_x, &val_y, &standardization, &device)?;
-    let mut params = weft_nn::params::Params::new(&device, config.seed);
-    let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
-    let mut adam = weft_nn::adam::Adam::new(&params, config.adam)?;
-    let ck = args.out.join("checkpoint");
-    let mut first = 0;
-    if resuming {
-        let state = checkpoint::load(&ck, &params, &mut adam)?;
-        first = state["epoch"].as_u64().context("checkpoint lacks its epoch")? as usize;
-        eprintln!("resuming after epoch {first}");
-    }
+    let mut progress = TrainProgress::new(c.quiet, &format!("nnwarp/{material}"))?;
+    let (state, n_train, n_val) = train_model(&args.out, &dataset, &config, &mut progress)?;
+    drop(progress);
     eprintln!(
-        "nnwarp/{material}: {} training and {} validation pairs, hidden {:?}",
-        train_x.len(),
-        val_x.len(),
-        config.hidden
+        "nnwarp/{material}: {n_train} training and {n_val} validation pairs; kept epoch {} of {}, validation {:.4e}",
+        state.best_epoch, state.epochs_done, state.best_validation
     );
-    let batches = train_x.len().div_ceil(config.batch) as u64;
-    let bar = progress_bar(
-        args.quiet,
-        (config.epochs.saturating_sub(first)) as u64 * batches,
-        "nnwarp",
-        "batches",
-    )?;
-    for epoch in first..config.epochs {
-        let train = train_epoch(&mlp, &params, &mut adam, &x, &y, &config, epoch, |l| {
-            bar.set_message(format!("epoch {epoch} loss {l:.3e}"));
-            bar.inc(1);
-        })?;
-        let validation = mean_loss(&mlp, &vx, &vy)?;
-        end_epoch(
-            &args.out,
-            &params,
-            &adam,
-            epoch,
-            &format!("{epoch},{train},{validation}"),
-        )?;
-    }
-    bar.finish_and_clear();
     eprintln!("model → {}", args.out.display());
     Ok(())
 }

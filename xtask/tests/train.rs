@@ -1,6 +1,8 @@
-//! `cargo xtask train embed` end to end on a quick dataset: every stage lowers its loss, a
-//! run split by `--resume` ends bit for bit where an uninterrupted run does, and a model
-//! directory is never overwritten by accident.
+//! `cargo xtask train` end to end on quick datasets, every model through the one trainer:
+//! every stage lowers its loss, a run split by `--resume` ends bit for bit where an
+//! uninterrupted run does, the kept weights are those of the best validation epoch, bad
+//! configurations are refused by field before anything is written, and a model directory
+//! is never overwritten by accident.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -22,17 +24,33 @@ fn xtask(args: &[&str], dirs: &[(&str, &Path)]) -> std::process::Output {
     c.output().expect("xtask runs")
 }
 
-/// `log.csv` rows as (stage, epoch, total).
-fn log(model: &Path) -> Vec<(u8, usize, f64)> {
-    std::fs::read_to_string(model.join("log.csv"))
+/// A run's `training.json`.
+fn state(run: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(run.join("training.json")).unwrap()).unwrap()
+}
+
+/// Per epoch (loss, validation) of a run: what a resumed run must reproduce exactly.
+fn history(run: &Path) -> Vec<(f64, f64)> {
+    state(run)["history"]
+        .as_array()
         .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f[0].parse().unwrap(), f[1].parse().unwrap(), f[7].parse().unwrap())
-        })
+        .iter()
+        .map(|h| (h["loss"].as_f64().unwrap(), h["validation"].as_f64().unwrap()))
         .collect()
+}
+
+/// The kept epoch is the one with the lowest validation score, the starting weights
+/// (epoch 0) included, and `best/` holds exactly its weights.
+fn assert_selected_on_validation(run: &Path) {
+    let s = state(run);
+    let mut best = (0, s["initial_validation"].as_f64().unwrap());
+    for (e, (_, v)) in history(run).into_iter().enumerate() {
+        if v < best.1 {
+            best = (e + 1, v);
+        }
+    }
+    assert_eq!(s["best_epoch"].as_u64(), Some(best.0 as u64), "{}", run.display());
+    assert_eq!(s["best_validation"].as_f64(), Some(best.1));
 }
 
 #[test]
@@ -59,14 +77,15 @@ fn train_embed_lowers_every_stage_and_resumes_bit_for_bit() {
     let straight = root.join("straight");
     let out = train(&straight, &[]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let rows = log(&straight);
-    assert_eq!(rows.len(), 28);
-    for stage in 1..=3u8 {
-        let totals: Vec<f64> = rows.iter().filter(|r| r.0 == stage).map(|r| r.2).collect();
+    for (stage, epochs) in [(1, 12), (2, 12), (3, 4)] {
+        let run = straight.join(format!("stage-{stage}"));
+        let totals: Vec<f64> = history(&run).iter().map(|h| h.0).collect();
+        assert_eq!(totals.len(), epochs);
         assert!(
             totals.last().unwrap() < totals.first().unwrap(),
             "stage {stage} did not lower its loss: {totals:?}"
         );
+        assert_selected_on_validation(&run);
     }
     // Stage 1 alone, then the rest with --resume: the same bytes as the straight run.
     let split = root.join("split");
@@ -75,11 +94,15 @@ fn train_embed_lowers_every_stage_and_resumes_bit_for_bit() {
     assert!(!refused.status.success(), "an existing model must not be overwritten");
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--resume"));
     assert!(train(&split, &["--resume"]).status.success());
+    for stage in 1..=3 {
+        let run = format!("stage-{stage}");
+        assert_eq!(history(&straight.join(&run)), history(&split.join(&run)), "{run}");
+    }
     for file in [
-        "checkpoint/autoencoder/params.safetensors",
-        "checkpoint/simulator/params.safetensors",
-        "checkpoint/autoencoder/optimizer.safetensors",
-        "log.csv",
+        "stage-1/best/autoencoder/params.safetensors",
+        "stage-3/best/autoencoder/params.safetensors",
+        "stage-3/best/simulator/params.safetensors",
+        "stage-3/last/autoencoder/optimizer.safetensors",
     ] {
         assert_eq!(
             std::fs::read(straight.join(file)).unwrap(),
@@ -90,7 +113,18 @@ fn train_embed_lowers_every_stage_and_resumes_bit_for_bit() {
     // Resuming with another configuration is refused, not mixed.
     let changed = train(&split, &["--resume", "--no-pb"]);
     assert!(!changed.status.success());
-    assert!(String::from_utf8_lossy(&changed.stderr).contains("configuration differs"));
+    assert!(String::from_utf8_lossy(&changed.stderr).contains("another configuration"));
+    // A bad configuration is refused by field before anything is written.
+    std::fs::write(&config, r#"{"batch": 0}"#).unwrap();
+    let bad = root.join("bad");
+    let out = train(&bad, &[]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("`batch`"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!bad.exists(), "nothing is written for a refused configuration");
     let _ = std::fs::remove_dir_all(&root);
 }
 
@@ -101,7 +135,7 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     let root = scratch("nnwarp");
     let data = root.join("data");
     let out = xtask(
-        &["dataset", "nnwarp", "--size", "quick", "--sequences", "16", "--quiet"],
+        &["dataset", "nnwarp", "--size", "quick", "--sequences", "32", "--quiet"],
         &[("--out", &data)],
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -119,7 +153,32 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
         &[("--data", &data), ("--config", &config), ("--out", &model)],
     );
     assert!(!again.status.success());
+    assert_selected_on_validation(&model);
+    // 4 epochs straight, and 2 + 2 with --resume: the same run, bit for bit.
+    let (straight, split) = (root.join("straight"), root.join("split"));
+    let short = |out: &Path, extra: &[&str]| {
+        let mut a = vec!["train", "nnwarp", "--material", "neo-hookean", "--quiet"];
+        a.extend_from_slice(extra);
+        let o = xtask(&a, &[("--data", &data), ("--config", &config), ("--out", out)]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    short(&straight, &["--epochs", "4"]);
+    short(&split, &["--epochs", "2"]);
+    short(&split, &["--epochs", "4", "--resume"]);
+    assert_eq!(history(&straight), history(&split));
+    for f in [
+        "best/net/params.safetensors",
+        "last/net/params.safetensors",
+        "last/net/optimizer.safetensors",
+    ] {
+        assert_eq!(
+            std::fs::read(straight.join(f)).unwrap(),
+            std::fs::read(split.join(f)).unwrap(),
+            "{f}"
+        );
+    }
     let (_, mlp) = load_model(&model).unwrap();
+    eprintln!("nnwarp kept epoch {} of 40", state(&model)["best_epoch"]);
     let set = weft_nn::data::WarpDataset::load(&data, "neo-hookean").unwrap();
     let grads = Arc::new(weft_sim::warp::NodalGradients::new(&set.body).unwrap());
     let mut tested = 0;
@@ -185,7 +244,7 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
 }
 
 fn progress(model: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(model.join("progress.json")).unwrap()).unwrap()
+    state(model)
 }
 
 /// `cargo xtask train drape`: a learned-μ model continued with a larger `--epochs` ends where
@@ -212,6 +271,19 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     };
     let out = run(&net, &["--epochs", "20"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_selected_on_validation(&net);
+    // The network alone (no layer, no warm starts) resumes bit for bit.
+    let half = root.join("half");
+    assert!(run(&half, &["--epochs", "10"]).status.success());
+    assert!(run(&half, &["--epochs", "20", "--resume"]).status.success());
+    assert_eq!(history(&net), history(&half));
+    for f in ["best/net/params.safetensors", "last/net/optimizer.safetensors"] {
+        assert_eq!(
+            std::fs::read(net.join(f)).unwrap(),
+            std::fs::read(half.join(f)).unwrap(),
+            "{f}"
+        );
+    }
     let mu = ["--layer", "quasistatic", "--learn-mu", "global", "--mu", "1"];
     let with = |epochs: &'static str, resume: bool| {
         let mut a = mu.to_vec();
@@ -232,15 +304,19 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (a, b) = (progress(&whole), progress(&split));
     assert_eq!(b["epochs_done"], 3);
-    let record = |p: &serde_json::Value, e: usize, key: &str| p["history"][e][key].as_f64().unwrap();
+    let record = |p: &serde_json::Value, e: usize, key: &str| {
+        let h = &p["history"][e];
+        h[key].as_f64().or_else(|| h["extra"][key].as_f64()).unwrap()
+    };
     for e in 0..3 {
         let (ma, mb) = (record(&a, e, "mu"), record(&b, e, "mu"));
         assert!(
             (ma - mb).abs() <= 1e-3 * ma,
             "epoch {e}: μ {ma} uninterrupted, {mb} continued"
         );
-        assert!(a["history"][e]["mu_gradient"]["batches"].as_u64() == Some(4));
+        assert!(record(&a, e, "mu_gradient_sd") > 0.0);
     }
+    assert_selected_on_validation(&whole);
     // μ moved from its start: the continued run really trained it.
     assert!((record(&b, 2, "mu") - 1.0).abs() > 0.05);
     let scores: serde_json::Value =
@@ -250,13 +326,10 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     // the last μ, and the upper median of |mean|/sd of μ's gradient.
     let half = &scores["second_half"];
     assert_eq!(half["epochs"], serde_json::json!([2, 3]));
-    let val = (record(&b, 1, "validation_sqrtmse_mm") + record(&b, 2, "validation_sqrtmse_mm")) / 2.0;
+    let val = (record(&b, 1, "validation") + record(&b, 2, "validation")) / 2.0;
     assert!((half["validation_sqrtmse_mm_mean"].as_f64().unwrap() - val).abs() <= 1e-12 * val);
     assert_eq!(half["last_mu"].as_f64(), Some(record(&b, 2, "mu")));
-    let signal = |e: usize| {
-        let g = &b["history"][e]["mu_gradient"];
-        g["mean"].as_f64().unwrap().abs() / g["sd"].as_f64().unwrap()
-    };
+    let signal = |e: usize| record(&b, e, "mu_gradient_mean").abs() / record(&b, e, "mu_gradient_sd");
     assert_eq!(
         half["mu_gradient_mean_over_sd_median"].as_f64(),
         Some(signal(1).max(signal(2)))
@@ -299,5 +372,100 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     let out = run(&root.join("bad"), &bad);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--scan-mu"));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// `cargo xtask train altconv` on the quick `limb` dataset: a run split by `--resume`
+/// ends bit for bit where an uninterrupted one does, the kept epoch is the best on
+/// validation, and widths beyond any machine are refused by field before any allocation.
+#[test]
+fn train_altconv_resumes_bit_for_bit_and_refuses_absurd_widths() {
+    let root = scratch("altconv");
+    let data = root.join("data");
+    let out = xtask(&["dataset", "limb", "--size", "quick", "--quiet"], &[("--out", &data)]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let config = root.join("config.json");
+    std::fs::write(&config, r#"{"hidden": [8, 8], "steps": 4, "batch": 1}"#).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let mut a = vec!["train", "altconv", "--model", "alt", "--quiet"];
+        a.extend_from_slice(extra);
+        xtask(&a, &[("--data", &data), ("--config", &config), ("--out", out)])
+    };
+    let (straight, split) = (root.join("straight"), root.join("split"));
+    for (dir, extra) in [
+        (&straight, vec!["--epochs", "4", "--lr", "0.01"]),
+        (&split, vec!["--epochs", "2", "--lr", "0.01"]),
+        (&split, vec!["--epochs", "4", "--lr", "0.01", "--resume"]),
+    ] {
+        let o = run(dir, &extra);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert_eq!(history(&straight).len(), 4);
+    assert_eq!(history(&straight), history(&split));
+    for f in ["best/net/params.safetensors", "last/net/optimizer.safetensors"] {
+        assert_eq!(
+            std::fs::read(straight.join(f)).unwrap(),
+            std::fs::read(split.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    assert_selected_on_validation(&straight);
+    // --lr reached the configuration the model stores.
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(straight.join("config.json")).unwrap()).unwrap();
+    assert_eq!(stored["adam"]["learning_rate"].as_f64(), Some(0.01));
+    // The epoch lines are in the run's log.
+    let log = std::fs::read_to_string(straight.join("train.log")).unwrap();
+    assert_eq!(log.lines().filter(|l| l.contains("validation")).count(), 5);
+    // A width of four billion is a typo: refused by name, nothing allocated or written.
+    std::fs::write(&config, r#"{"hidden": [8, 4000000000], "steps": 4}"#).unwrap();
+    let bad = root.join("bad");
+    let out = run(&bad, &[]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("hidden[1]"), "{err}");
+    assert!(!bad.exists());
+    for (json, field) in [
+        (r#"{"steps": 0}"#, "`steps`"),
+        (
+            r#"{"adam": {"learning_rate": -1, "beta1": 0.9, "beta2": 0.999, "epsilon": 1e-8}}"#,
+            "adam.learning_rate",
+        ),
+        (
+            r#"{"schedule": {"decay": {"kind": "exponential", "per_epoch": 2}}}"#,
+            "schedule.decay.per_epoch",
+        ),
+        (r#"{"stpes": 3}"#, "stpes"),
+    ] {
+        std::fs::write(&config, json).unwrap();
+        let out = run(&bad, &[]);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(field), "{json}: {err}");
+        assert!(!bad.exists());
+    }
+    std::fs::write(&config, r#"{"hidden": [8, 8], "steps": 4}"#).unwrap();
+    let out = run(&bad, &["--lr=1e9"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("adam.learning_rate"));
+    assert!(!out.status.success() && !bad.exists());
+    // A flipped byte in a sequence file is refused by name before anything trains.
+    std::fs::write(&config, r#"{"hidden": [8, 8], "steps": 4, "batch": 1}"#).unwrap();
+    let seq = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "safetensors"))
+        .unwrap();
+    let mut bytes = std::fs::read(&seq).unwrap();
+    let last = bytes.len() - 1;
+    bytes[last] ^= 1;
+    std::fs::write(&seq, bytes).unwrap();
+    let out = run(&bad, &["--epochs", "1"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("SHA-256") && err.contains(seq.file_name().unwrap().to_str().unwrap()),
+        "{err}"
+    );
+    assert!(!bad.exists());
     let _ = std::fs::remove_dir_all(&root);
 }

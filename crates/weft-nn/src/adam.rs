@@ -98,10 +98,21 @@ impl Adam {
     /// One Adam step on every parameter that has a gradient in `grads`. A non-finite
     /// gradient is an error and changes nothing.
     pub fn step(&mut self, params: &Params, grads: &GradStore) -> Result<()> {
+        self.step_scaled(params, grads, 1.0)
+    }
+
+    /// One Adam step on the gradients multiplied by `scale` (gradient clipping: the
+    /// trainer scales every group by one factor so the global norm stays bounded).
+    /// Multiplying by 1 is exact, so an unclipped step is [`Adam::step`] bit for bit.
+    pub fn step_scaled(&mut self, params: &Params, grads: &GradStore, scale: f64) -> Result<()> {
+        let scale = scale as f32;
         let mut gradients: Vec<(&String, &Var, Vec<f32>)> = Vec::new();
         for (name, var) in params.vars() {
             let Some(g) = grads.get(var.as_tensor()) else { continue };
-            let g = values(g)?;
+            let mut g = values(g)?;
+            if scale != 1.0 {
+                g.iter_mut().for_each(|x| *x *= scale);
+            }
             if let Some(index) = g.iter().position(|x| !x.is_finite()) {
                 return Err(Error::NonFinite {
                     what: "gradient",
@@ -131,6 +142,11 @@ impl Adam {
             var.set(&Tensor::from_vec(p, state.shape.as_slice(), var.device())?)?;
         }
         Ok(())
+    }
+
+    /// The learning rate of the next step.
+    pub fn learning_rate(&self) -> f64 {
+        self.settings.learning_rate
     }
 
     /// The state as named tensors: `adam.m/<name>`, `adam.v/<name>` and the step count.
@@ -170,6 +186,17 @@ impl Adam {
         self.step = step;
         Ok(())
     }
+}
+
+/// The squared Euclidean norm of the gradients `grads` holds for `params`.
+pub fn gradient_sq_norm(params: &Params, grads: &GradStore) -> Result<f64> {
+    let mut sum = 0.0f64;
+    for var in params.vars().values() {
+        if let Some(g) = grads.get(var.as_tensor()) {
+            sum += values(g)?.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>();
+        }
+    }
+    Ok(sum)
 }
 
 #[cfg(test)]

@@ -104,3 +104,22 @@ pub fn load_params(dir: &Path, params: &Params) -> Result<()> {
     let p = dir.join("params.safetensors");
     params.assign(&read_safetensors(&p, params)?, &p.display().to_string())
 }
+
+/// Writes `value` as pretty JSON to `path` through a temporary name (a model directory's
+/// configuration and fitted normalisations).
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    let tmp = path.with_extension("json.partial");
+    let text = serde_json::to_string_pretty(value).expect("plain data serialises");
+    std::fs::write(&tmp, text).map_err(|e| io_error(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
+}
+
+/// Reads a JSON file of a model directory; a file that does not parse is a checkpoint
+/// error naming it.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| io_error(path, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })
+}

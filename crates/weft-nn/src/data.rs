@@ -5,7 +5,8 @@
 //! A dataset directory holds `manifest.json`, `scene.toml`, `rest.obj` and one
 //! `seq-NNNNN.safetensors` per sequence with `positions` `[F, V, 3]`, `controls`
 //! `[F, G, 3]` (metres) and `labels` `[F]`. Everything read is checked: shapes against the
-//! rest mesh, finiteness, and that every sequence names the same grasped vertices.
+//! rest mesh, finiteness, that every sequence names the same grasped vertices, and every
+//! file's SHA-256 against the manifest.
 
 use std::path::{Path, PathBuf};
 
@@ -25,7 +26,35 @@ fn read_manifest(dir: &Path, dataset: Option<&str>) -> Result<(PathBuf, serde_js
         let what = dataset.map_or(String::new(), |d| format!(" {d}"));
         return Err(data_error(&path, format!("not a weft-dataset/1{what} manifest")));
     }
+    // The files every sequence shares (scene, rest shape) are verified up front.
+    for (k, entry) in manifest["files"].as_array().into_iter().flatten().enumerate() {
+        let rel = entry["path"]
+            .as_str()
+            .ok_or_else(|| data_error(&path, format!("file entry {k} has no path")))?;
+        let file = dir.join(rel);
+        let bytes = std::fs::read(&file).map_err(|e| io_error(&file, e))?;
+        verify_checksum(&file, &bytes, &entry["sha256"])?;
+    }
     Ok((path, manifest))
+}
+
+/// Checks `bytes` (read from `path`) against the manifest's SHA-256 `expected`: a dataset
+/// file changed after it was written (a flipped byte, a truncated copy) is refused by
+/// name before anything trains on it.
+fn verify_checksum(path: &Path, bytes: &[u8], expected: &serde_json::Value) -> Result<()> {
+    use sha2::Digest;
+    let expected = expected
+        .as_str()
+        .ok_or_else(|| data_error(path, "the manifest lists no sha256 for it"))?;
+    let actual: String = sha2::Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect();
+    if actual != expected {
+        return Err(Error::Checksum {
+            path: path.display().to_string(),
+            expected: expected.to_string(),
+            actual,
+        });
+    }
+    Ok(())
 }
 
 /// One file the manifest lists (a sequence, or a chunk of examples), opened.
@@ -68,6 +97,7 @@ fn for_each_listed(
             .ok_or_else(|| data_error(manifest_path, format!("entry {k} has no path")))?;
         let path = dir.join(rel);
         let bytes = std::fs::read(&path).map_err(|e| io_error(&path, e))?;
+        verify_checksum(&path, &bytes, &entry["sha256"])?;
         let tensors = SafeTensors::deserialize(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
         let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| data_error(&path, e.to_string()))?;
         each(Listed {
@@ -85,6 +115,13 @@ fn for_each_listed(
 /// test. `m` counts from a sequence's first frame.
 pub fn is_train_frame(m: usize) -> bool {
     m % 17 < 12
+}
+
+/// Validation frames, carved from Tan et al.'s training frames (they had no validation
+/// split): the last two of every twelve (`m mod 17` ∈ {10, 11}). They are never trained
+/// on, so model selection reads frames neither the loss nor the test split sees.
+pub fn is_validation_frame(m: usize) -> bool {
+    matches!(m % 17, 10 | 11)
 }
 
 /// One simulated sequence.

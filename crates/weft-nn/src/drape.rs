@@ -244,31 +244,6 @@ impl DrapeTensors {
     }
 }
 
-/// Optimisers of a [`DrapeModel`]: one for the network, one for a learned μ.
-#[derive(Debug)]
-pub struct DrapeOptimizers<'a> {
-    pub net_params: &'a Params,
-    pub net: &'a mut crate::adam::Adam,
-    pub mu: Option<(&'a Params, &'a mut crate::adam::Adam)>,
-}
-
-/// What one training epoch did.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EpochReport {
-    /// Mean training loss (mm²) over the batches that trained.
-    pub mean_loss: f64,
-    /// Batches skipped because the postprocess failed on one of their examples (a saddle
-    /// equilibrium, a collapsed spring, a solve that did not converge): no step is taken
-    /// for them, and the first failure is kept.
-    pub skipped_batches: usize,
-    pub first_error: Option<String>,
-    /// With a learned μ: how the gradient of the batch loss in `log μ` (averaged over its
-    /// entries when μ is per vertex) varied over the epoch's batches. Adam moves `log μ`
-    /// by about `lr · mean / sd` per step on average, so a ratio near zero is why a
-    /// learned μ drifts slowly (docs/DRAPE.md).
-    pub mu_gradient: Option<GradientStats>,
-}
-
 /// Mean and standard deviation over an epoch's batches of one gradient (per batch, mm²
 /// per unit of the parameter).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -279,7 +254,8 @@ pub struct GradientStats {
 }
 
 impl GradientStats {
-    fn of(values: &[f64]) -> Option<Self> {
+    /// Mean and sample standard deviation of `values` (`None` when empty).
+    pub fn of(values: &[f64]) -> Option<Self> {
         let n = values.len();
         if n == 0 {
             return None;
@@ -294,88 +270,158 @@ impl GradientStats {
     }
 }
 
-/// One epoch over `data` in shuffled batches (seeded by `seed`). The layers warm-start
-/// every example from its solution of the previous epoch (keys: the examples' indices in
-/// `data`). A batch whose postprocess fails is skipped and counted; a non-finite loss is
-/// an error (the network diverged), as is an epoch in which every batch failed.
-pub fn train_epoch(
-    model: &DrapeModel,
-    opt: &mut DrapeOptimizers<'_>,
-    data: &DrapeTensors,
-    batch: usize,
-    seed: u64,
-) -> Result<EpochReport> {
-    let n = data.len();
-    if batch == 0 || n == 0 {
-        return Err(Error::InvalidParameter {
-            name: "drape training batch",
-            value: format!("batch {batch}, {n} examples"),
-            reason: "needs a batch of at least 1 and at least one example",
-        });
-    }
-    let mut order: Vec<usize> = (0..n).collect();
-    // Fisher–Yates with SplitMix64, so an epoch's order depends on the seed alone.
-    let mut rng = weft_sim::rng::SplitMix64::new(seed);
-    for i in (1..n).rev() {
-        order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
-    }
-    let mut report = EpochReport {
-        mean_loss: 0.0,
-        skipped_batches: 0,
-        first_error: None,
-        mu_gradient: None,
-    };
-    let mut trained = 0;
-    let mut mu_grads = Vec::new();
-    for chunk in order.chunks(batch) {
-        let b = data.select(chunk)?;
-        let step = model
-            .predict_keyed(&b.pose, &b.guess, Some(chunk))
-            .and_then(|r| loss(&r, &b.truth))
-            .and_then(|l| {
-                let value = f64::from(l.to_scalar::<f32>()?);
-                Ok((value, value.is_finite().then(|| l.backward()).transpose()?))
-            });
-        let (value, grads) = match step {
-            Ok((value, Some(grads))) => (value, grads),
-            Ok((_, None)) => {
-                return Err(Error::NonFinite {
-                    what: "drape training loss",
-                    index: 0,
-                });
-            }
-            Err(e) => {
-                report.skipped_batches += 1;
-                report.first_error.get_or_insert_with(|| e.to_string());
-                continue;
-            }
-        };
-        opt.net.step(opt.net_params, &grads)?;
-        if let Some((params, adam)) = opt.mu.as_mut() {
-            if let Postprocess::Quasistatic {
-                mu: Mu::Learned(log_mu),
+impl DrapeModel {
+    /// μ of a learned-μ quasistatic postprocess (the global value, or one per vertex);
+    /// `None` for any other postprocess.
+    pub fn learned_mu(&self) -> Result<Option<Vec<f64>>> {
+        Ok(match &self.post {
+            Postprocess::Quasistatic {
+                mu: mu @ Mu::Learned(_),
                 ..
-            } = &model.post
-            {
-                if let Some(g) = grads.get(log_mu) {
-                    mu_grads.push(f64::from(g.mean_all()?.to_scalar::<f32>()?));
-                }
-            }
-            adam.step(params, &grads)?;
+            } => Some(
+                mu.value(&Device::Cpu)?
+                    .to_vec1::<f32>()?
+                    .into_iter()
+                    .map(f64::from)
+                    .collect(),
+            ),
+            _ => None,
+        })
+    }
+}
+
+/// A drape model trained through [`crate::trainer::Trainer`]: the network (group `net`)
+/// and, with a learned μ, `log μ` (group `mu`, its own learning rate).
+///
+/// The layers warm-start every training example from its solution of the previous epoch
+/// (keys: the examples' indices in `train`) and every validation example likewise (keys
+/// after the training ones). A batch whose postprocess fails (a saddle equilibrium, a
+/// collapsed spring, a solve that did not converge) is skipped. The validation score is
+/// the mean SqrtMSE (mm) over the validation examples the postprocess succeeds on.
+/// Warm starts make a resumed run equal to an uninterrupted one only to the layers'
+/// solver tolerance (the network alone resumes bit for bit).
+#[derive(Debug)]
+pub struct DrapeTraining<'a> {
+    pub model: &'a DrapeModel,
+    pub net_params: &'a Params,
+    pub net_adam: crate::adam::AdamSettings,
+    /// A learned μ's parameters and Adam settings.
+    pub mu: Option<(&'a Params, crate::adam::AdamSettings)>,
+    pub train: &'a DrapeTensors,
+    pub validation: &'a DrapeTensors,
+    /// Examples per layer call in the validation pass.
+    pub batch: usize,
+    mu_grads: Vec<f64>,
+}
+
+impl<'a> DrapeTraining<'a> {
+    pub fn new(
+        model: &'a DrapeModel,
+        net: (&'a Params, crate::adam::AdamSettings),
+        mu: Option<(&'a Params, crate::adam::AdamSettings)>,
+        train: &'a DrapeTensors,
+        validation: &'a DrapeTensors,
+        batch: usize,
+    ) -> Self {
+        Self {
+            model,
+            net_params: net.0,
+            net_adam: net.1,
+            mu,
+            train,
+            validation,
+            batch,
+            mu_grads: Vec::new(),
         }
-        report.mean_loss += value * chunk.len() as f64;
-        trained += chunk.len();
     }
-    if trained == 0 {
-        return Err(Error::InvalidParameter {
-            name: "drape training epoch",
-            value: report.first_error.unwrap_or_default(),
-            reason: "the postprocess failed on every batch",
-        });
+}
+
+impl crate::trainer::Trainable for DrapeTraining<'_> {
+    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
+        let mut g = vec![crate::trainer::Group {
+            name: "net",
+            params: self.net_params,
+            adam: self.net_adam,
+        }];
+        if let Some((params, adam)) = self.mu {
+            g.push(crate::trainer::Group {
+                name: "mu",
+                params,
+                adam,
+            });
+        }
+        g
     }
-    report.mean_loss /= trained as f64;
-    report.mu_gradient = GradientStats::of(&mu_grads);
-    Ok(report)
+
+    fn num_examples(&self) -> usize {
+        self.train.len()
+    }
+
+    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+        let b = self.train.select(batch)?;
+        match self
+            .model
+            .predict_keyed(&b.pose, &b.guess, Some(batch))
+            .and_then(|r| loss(&r, &b.truth))
+        {
+            Ok(loss) => Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] }),
+            Err(e) => Ok(crate::trainer::BatchLoss::Skipped { reason: e.to_string() }),
+        }
+    }
+
+    fn after_backward(&mut self, grads: &candle_core::backprop::GradStore) -> Result<()> {
+        if let Postprocess::Quasistatic {
+            mu: Mu::Learned(log_mu),
+            ..
+        } = &self.model.post
+        {
+            if let Some(g) = grads.get(log_mu) {
+                self.mu_grads.push(f64::from(g.mean_all()?.to_scalar::<f32>()?));
+            }
+        }
+        Ok(())
+    }
+
+    fn validation_score(&mut self) -> Result<f64> {
+        let pred = predict_each_keyed(self.model, self.validation, self.batch, self.train.len())?;
+        let truth = self.validation.truths()?;
+        let (mut sum, mut n) = (0.0, 0);
+        for (p, t) in pred.iter().zip(&truth) {
+            if let Ok(p) = p {
+                sum += sqrtmse_maxdist_mm(p, t)?.0;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Err(Error::InvalidParameter {
+                name: "validation split",
+                value: format!("{} examples", self.validation.len()),
+                reason: "the postprocess failed on every validation example (or there are none)",
+            });
+        }
+        Ok(sum / n as f64)
+    }
+
+    /// A learned μ after the epoch (its mean over vertices) and how the per-batch
+    /// gradient of the loss in `log μ` varied over the epoch: Adam moves `log μ` by about
+    /// `lr · mean / sd` per step, so a ratio near zero is why a learned μ drifts slowly
+    /// (docs/DRAPE.md).
+    fn epoch_extra(&mut self) -> Result<std::collections::BTreeMap<String, f64>> {
+        let mut extra = std::collections::BTreeMap::new();
+        if let Some(mu) = self.model.learned_mu()? {
+            extra.insert("mu".into(), mu.iter().sum::<f64>() / mu.len().max(1) as f64);
+        }
+        if let Some(g) = GradientStats::of(&std::mem::take(&mut self.mu_grads)) {
+            extra.insert("mu_gradient_mean".into(), g.mean);
+            extra.insert("mu_gradient_sd".into(), g.sd);
+        }
+        Ok(extra)
+    }
+
+    /// Epoch `e` is ordered by SplitMix64(`seed · 1000 + e`), as before the trainer.
+    fn shuffle_seed(&self, seed: u64, epoch: usize) -> u64 {
+        seed.wrapping_mul(1000).wrapping_add(epoch as u64)
+    }
 }
 
 /// `r*` of every example, in batches, as flat f64 per example (m).

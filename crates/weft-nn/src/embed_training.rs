@@ -16,11 +16,10 @@ use std::sync::Arc;
 use candle_core::{Device, Tensor};
 use nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, Feature, FeatureNormalization, PoissonPseudoInverse};
-use weft_sim::rng::SplitMix64;
 use weft_sim::{ClothSimulation, ImplicitEuler};
 
-use crate::adam::{Adam, AdamSettings};
-use crate::data::{ClothDataset, is_train_frame};
+use crate::adam::AdamSettings;
+use crate::data::{ClothDataset, is_train_frame, is_validation_frame};
 use crate::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
 use crate::error::{Error, Result};
 use crate::graph::MeshGraph;
@@ -77,6 +76,10 @@ pub struct EmbedTrainingConfig {
     /// stored configuration without the field had no ramp.
     #[serde(default)]
     pub ephys_warmup: usize,
+    /// The learning-rate schedule and stopping rules of every stage (constant by
+    /// default, as Tan et al.).
+    #[serde(default)]
+    pub schedule: crate::trainer::Schedule,
 }
 
 /// The factor that multiplies `L_phys` (J) in `L_ephys` and `L_mphys` (m²/J).
@@ -125,6 +128,55 @@ impl EmbedTrainingConfig {
     }
 }
 
+impl EmbedTrainingConfig {
+    /// Checks every field before any work: a typed error naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_adam, check_count, invalid};
+        check_count("autoencoder.conv_layers", self.autoencoder.conv_layers, 16)?;
+        check_count("autoencoder.latent", self.autoencoder.latent, 65_536)?;
+        check_count("latent_hidden (number of layers)", self.latent_hidden.len().max(1), 64)?;
+        for (i, &w) in self.latent_hidden.iter().enumerate() {
+            check_count(&format!("latent_hidden[{i}]"), w, 65_536)?;
+        }
+        for (name, w) in [
+            ("weights.recon", self.weights.recon),
+            ("weights.vert", self.weights.vert),
+            ("weights.ephys", self.weights.ephys),
+            ("weights.sim", self.weights.sim),
+            ("weights.mphys", self.weights.mphys),
+        ] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(invalid(name, w, "must be non-negative and finite"));
+            }
+        }
+        check_adam("adam", &self.adam)?;
+        check_count("batch", self.batch, MAX_BATCH)?;
+        for (i, &e) in self.epochs.iter().enumerate() {
+            if e > MAX_EPOCHS {
+                return Err(invalid(&format!("epochs[{i}]"), e, "is beyond any sensible size"));
+            }
+        }
+        if self.ephys_warmup > MAX_EPOCHS {
+            return Err(invalid(
+                "ephys_warmup",
+                self.ephys_warmup,
+                "is beyond any sensible size",
+            ));
+        }
+        self.schedule.validate("schedule")
+    }
+
+    /// The trainer's configuration of `stage` (1, 2 or 3).
+    pub fn trainer(&self, stage: u8) -> crate::trainer::TrainerConfig {
+        crate::trainer::TrainerConfig {
+            epochs: self.epochs[stage as usize - 1],
+            batch: self.batch,
+            seed: self.seed,
+            schedule: self.schedule,
+        }
+    }
+}
+
 impl PhysScale {
     fn legacy() -> Self {
         PhysScale::Inertial
@@ -143,6 +195,7 @@ impl Default for EmbedTrainingConfig {
             seed: 0,
             phys_scale: PhysScale::default(),
             ephys_warmup: 0,
+            schedule: crate::trainer::Schedule::default(),
         }
     }
 }
@@ -180,8 +233,12 @@ pub struct EmbedData {
     /// `1 / mean(diag ∂²L_phys/∂p²)` over the free DOFs at the first frame of the first
     /// sequence, held still (m²/J): [`PhysScale::Curvature`].
     pub curvature_scale: f64,
-    /// Training windows (frame `m` and both predecessors in the training split).
+    /// Training windows (frame `m` and both predecessors training frames, `m` not a
+    /// validation frame; [`crate::data::is_validation_frame`]).
     pub train_windows: Vec<FrameRef>,
+    /// Validation windows: frame `m` a validation frame, its predecessors in Tan et al.'s
+    /// training frames. Model selection reads these only.
+    pub validation_windows: Vec<FrameRef>,
     /// Every test frame (the last 5 of each 17), in sequence order.
     pub test_frames: Vec<FrameRef>,
 }
@@ -206,7 +263,7 @@ impl EmbedData {
         let normalization = FeatureNormalization::fit_per_block(raw.iter().flat_map(|seq| {
             seq.iter()
                 .enumerate()
-                .filter(|(m, _)| is_train_frame(*m))
+                .filter(|(m, _)| is_train_frame(*m) && !is_validation_frame(*m))
                 .flat_map(|(_, f)| f)
         }))?;
         let features = raw
@@ -243,11 +300,16 @@ impl EmbedData {
             1.0 / mean
         };
         let mut train_windows = Vec::new();
+        let mut validation_windows = Vec::new();
         let mut test_frames = Vec::new();
         for (s, seq) in dataset.sequences.iter().enumerate() {
             for m in 2..seq.num_frames() {
                 if is_train_frame(m) && is_train_frame(m - 1) && is_train_frame(m - 2) {
-                    train_windows.push(FrameRef { sequence: s, frame: m });
+                    if is_validation_frame(m) {
+                        validation_windows.push(FrameRef { sequence: s, frame: m });
+                    } else {
+                        train_windows.push(FrameRef { sequence: s, frame: m });
+                    }
                 } else if !is_train_frame(m) {
                     test_frames.push(FrameRef { sequence: s, frame: m });
                 }
@@ -269,6 +331,7 @@ impl EmbedData {
             inertial_scale,
             curvature_scale,
             train_windows,
+            validation_windows,
             test_frames,
         })
     }
@@ -382,9 +445,10 @@ impl EmbedModel {
         })
     }
 
-    /// A trained model from a model directory written by `cargo xtask train embed`
-    /// (`config.json` and the latest `checkpoint/`).
-    pub fn load(dir: &std::path::Path, data: &EmbedData) -> Result<Self> {
+    /// A trained model from a model directory written by [`train_stages`] (`cargo xtask
+    /// train embed`): `config.json` and each stage's best weights, up to and including
+    /// stage `after` (Tan Table IV reads the model after stage 2 and after stage 3).
+    pub fn load(dir: &std::path::Path, data: &EmbedData, after: u8) -> Result<Self> {
         let path = dir.join("config.json");
         let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
             path: path.display().to_string(),
@@ -395,10 +459,41 @@ impl EmbedModel {
             reason: e.to_string(),
         })?;
         let model = Self::new(config, data)?;
-        let ck = dir.join("checkpoint");
-        crate::checkpoint::load_params(&ck.join("autoencoder"), &model.autoencoder_params)?;
-        crate::checkpoint::load_params(&ck.join("simulator"), &model.simulator_params)?;
+        let mut any = false;
+        for stage in 1..=after.min(3) {
+            let run = stage_dir(dir, stage);
+            if crate::trainer::has_run(&run) {
+                crate::trainer::load_weights(&run.join("best"), &model.stage_groups(stage))?;
+                any = true;
+            }
+        }
+        if !any {
+            return Err(Error::Checkpoint {
+                path: dir.display().to_string(),
+                reason: format!("no trained stage up to stage {after}"),
+            });
+        }
         Ok(model)
+    }
+
+    /// The parameter groups stage `stage` trains: the autoencoder (1), the latent
+    /// simulator (2), both (3).
+    pub fn stage_groups(&self, stage: u8) -> Vec<crate::trainer::Group<'_>> {
+        let ae = crate::trainer::Group {
+            name: "autoencoder",
+            params: &self.autoencoder_params,
+            adam: self.config.adam,
+        };
+        let sim = crate::trainer::Group {
+            name: "simulator",
+            params: &self.simulator_params,
+            adam: self.config.adam,
+        };
+        match stage {
+            1 => vec![ae],
+            2 => vec![sim],
+            _ => vec![ae, sim],
+        }
     }
 
     /// `ACAP⁻¹ ∘ D ∘ E` of `frames`, in batches of `batch`: the reconstructed positions
@@ -521,7 +616,76 @@ impl EmbedModel {
     }
 }
 
-/// Where a run stands; stored in every checkpoint's record.
+/// One stage of the embedding as the [`crate::trainer::Trainer`] sees it: examples are
+/// the training windows, the loss is the stage's (λ_ephys ramped as configured), the
+/// validation score the stage's total loss on the validation windows at the full weights.
+#[derive(Debug)]
+pub struct EmbedStage<'a> {
+    pub model: &'a EmbedModel,
+    pub data: &'a EmbedData,
+    /// 1, 2 or 3.
+    pub stage: u8,
+}
+
+impl crate::trainer::Trainable for EmbedStage<'_> {
+    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
+        self.model.stage_groups(self.stage)
+    }
+
+    fn num_examples(&self) -> usize {
+        self.data.train_windows.len()
+    }
+
+    fn batch_loss(&mut self, batch: &[usize], at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+        let frames: Vec<FrameRef> = batch.iter().map(|&i| self.data.train_windows[i]).collect();
+        let progress = Progress {
+            stage: self.stage,
+            epoch: at.epoch,
+        };
+        let ephys = self
+            .model
+            .config
+            .ephys_weight(progress, at.batch as f64 / at.batches as f64);
+        let (loss, t) = self.model.losses(self.data, &frames, self.stage, ephys)?;
+        Ok(crate::trainer::BatchLoss::Loss {
+            loss,
+            terms: vec![
+                ("recon", t.recon),
+                ("vert", t.vert),
+                ("ephys", t.ephys),
+                ("sim", t.sim),
+                ("mphys", t.mphys),
+            ],
+        })
+    }
+
+    fn validation_score(&mut self) -> Result<f64> {
+        let windows = &self.data.validation_windows;
+        if windows.is_empty() {
+            return Err(Error::InvalidParameter {
+                name: "validation split",
+                value: "0 windows".into(),
+                reason: "model selection needs validation windows (sequences of at least 12 frames)",
+            });
+        }
+        let mut sum = 0.0;
+        for chunk in windows.chunks(self.model.config.batch.max(1)) {
+            let (_, t) = self
+                .model
+                .losses(self.data, chunk, self.stage, self.model.config.weights.ephys)?;
+            sum += t.total * chunk.len() as f64;
+        }
+        Ok(sum / windows.len() as f64)
+    }
+
+    /// The order of stage `s`, epoch `e`: SplitMix64(seed ⊕ s·2⁵⁶ ⊕ e·0x9E3779B9), as
+    /// before the trainer.
+    fn shuffle_seed(&self, seed: u64, epoch: usize) -> u64 {
+        seed ^ ((self.stage as u64) << 56) ^ (epoch as u64).wrapping_mul(0x9E37_79B9)
+    }
+}
+
+/// Where a run stands in the three stages (λ_ephys's ramp reads it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Progress {
     /// 1, 2 or 3.
@@ -530,63 +694,108 @@ pub struct Progress {
     pub epoch: usize,
 }
 
-/// The epoch's batches: the training windows in an order drawn from SplitMix64(seed,
-/// stage, epoch), so a resumed run sees the same batches as an uninterrupted one.
-pub fn epoch_batches(windows: &[FrameRef], batch: usize, seed: u64, progress: Progress) -> Vec<Vec<FrameRef>> {
-    let mut order: Vec<usize> = (0..windows.len()).collect();
-    let mut rng =
-        SplitMix64::new(seed ^ ((progress.stage as u64) << 56) ^ (progress.epoch as u64).wrapping_mul(0x9E37_79B9));
-    for i in (1..order.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        order.swap(i, j);
-    }
-    order
-        .chunks(batch.max(1))
-        .map(|c| c.iter().map(|&i| windows[i]).collect())
-        .collect()
+/// The trainer's run directory of stage `stage` in a model directory.
+pub fn stage_dir(dir: &std::path::Path, stage: u8) -> std::path::PathBuf {
+    dir.join(format!("stage-{stage}"))
 }
 
-/// Runs one epoch of `stage`, calling `on_batch` with each batch's losses; returns the
-/// mean losses over the epoch.
-pub fn train_epoch(
+/// Whether stage `stage` of the model in `dir` has trained all `epochs` (or stopped early).
+pub fn stage_done(dir: &std::path::Path, stage: u8, epochs: usize) -> bool {
+    crate::trainer::TrainingState::read(&stage_dir(dir, stage))
+        .is_ok_and(|s| s.stopped_early || s.epochs_done >= epochs)
+}
+
+/// Trains `stages` (ascending) of `model` in the model directory `dir`, one trainer run
+/// per stage (`stage-1/`, `stage-2/`, `stage-3/`), resuming where a run stopped. A stage
+/// already complete is loaded at its best weights instead; a stage of 0 epochs is skipped.
+/// Every stage's Adam starts afresh (each is a new objective). Returns each trained
+/// stage's state.
+pub fn train_stages(
+    dir: &std::path::Path,
     model: &EmbedModel,
     data: &EmbedData,
-    optimizers: (&mut Adam, &mut Adam),
-    progress: Progress,
-    mut on_batch: impl FnMut(&LossTerms),
-) -> Result<LossTerms> {
-    let batches = epoch_batches(&data.train_windows, model.config.batch, model.config.seed, progress);
-    let (ae_adam, sim_adam) = optimizers;
-    let mut mean = LossTerms::default();
-    for (k, batch) in batches.iter().enumerate() {
-        let ephys = model.config.ephys_weight(progress, k as f64 / batches.len() as f64);
-        let (total, terms) = model.losses(data, batch, progress.stage, ephys)?;
-        let grads = total.backward()?;
-        if progress.stage != 2 {
-            ae_adam.step(&model.autoencoder_params, &grads)?;
-        }
-        if progress.stage != 1 {
-            sim_adam.step(&model.simulator_params, &grads)?;
-        }
-        on_batch(&terms);
-        for (acc, v) in [
-            (&mut mean.recon, terms.recon),
-            (&mut mean.vert, terms.vert),
-            (&mut mean.ephys, terms.ephys),
-            (&mut mean.sim, terms.sim),
-            (&mut mean.mphys, terms.mphys),
-            (&mut mean.total, terms.total),
-        ] {
-            *acc += v / batches.len() as f64;
+    stages: &[u8],
+    label: &str,
+    observer: &mut dyn crate::trainer::Observer,
+) -> Result<Vec<(u8, crate::trainer::TrainingState)>> {
+    model.config.validate()?;
+    // Stages before the first asked for (`--stages 2,3` continues a trained autoencoder)
+    // are loaded at their best weights.
+    for earlier in 1..stages.iter().copied().min().unwrap_or(1) {
+        let run = stage_dir(dir, earlier);
+        if crate::trainer::has_run(&run) {
+            crate::trainer::load_weights(&run.join("best"), &model.stage_groups(earlier))?;
         }
     }
-    Ok(mean)
+    let mut out = Vec::new();
+    for &stage in stages {
+        if !(1..=3).contains(&stage) {
+            return Err(crate::trainer::invalid("stages", stage, "must be 1, 2 or 3"));
+        }
+        let config = model.config.trainer(stage);
+        if config.epochs == 0 {
+            continue;
+        }
+        let run = stage_dir(dir, stage);
+        let state = if stage_done(dir, stage, config.epochs) {
+            crate::trainer::load_weights(&run.join("best"), &model.stage_groups(stage))?;
+            crate::trainer::TrainingState::read(&run)?
+        } else {
+            let trainer = crate::trainer::Trainer::new(format!("{label} stage {stage}"), config);
+            trainer.run(&run, &mut EmbedStage { model, data, stage }, observer)?
+        };
+        out.push((stage, state));
+    }
+    Ok(out)
 }
 
-/// Adam for each network, with the run's settings.
-pub fn optimizers(model: &EmbedModel, settings: AdamSettings) -> Result<(Adam, Adam)> {
-    Ok((
-        Adam::new(&model.autoencoder_params, settings)?,
-        Adam::new(&model.simulator_params, settings)?,
-    ))
+/// Trains (or continues) the embedding on `data` into the model directory `dir`:
+/// `config.json`, `normalization.json` (the ACAP feature normalisation fitted on the
+/// training frames) and one trainer run per stage ([`train_stages`]). A directory trained
+/// under another configuration is an error (only the epoch counts may change).
+pub fn train_model(
+    dir: &std::path::Path,
+    data: &EmbedData,
+    config: &EmbedTrainingConfig,
+    stages: &[u8],
+    observer: &mut dyn crate::trainer::Observer,
+) -> Result<(EmbedModel, Vec<(u8, crate::trainer::TrainingState)>)> {
+    config.validate()?;
+    let io = |path: &std::path::Path, source: std::io::Error| Error::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+    let config_path = dir.join("config.json");
+    if let Ok(text) = std::fs::read_to_string(&config_path) {
+        let stored: EmbedTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+            path: config_path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        if !(EmbedTrainingConfig {
+            epochs: config.epochs,
+            ..stored
+        })
+        .trains_like(config)
+        {
+            return Err(Error::Checkpoint {
+                path: config_path.display().to_string(),
+                reason: "the model was trained under another configuration; continue it with the same one (only \
+                         the epochs may change)"
+                    .into(),
+            });
+        }
+    }
+    crate::checkpoint::write_json(&config_path, config)?;
+    crate::checkpoint::write_json(&dir.join("normalization.json"), &data.normalization)?;
+    let model = EmbedModel::new(config.clone(), data)?;
+    let states = train_stages(
+        dir,
+        &model,
+        data,
+        stages,
+        &format!("embed/{}", data.dataset.name),
+        observer,
+    )?;
+    Ok((model, states))
 }

@@ -32,6 +32,14 @@ pub enum Error {
         value: String,
         reason: &'static str,
     },
+    /// A training configuration field is out of its range: checked before any work, so
+    /// nothing is written.
+    #[error("configuration field `{field}` = {value} {reason}")]
+    InvalidConfig {
+        field: String,
+        value: String,
+        reason: &'static str,
+    },
     /// A checkpoint is missing a tensor, has one of the wrong shape, or does not belong to
     /// this model.
     #[error("checkpoint {path}: {reason}")]
@@ -40,6 +48,15 @@ pub enum Error {
     /// value, or does not fit the rest of the dataset.
     #[error("dataset file {path}: {reason}")]
     Dataset { path: String, reason: String },
+    /// A dataset file's SHA-256 is not the one its manifest recorded.
+    #[error(
+        "dataset file {path}: SHA-256 {actual} does not match the manifest's {expected} (the file changed after it was written)"
+    )]
+    Checksum {
+        path: String,
+        expected: String,
+        actual: String,
+    },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

@@ -20,6 +20,10 @@
 //!   the cells on the Kipf–Welling normalised adjacency
 //!   ([`graph::NormalizedAdjacency`]), teacher-forced training, and a roll-out runtime
 //!   outside candle; [`fast`] holds the f32 activations both runtimes share;
+//! - [`trainer`]: the one training loop every model runs through — epochs, batches, Adam
+//!   per parameter group, learning-rate schedules, gradient clipping, model selection and
+//!   early stopping on the validation split only, a checkpoint each epoch and
+//!   bit-identical resume;
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
 //!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
 //!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
@@ -54,6 +58,7 @@ pub mod checkpoint;
 pub mod convert;
 pub mod data;
 pub mod drape;
+pub mod drape_training;
 pub mod embed;
 pub mod embed_training;
 pub mod error;
@@ -67,6 +72,7 @@ pub mod ops;
 pub mod params;
 pub mod pca;
 pub mod rollout;
+pub mod trainer;
 
 pub use candle_core::Device;
 pub use error::{Error, Result};

@@ -756,6 +756,33 @@ pub struct WarpTrainingConfig {
     pub batch: usize,
     pub epochs: usize,
     pub seed: u64,
+    /// The learning-rate schedule and stopping rules (constant by default, as NNWarp §5).
+    pub schedule: crate::trainer::Schedule,
+}
+
+impl WarpTrainingConfig {
+    /// Checks every field before any work: a typed error naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_adam, check_count};
+        check_count("hidden (number of layers)", self.hidden.len().max(1), 64)?;
+        for (i, &w) in self.hidden.iter().enumerate() {
+            check_count(&format!("hidden[{i}]"), w, 4096)?;
+        }
+        check_count("epochs", self.epochs, MAX_EPOCHS)?;
+        check_count("batch", self.batch, MAX_BATCH)?;
+        check_adam("adam", &self.adam)?;
+        self.schedule.validate("schedule")
+    }
+
+    /// The trainer's part of the configuration.
+    pub fn trainer(&self) -> crate::trainer::TrainerConfig {
+        crate::trainer::TrainerConfig {
+            epochs: self.epochs,
+            batch: self.batch,
+            seed: self.seed,
+            schedule: self.schedule,
+        }
+    }
 }
 
 impl Default for WarpTrainingConfig {
@@ -767,6 +794,7 @@ impl Default for WarpTrainingConfig {
             batch: 1024,
             epochs: 10,
             seed: 0,
+            schedule: crate::trainer::Schedule::default(),
         }
     }
 }
@@ -812,43 +840,56 @@ pub fn mean_loss(mlp: &WarpMlp, x: &Tensor, y: &Tensor) -> Result<f64> {
     Ok(sum / (n * OUTPUTS) as f64)
 }
 
-/// One epoch over the pairs in an order drawn from SplitMix64(seed, epoch); returns the
-/// mean batch loss.
-pub fn train_epoch(
-    mlp: &WarpMlp,
-    params: &Params,
-    adam: &mut crate::adam::Adam,
-    x: &Tensor,
-    y: &Tensor,
-    config: &WarpTrainingConfig,
-    epoch: usize,
-    mut on_batch: impl FnMut(f64),
-) -> Result<f64> {
-    let n = x.dim(0)?;
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    let mut rng = weft_sim::rng::SplitMix64::new(config.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    for i in (1..order.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        order.swap(i, j);
+/// NNWarp's MLP trained through [`crate::trainer::Trainer`] on standardised pairs: the
+/// loss is the mean squared error of a batch, the validation score that of the
+/// validation pairs (standardised units).
+#[derive(Debug)]
+pub struct WarpTraining<'a> {
+    pub mlp: &'a WarpMlp,
+    pub params: &'a Params,
+    pub x: &'a Tensor,
+    pub y: &'a Tensor,
+    pub validation_x: &'a Tensor,
+    pub validation_y: &'a Tensor,
+    pub adam: crate::adam::AdamSettings,
+}
+
+impl crate::trainer::Trainable for WarpTraining<'_> {
+    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
+        vec![crate::trainer::Group {
+            name: "net",
+            params: self.params,
+            adam: self.adam,
+        }]
     }
-    let device = x.device();
-    let (mut total, mut batches) = (0.0, 0usize);
-    for chunk in order.chunks(config.batch.max(1)) {
-        let idx = Tensor::from_slice(chunk, chunk.len(), device)?;
-        let (xb, yb) = (x.index_select(&idx, 0)?, y.index_select(&idx, 0)?);
-        let loss = (mlp.forward(&xb)? - yb)?.sqr()?.mean_all()?;
-        let value = loss.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
-        adam.step(params, &loss.backward()?)?;
-        total += value;
-        batches += 1;
-        on_batch(value);
+
+    fn num_examples(&self) -> usize {
+        self.x.dim(0).unwrap_or(0)
     }
-    Ok(total / batches.max(1) as f64)
+
+    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+        let chunk: Vec<u32> = batch.iter().map(|&i| i as u32).collect();
+        let idx = Tensor::from_slice(&chunk, chunk.len(), self.x.device())?;
+        let (xb, yb) = (self.x.index_select(&idx, 0)?, self.y.index_select(&idx, 0)?);
+        let loss = (self.mlp.forward(&xb)? - yb)?.sqr()?.mean_all()?;
+        Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] })
+    }
+
+    fn validation_score(&mut self) -> Result<f64> {
+        if self.validation_x.dim(0)? == 0 {
+            return Err(Error::InvalidParameter {
+                name: "validation split",
+                value: "0 pairs".into(),
+                reason: "model selection needs validation pairs",
+            });
+        }
+        mean_loss(self.mlp, self.validation_x, self.validation_y)
+    }
 }
 
 /// A trained model directory written by `cargo xtask train nnwarp`: `config.json` (the
 /// training configuration, hidden widths resolved), `standardization.json` and the
-/// latest `checkpoint/`.
+/// trainer's run, loaded at its best validation weights.
 pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)> {
     let read = |name: &str| -> Result<String> {
         let path = dir.join(name);
@@ -867,7 +908,7 @@ pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)
         serde_json::from_str(&read("standardization.json")?).map_err(|e| parse_error("standardization.json", e))?;
     let mut params = Params::new(&candle_core::Device::Cpu, config.seed);
     let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
-    crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
+    crate::checkpoint::load_params(&dir.join("best").join("net"), &params)?;
     let node = mlp.to_node_mlp(standardization)?;
     Ok((config, node))
 }
@@ -884,4 +925,86 @@ pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
     }
     let diff: Vec<f64> = predicted.iter().zip(reference).map(|(p, r)| p - r).collect();
     (0..n).map(|i| norm(&diff, i)).sum::<f64>() / (n as f64 * max)
+}
+
+/// Trains (or continues, up to `config.epochs`) NNWarp's MLP for `dataset`'s material
+/// into the model directory `dir`: `config.json` (hidden widths resolved),
+/// `standardization.json` (fitted on the training pairs) and the trainer's run. The
+/// validation pairs select the kept weights; the test split is not read. Returns the
+/// run's state and the pair counts (training, validation).
+pub fn train_model(
+    dir: &std::path::Path,
+    dataset: &crate::data::WarpDataset,
+    config: &WarpTrainingConfig,
+    observer: &mut dyn crate::trainer::Observer,
+) -> Result<(crate::trainer::TrainingState, usize, usize)> {
+    let mut config = config.clone();
+    if !config.material.is_empty() && config.material != dataset.material {
+        return Err(Error::InvalidConfig {
+            field: "material".into(),
+            value: config.material.clone(),
+            reason: "differs from the material read from the dataset",
+        });
+    }
+    config.material = dataset.material.clone();
+    if config.hidden.is_empty() {
+        config.hidden = hidden_layers(&config.material);
+    }
+    config.validate()?;
+    let (train_x, train_y) = collect_pairs(dataset, "train")?;
+    let (val_x, val_y) = collect_pairs(dataset, "validation")?;
+    if train_x.is_empty() || val_x.is_empty() {
+        return Err(Error::Dataset {
+            path: dataset.dir.display().to_string(),
+            reason: format!(
+                "needs training and validation pairs (it has {} and {})",
+                train_x.len(),
+                val_x.len()
+            ),
+        });
+    }
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let config_path = dir.join("config.json");
+    let standardization_path = dir.join("standardization.json");
+    let standardization: Standardization = if crate::trainer::has_run(dir) {
+        let stored: WarpTrainingConfig = crate::checkpoint::read_json(&config_path)?;
+        if (WarpTrainingConfig {
+            epochs: config.epochs,
+            ..stored
+        }) != config
+        {
+            return Err(Error::Checkpoint {
+                path: config_path.display().to_string(),
+                reason: "the model was trained under another configuration; continue it with the same one (only \
+                         the epochs may change)"
+                    .into(),
+            });
+        }
+        crate::checkpoint::read_json(&standardization_path)?
+    } else {
+        let s = Standardization::fit(&train_x, &train_y)?;
+        crate::checkpoint::write_json(&standardization_path, &s)?;
+        s
+    };
+    crate::checkpoint::write_json(&config_path, &config)?;
+    let device = candle_core::Device::Cpu;
+    let (x, y) = pair_tensors(&train_x, &train_y, &standardization, &device)?;
+    let (vx, vy) = pair_tensors(&val_x, &val_y, &standardization, &device)?;
+    let mut params = Params::new(&device, config.seed);
+    let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
+    let mut training = WarpTraining {
+        mlp: &mlp,
+        params: &params,
+        x: &x,
+        y: &y,
+        validation_x: &vx,
+        validation_y: &vy,
+        adam: config.adam,
+    };
+    let trainer = crate::trainer::Trainer::new(format!("nnwarp/{}", config.material), config.trainer());
+    let state = trainer.run(dir, &mut training, observer)?;
+    Ok((state, train_x.len(), val_x.len()))
 }

@@ -4,13 +4,51 @@
 //! overfit and seeded determinism.
 
 use candle_core::{Device, Tensor, Var};
-use weft_nn::adam::{Adam, AdamSettings};
+use weft_nn::adam::AdamSettings;
 use weft_nn::altconv::{
-    AltConvNet, AltConvTrainingConfig, Drive, Scaling, SequenceTensors, Variant, mean_vertex_error, train_epoch,
+    AltConvNet, AltConvTraining, AltConvTrainingConfig, Drive, Scaling, SequenceTensors, Variant, mean_vertex_error,
 };
 use weft_nn::graph::NormalizedAdjacency;
 use weft_nn::params::Params;
+use weft_nn::trainer::{Decay, Silent, Trainer};
 use weft_testkit::TestRng;
+
+/// A fresh run directory for the trainer.
+fn run_dir(name: &str) -> std::path::PathBuf {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let d = std::env::temp_dir().join(format!(
+        "weft-altconv-{name}-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::SeqCst)
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Trains `net` through the trainer on `seqs` (validated on the same sequences); returns
+/// the per-epoch mean training losses.
+fn fit(
+    net: &AltConvNet,
+    params: &Params,
+    adj: &NormalizedAdjacency,
+    seqs: &[SequenceTensors],
+    config: &AltConvTrainingConfig,
+) -> Vec<f64> {
+    let mut t = AltConvTraining {
+        net,
+        params,
+        adj,
+        train: seqs,
+        validation: seqs,
+        steps: config.steps,
+        adam: config.adam,
+    };
+    let state = Trainer::new("test", config.trainer())
+        .run(&run_dir("fit"), &mut t, &mut Silent)
+        .unwrap();
+    state.history.iter().map(|h| h.loss).collect()
+}
 
 fn cpu() -> Device {
     Device::Cpu
@@ -263,17 +301,15 @@ fn train(
     config.steps = 8;
     config.batch = 1;
     config.seed = seed;
-    config.lr_decay = 0.99;
+    config.epochs = epochs;
+    config.schedule.decay = Decay::Exponential { per_epoch: 0.99 };
     config.adam = AdamSettings {
         learning_rate: 3e-2,
         ..Default::default()
     };
     let mut params = Params::new(&cpu(), seed);
     let net = AltConvNet::new(&mut params, variant, &config.hidden).unwrap();
-    let mut adam = Adam::new(&params, config.adam).unwrap();
-    let losses = (0..epochs)
-        .map(|e| train_epoch(&net, &params, &mut adam, adj, seqs, &config, e, |_| {}).unwrap())
-        .collect();
+    let losses = fit(&net, &params, adj, seqs, &config);
     (params, losses)
 }
 
@@ -374,30 +410,15 @@ fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
         let net = AltConvNet::new(&mut params, variant, &[4, 6, 4])
             .unwrap()
             .with_scaling(scaling);
-        let mut adam = Adam::new(
-            &params,
-            AdamSettings {
-                learning_rate: 3e-2,
-                ..Default::default()
-            },
-        )
-        .unwrap();
         let mut config = AltConvTrainingConfig::new(variant);
         config.steps = 5;
         config.batch = 1;
-        for e in 0..3 {
-            train_epoch(
-                &net,
-                &params,
-                &mut adam,
-                &adj,
-                std::slice::from_ref(&s),
-                &config,
-                e,
-                |_| {},
-            )
-            .unwrap();
-        }
+        config.epochs = 3;
+        config.adam = AdamSettings {
+            learning_rate: 3e-2,
+            ..Default::default()
+        };
+        fit(&net, &params, &adj, std::slice::from_ref(&s), &config);
         let reference = net.run(&adj, &s.drive, None, 5).unwrap();
         let mut runtime = AltConvRuntime::new(&net, adj.clone()).unwrap();
         assert!(runtime.step(&frame(1)).is_err(), "a step before start");

@@ -6,16 +6,45 @@
 use std::sync::Arc;
 
 use candle_core::{Device, Tensor};
-use weft_nn::adam::{Adam, AdamSettings};
-use weft_nn::drape::{
-    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, Mu, Postprocess, loss, train_epoch,
-};
+use weft_nn::adam::AdamSettings;
+use weft_nn::drape::{DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, DrapeTraining, Mu, Postprocess, loss};
 use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
 use weft_nn::params::Params;
+use weft_nn::trainer::{Schedule, Silent, Trainer, TrainerConfig, TrainingState};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
 use weft_sim::rng::SplitMix64;
 use weft_sim::scenes::drape::{Drape, DrapeParams};
 use weft_sim::scenes::soft_tissue::ArmPose;
+
+/// Trains `model` through the trainer for `epochs` in a fresh directory.
+#[allow(clippy::too_many_arguments)]
+fn fit(
+    model: &DrapeModel,
+    net: (&Params, AdamSettings),
+    mu: Option<(&Params, AdamSettings)>,
+    train: &DrapeTensors,
+    validation: &DrapeTensors,
+    batch: usize,
+    epochs: usize,
+    seed: u64,
+) -> weft_nn::Result<TrainingState> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "weft-drape-test-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::SeqCst)
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    let config = TrainerConfig {
+        epochs,
+        batch,
+        seed,
+        schedule: Schedule::default(),
+    };
+    let mut t = DrapeTraining::new(model, net, mu, train, validation, batch);
+    Trainer::new("drape-test", config).run(&dir, &mut t, &mut Silent)
+}
 
 /// Six solved examples of the quick scene (the converged ones of the first draws).
 fn examples() -> (Drape, DrapeTensors) {
@@ -107,20 +136,22 @@ fn the_epoch_reports_the_per_batch_mu_gradient() {
         learning_rate: 1e-30,
         ..AdamSettings::default()
     };
-    let (mut adam, mut mu_adam) = (
-        Adam::new(&net_params, held).unwrap(),
-        Adam::new(&mu_params, held).unwrap(),
-    );
-    let mut epoch = |batch: usize| {
-        let mut opt = DrapeOptimizers {
-            net_params: &net_params,
-            net: &mut adam,
-            mu: Some((&mu_params, &mut mu_adam)),
-        };
-        train_epoch(&model, &mut opt, &data, batch, 0)
-            .unwrap()
-            .mu_gradient
-            .unwrap()
+    // One epoch at a learning rate too small to move anything: the record holds the
+    // per-batch gradient of the loss in log μ, its mean and spread over the batches.
+    let epoch = |batch: usize| {
+        let state = fit(
+            &model,
+            (&net_params, held),
+            Some((&mu_params, held)),
+            &data,
+            &data,
+            batch,
+            1,
+            0,
+        )
+        .unwrap();
+        let e = &state.history[0].extra;
+        (e["mu_gradient_mean"], e["mu_gradient_sd"])
     };
     let whole = epoch(data.len());
     let halves = epoch(data.len() / 2);
@@ -133,15 +164,15 @@ fn the_epoch_reports_the_per_batch_mu_gradient() {
     };
     let h = 0.02;
     let fd = (at(h) - at(-h)) / (2.0 * f64::from(h));
-    assert_eq!((whole.batches, whole.sd), (1, 0.0));
+    assert_eq!(whole.1, 0.0, "one batch has no spread");
     assert!(fd.abs() > 1e-3, "the μ gradient is zero: {fd}");
     assert!(
-        (whole.mean - fd).abs() <= 0.02 * fd.abs(),
+        (whole.0 - fd).abs() <= 0.02 * fd.abs(),
         "one batch: {whole:?}, finite differences {fd}"
     );
-    assert_eq!(halves.batches, 2);
+    assert!(halves.1 > 0.0, "two batches differ");
     assert!(
-        (halves.mean - whole.mean).abs() <= 1e-3 * whole.mean.abs(),
+        (halves.0 - whole.0).abs() <= 1e-3 * whole.0.abs(),
         "two batches {halves:?} against one {whole:?}"
     );
 }
@@ -156,19 +187,11 @@ fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params
         learning_rate: 1e-3,
         ..AdamSettings::default()
     };
-    let mut adam = Adam::new(&net_params, settings).unwrap();
     let mut model = DrapeModel {
         net,
         post: Postprocess::None,
     };
-    for epoch in 0..30 {
-        let mut opt = DrapeOptimizers {
-            net_params: &net_params,
-            net: &mut adam,
-            mu: None,
-        };
-        train_epoch(&model, &mut opt, data, 3, epoch).unwrap();
-    }
+    fit(&model, (&net_params, settings), None, data, data, 3, 30, 1).unwrap();
     let mut mu_params = Params::new(&Device::Cpu, 10);
     model.post = post(&mut mu_params);
     let eval = |m: &DrapeModel| {
@@ -180,15 +203,7 @@ fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params
         )
     };
     let before = eval(&model);
-    let mut adam = Adam::new(&net_params, settings).unwrap();
-    for epoch in 0..8 {
-        let mut opt = DrapeOptimizers {
-            net_params: &net_params,
-            net: &mut adam,
-            mu: None,
-        };
-        train_epoch(&model, &mut opt, data, 3, 100 + epoch).unwrap();
-    }
+    fit(&model, (&net_params, settings), None, data, data, 3, 8, 2).unwrap();
     (before, eval(&model))
 }
 
@@ -244,21 +259,18 @@ fn a_failing_example_is_left_out_of_predictions_and_its_batch_skipped_in_trainin
     assert!(each[1].is_err(), "the overflowing example must fail");
     assert!(each.iter().enumerate().all(|(i, r)| i == 1 || r.is_ok()));
     // Training one example per batch: that batch is skipped and counted, the rest train.
-    let mut adam = Adam::new(&net_params, AdamSettings::default()).unwrap();
-    let mut opt = DrapeOptimizers {
-        net_params: &net_params,
-        net: &mut adam,
-        mu: None,
-    };
-    let report = train_epoch(&model, &mut opt, &bad, 1, 0).unwrap();
-    assert_eq!(report.skipped_batches, 1);
-    assert!(report.first_error.is_some() && report.mean_loss.is_finite());
+    let settings = AdamSettings::default();
+    let state = fit(&model, (&net_params, settings), None, &bad, &data, 1, 1, 0).unwrap();
+    let (skipped, first) = state.skipped();
+    assert_eq!(skipped, 1);
+    assert!(first.is_some() && state.history[0].loss.is_finite());
     // Without a postprocess the same example is a non-finite loss: an error, not a skip.
     let plain = DrapeModel {
         net: model.net.clone(),
         post: Postprocess::None,
     };
-    assert!(train_epoch(&plain, &mut opt, &bad, 1, 0).is_err());
+    let e = fit(&plain, (&net_params, settings), None, &bad, &data, 1, 1, 0).unwrap_err();
+    assert!(e.to_string().contains("training loss"), "{e}");
 }
 
 /// The per-epoch validation pass warm-starts each layer solve from the same example's

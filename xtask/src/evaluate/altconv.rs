@@ -26,7 +26,6 @@ use super::results::{ExperimentOutput, LinePlot, Series, Timing};
 use super::{EvalContext, mean_sd};
 use crate::dataset::Size;
 use crate::report::render::{View, error_colors, error_png};
-use crate::train::{AltconvArgs, TrainCommand};
 
 const SCENE: &str = "limb";
 const SKINNING: &str = "skinning";
@@ -212,15 +211,9 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
         let model_dir = root.join("models").join(variant.name());
         discard_if_stale(&model_dir, &config)?;
-        crate::train::run(TrainCommand::Altconv(AltconvArgs {
-            data: data.clone(),
-            model: variant.name().into(),
-            config: Some(config_path),
-            out: model_dir,
-            resume: true,
-            quiet: ctx.quiet,
-        }))
-        .with_context(|| format!("training altconv/{}", variant.name()))?;
+        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("altconv/{}", variant.name()))?;
+        weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
+            .with_context(|| format!("training altconv/{}", variant.name()))?;
     }
     let longest_common = dataset.sequences.iter().map(|s| s.skinned.len() - 1).min().unwrap_or(0);
     let horizon = longest_common.min(*WINDOWS.last().unwrap_or(&50));

@@ -15,23 +15,17 @@
 //! compressed and stretched edges, mJ, at the quasistatic layer's stretch stiffness), and
 //! on `train` the `training-seconds-per-example` of each trained model.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 use weft_nn::Device;
-use weft_nn::adam::{Adam, AdamSettings};
 use weft_nn::data::DrapeDataset;
-use weft_nn::drape::{
-    DrapeModel, DrapeNet, DrapeNetConfig, DrapeOptimizers, DrapeTensors, GradientStats, Mu, Postprocess, predict_each,
-    predict_each_keyed, sqrtmse_maxdist_mm, train_epoch,
-};
-use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
+use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, predict_each, sqrtmse_maxdist_mm};
+use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
 use weft_nn::params::Params;
-use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, RestShape, SocpSettings};
+use weft_proj::RestShape;
 
 use super::EvalContext;
 use super::paper::Table;
@@ -47,87 +41,20 @@ const FIXED_MU: [(f64, &str); 3] = [(1.0, "mu1"), (0.1, "mu0.1"), (0.01, "mu0.01
 /// Starts of the learned global μ (Geng et al. §6.2); the method row starts at 0.1.
 const MU_STARTS: [(f64, &str); 3] = [(1.0, "1"), (0.1, "0.1"), (0.01, "0.01")];
 
-/// Everything that decides a trained model but its number of epochs (a model directory
-/// trained under another configuration is retrained; one trained for fewer epochs is
-/// continued). Omitted fields in a `--config` file keep the standard size's values.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct DrapeTrainingConfig {
-    pub net: DrapeNetConfig,
-    /// Epochs of `network-only`.
-    pub pretrain_epochs: usize,
-    /// Epochs of each `trained-*` model after it.
-    pub finetune_epochs: usize,
-    pub batch: usize,
-    pub learning_rate: f64,
-    /// Adam's step for `log μ` (a relative change of μ per step).
-    pub mu_learning_rate: f64,
-    /// Inextensibility bound: edges at most `1 + ε` times their rest length.
-    pub epsilon: f64,
-    pub quasistatic: QuasistaticParams,
-    pub seed: u64,
-}
-
-impl Default for DrapeTrainingConfig {
-    fn default() -> Self {
-        training_config(Size::Standard)
-    }
-}
-
+/// The training configuration of each evaluation size (standard: the library's default).
 pub fn training_config(size: Size) -> DrapeTrainingConfig {
-    let quick = size == Size::Quick;
-    DrapeTrainingConfig {
-        net: if quick {
-            DrapeNetConfig {
-                hidden: vec![16, 32],
-                offset_scale: 0.01,
-            }
-        } else {
-            DrapeNetConfig::default()
-        },
-        pretrain_epochs: if quick { 30 } else { 200 },
-        // Five: in the first standard run (10 epochs, docs/DRAPE.md) the fixed-layer
-        // models kept epochs 1, 1 and 2, and the whole evaluation must fit one
-        // three-hour session with its dataset.
-        finetune_epochs: if quick { 3 } else { 5 },
-        batch: if quick { 4 } else { 16 },
-        learning_rate: 1e-3,
-        // At 0.05, μ started at 1 was still falling after 10 epochs (0.128). At 0.1 it
-        // falls to 0.171 in five epochs and settles near 0.09 in twenty, as do the starts
-        // 0.1 and 0.01: the network re-tunes itself to μ, so μ moves along a valley of the
-        // loss and its per-batch gradient is mostly noise (docs/DRAPE.md, the μ study).
-        mu_learning_rate: 0.1,
-        epsilon: 0.1,
-        quasistatic: QuasistaticParams::default(),
-        seed: 1,
+    if size != Size::Quick {
+        return DrapeTrainingConfig::default();
     }
-}
-
-/// What follows the network in a method.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub enum Layer {
-    None,
-    Socp,
-    Quasistatic(f64),
-    /// A learned μ from `start`, global or per vertex.
-    LearnedMu {
-        start: f64,
-        per_vertex: bool,
-    },
-}
-
-impl std::fmt::Display for Layer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match *self {
-            Self::None => write!(f, "no layer"),
-            Self::Socp => write!(f, "the inextensibility (SOCP) layer"),
-            Self::Quasistatic(mu) => write!(f, "the quasistatic layer at μ = {mu}"),
-            Self::LearnedMu { start, per_vertex } => write!(
-                f,
-                "the quasistatic layer with a learned {} μ from {start}",
-                if per_vertex { "per-vertex" } else { "global" }
-            ),
-        }
+    DrapeTrainingConfig {
+        net: DrapeNetConfig {
+            hidden: vec![16, 32],
+            offset_scale: 0.01,
+        },
+        pretrain_epochs: 30,
+        finetune_epochs: 3,
+        batch: 4,
+        ..DrapeTrainingConfig::default()
     }
 }
 
@@ -135,314 +62,6 @@ impl std::fmt::Display for Layer {
 struct Training {
     name: String,
     layer: Layer,
-}
-
-/// The layers of the experiment, built once.
-pub struct Layers {
-    socp: Arc<InextensibilityLayer>,
-    quasistatic: Arc<QuasistaticLayer>,
-}
-
-impl Layers {
-    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingConfig) -> anyhow::Result<Self> {
-        Ok(Self {
-            socp: Arc::new(InextensibilityLayer::new(
-                sleeve,
-                config.epsilon,
-                SocpSettings::default(),
-            )?),
-            quasistatic: Arc::new(QuasistaticLayer::new(sleeve, config.quasistatic)?),
-        })
-    }
-
-    /// `net` followed by the quasistatic layer at a fixed `mu`: how the loss of a trained
-    /// network depends on μ alone (`cargo xtask train drape --scan-mu`).
-    pub fn at_fixed_mu(&self, net: &DrapeNet, mu: f64) -> DrapeModel {
-        DrapeModel {
-            net: net.clone(),
-            post: self.quasistatic(Mu::Fixed(mu)),
-        }
-    }
-
-    fn quasistatic(&self, mu: Mu) -> Postprocess {
-        Postprocess::Quasistatic {
-            op: QuasistaticProjection::new(self.quasistatic.clone()),
-            mu,
-        }
-    }
-
-    fn postprocess(&self, layer: Layer, mu_params: &mut Params, v: usize) -> anyhow::Result<Postprocess> {
-        Ok(match layer {
-            Layer::None => Postprocess::None,
-            Layer::Socp => Postprocess::Inextensibility(InextensibilityProjection::new(self.socp.clone())),
-            Layer::Quasistatic(mu) => self.quasistatic(Mu::Fixed(mu)),
-            Layer::LearnedMu { start, per_vertex } => {
-                self.quasistatic(Mu::learned(mu_params, start, per_vertex.then_some(v))?)
-            }
-        })
-    }
-}
-
-/// Progress of a model's training, rewritten after every epoch.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct Progress {
-    pub epochs_done: usize,
-    pub best_epoch: Option<usize>,
-    pub best_validation_sqrtmse_mm: f64,
-    pub history: Vec<EpochRecord>,
-    pub training_seconds: f64,
-    /// Training batches skipped because the layer failed on them, and the first failure.
-    #[serde(default)]
-    pub skipped_batches: usize,
-    #[serde(default)]
-    pub first_error: Option<String>,
-}
-
-/// One epoch of a model's training.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct EpochRecord {
-    /// Mean training loss over the epoch's batches (mm²).
-    pub loss_mm2: f64,
-    /// Validation SqrtMSE after the epoch (mm).
-    pub validation_sqrtmse_mm: f64,
-    /// A learned μ after the epoch (its mean over vertices if per vertex).
-    pub mu: Option<f64>,
-    /// The per-batch gradient of the loss in log μ over the epoch (mm²).
-    pub mu_gradient: Option<GradientStats>,
-}
-
-/// A trained model, at its best validation weights.
-pub struct Fitted {
-    pub model: DrapeModel,
-    pub progress: Progress,
-    /// μ of a learned-μ model (global value, or the per-vertex values).
-    pub mu: Option<Vec<f64>>,
-}
-
-/// How a model is trained: its layer, where its weights start, for how many epochs.
-pub struct Plan<'a> {
-    pub name: &'a str,
-    pub layer: Layer,
-    /// A model directory whose best network weights the training starts from.
-    pub init: Option<&'a Path>,
-    pub epochs: usize,
-    pub quiet: bool,
-    /// A directory trained under another configuration is retrained (the evaluation)
-    /// rather than refused (`cargo xtask train drape`).
-    pub retrain_on_mismatch: bool,
-}
-
-fn learned_mu(post: &Postprocess) -> anyhow::Result<Option<Vec<f64>>> {
-    Ok(match post {
-        Postprocess::Quasistatic {
-            mu: mu @ Mu::Learned(_),
-            ..
-        } => Some(
-            mu.value(&Device::Cpu)?
-                .to_vec1::<f32>()?
-                .into_iter()
-                .map(f64::from)
-                .collect(),
-        ),
-        _ => None,
-    })
-}
-
-/// Mean SqrtMSE (mm) over the validation examples the model's postprocess succeeds on,
-/// for model selection. The layers warm-start each example from its solution of the
-/// previous epoch (keys after the `n_train` training examples'): the equilibrium is the
-/// same to the solver's tolerance, and a warm quasistatic solve costs 0.47–0.70 of a cold
-/// one (docs/BENCHMARKS.md). The reported scores ([`score`]) are cold solves.
-fn validation_sqrtmse(model: &DrapeModel, data: &DrapeTensors, batch: usize, n_train: usize) -> anyhow::Result<f64> {
-    let pred = predict_each_keyed(model, data, batch, n_train)?;
-    let truth = data.truths()?;
-    let (mut sum, mut n) = (0.0, 0);
-    for (p, t) in pred.iter().zip(&truth) {
-        if let Ok(p) = p {
-            sum += sqrtmse_maxdist_mm(p, t)?.0;
-            n += 1;
-        }
-    }
-    anyhow::ensure!(n > 0, "the postprocess failed on every validation example");
-    Ok(sum / n as f64)
-}
-
-/// What decides a model directory's training, bar the epochs: the configuration without
-/// its epoch counts, the layer and the starting weights (by content, so a retrained
-/// `network-only` retrains the models started from it, and another path to the same
-/// model does not).
-fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> anyhow::Result<serde_json::Value> {
-    let mut config = serde_json::to_value(config)?;
-    if let Some(c) = config.as_object_mut() {
-        c.remove("pretrain_epochs");
-        c.remove("finetune_epochs");
-    }
-    let init = match init {
-        Some(dir) => {
-            let weights = dir.join("best").join("params.safetensors");
-            Some(
-                crate::output::sha256_file(&weights)
-                    .with_context(|| format!("reading the starting weights {}", weights.display()))?,
-            )
-        }
-        None => None,
-    };
-    Ok(serde_json::json!({"config": config, "layer": layer, "init_weights_sha256": init}))
-}
-
-/// Trains, continues (up to `plan.epochs`) or reloads one model in `dir`; keeps the weights
-/// of its best validation SqrtMSE, epoch 0 (the starting weights) included.
-#[allow(clippy::too_many_arguments)]
-pub fn fit(
-    dir: &Path,
-    plan: &Plan<'_>,
-    config: &DrapeTrainingConfig,
-    layers: &Layers,
-    train: &DrapeTensors,
-    validation: &DrapeTensors,
-    v: usize,
-) -> anyhow::Result<Fitted> {
-    let stamp = stamp(config, plan.layer, plan.init)?;
-    let stamp_path = dir.join("config.json");
-    if stamp_path.exists() {
-        let stored: Option<serde_json::Value> = std::fs::read_to_string(&stamp_path)
-            .ok()
-            .and_then(|s| serde_json::from_str(&s).ok());
-        if stored.as_ref() != Some(&stamp) {
-            anyhow::ensure!(
-                plan.retrain_on_mismatch,
-                "{} was trained under another configuration, layer or --init (its config.json); continue it with \
-                 the same ones or choose another --out",
-                dir.display()
-            );
-            eprintln!(
-                "drape: {} was trained under another configuration; retraining it",
-                dir.display()
-            );
-            std::fs::remove_dir_all(dir)?;
-        }
-    }
-    std::fs::create_dir_all(dir)?;
-    write_json(&stamp_path, &stamp)?;
-    let device = Device::Cpu;
-    let mut net_params = Params::new(&device, config.seed);
-    let net = DrapeNet::new(&mut net_params, &config.net, v)?;
-    let mut mu_params = Params::new(&device, config.seed + 1);
-    let post = layers.postprocess(plan.layer, &mut mu_params, v)?;
-    let learned = matches!(plan.layer, Layer::LearnedMu { .. });
-    let adam_settings = AdamSettings {
-        learning_rate: config.learning_rate,
-        ..AdamSettings::default()
-    };
-    let mut adam = Adam::new(&net_params, adam_settings)?;
-    let mut mu_adam = Adam::new(
-        &mu_params,
-        AdamSettings {
-            learning_rate: config.mu_learning_rate,
-            ..AdamSettings::default()
-        },
-    )?;
-    if let Some(init) = plan.init {
-        weft_nn::checkpoint::load_params(&init.join("best"), &net_params)
-            .with_context(|| format!("loading the starting weights of {}", init.display()))?;
-    }
-    let epochs = plan.epochs;
-    let progress_path = dir.join("progress.json");
-    let mut progress: Progress = std::fs::read(&progress_path)
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or_default();
-    if progress.epochs_done > 0 && weft_nn::checkpoint::exists(&dir.join("last")) {
-        weft_nn::checkpoint::load(&dir.join("last"), &net_params, &mut adam)?;
-        if learned {
-            weft_nn::checkpoint::load(&dir.join("last-mu"), &mu_params, &mut mu_adam)?;
-        }
-    } else {
-        progress = Progress::default();
-    }
-    let model = DrapeModel { net, post };
-    if progress.epochs_done == 0 {
-        // Epoch 0: the starting weights, so a fine-tune that only gets worse keeps them.
-        progress.best_validation_sqrtmse_mm = validation_sqrtmse(&model, validation, config.batch, train.len())?;
-        progress.best_epoch = Some(0);
-        save(
-            &dir.join("best"),
-            &net_params,
-            &adam,
-            learned.then_some((&mu_params, &mu_adam)),
-        )?;
-    }
-    let bar = progress_bar(
-        plan.quiet,
-        (epochs.saturating_sub(progress.epochs_done) * train.len()) as u64,
-        &format!("drape/{}", plan.name),
-        "examples",
-    )?;
-    for epoch in progress.epochs_done..epochs {
-        let start = Instant::now();
-        let mut opt = DrapeOptimizers {
-            net_params: &net_params,
-            net: &mut adam,
-            mu: learned.then_some((&mu_params, &mut mu_adam)),
-        };
-        let epoch_report = train_epoch(&model, &mut opt, train, config.batch, config.seed * 1000 + epoch as u64)
-            .with_context(|| format!("drape/{} epoch {epoch}", plan.name))?;
-        let loss = epoch_report.mean_loss;
-        progress.skipped_batches += epoch_report.skipped_batches;
-        if progress.first_error.is_none() {
-            progress.first_error = epoch_report.first_error;
-        }
-        progress.training_seconds += start.elapsed().as_secs_f64();
-        bar.inc(train.len() as u64);
-        let val = validation_sqrtmse(&model, validation, config.batch, train.len())?;
-        let mu = learned_mu(&model.post)?.map(|m| m.iter().sum::<f64>() / m.len() as f64);
-        progress.history.push(EpochRecord {
-            loss_mm2: loss,
-            validation_sqrtmse_mm: val,
-            mu,
-            mu_gradient: epoch_report.mu_gradient,
-        });
-        progress.epochs_done = epoch + 1;
-        if val < progress.best_validation_sqrtmse_mm {
-            progress.best_validation_sqrtmse_mm = val;
-            progress.best_epoch = Some(epoch + 1);
-            save(
-                &dir.join("best"),
-                &net_params,
-                &adam,
-                learned.then_some((&mu_params, &mu_adam)),
-            )?;
-        }
-        save(
-            &dir.join("last"),
-            &net_params,
-            &adam,
-            learned.then_some((&mu_params, &mu_adam)),
-        )?;
-        write_json(&progress_path, &progress)?;
-    }
-    bar.finish_and_clear();
-    write_json(&progress_path, &progress)?;
-    weft_nn::checkpoint::load_params(&dir.join("best"), &net_params)?;
-    if learned {
-        weft_nn::checkpoint::load_params(&mu_dir(&dir.join("best")), &mu_params)?;
-    }
-    let mu = learned_mu(&model.post)?;
-    Ok(Fitted { model, progress, mu })
-}
-
-fn mu_dir(dir: &Path) -> PathBuf {
-    let mut name = dir.file_name().unwrap_or_default().to_os_string();
-    name.push("-mu");
-    dir.with_file_name(name)
-}
-
-fn save(dir: &Path, params: &Params, adam: &Adam, mu: Option<(&Params, &Adam)>) -> anyhow::Result<()> {
-    weft_nn::checkpoint::save(dir, params, adam, &serde_json::Value::Null)?;
-    if let Some((p, a)) = mu {
-        weft_nn::checkpoint::save(&mu_dir(dir), p, a, &serde_json::Value::Null)?;
-    }
-    Ok(())
 }
 
 /// Geng et al. Tables 1 and 3: (train, validation, test) × (SqrtMSE, MaxDist) in mm.
@@ -665,9 +284,9 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             } else {
                 config.finetune_epochs
             },
-            quiet: ctx.quiet,
             retrain_on_mismatch: true,
         };
+        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("drape/{}", t.name))?;
         let f = fit(
             &models.join(&t.name),
             &plan,
@@ -676,14 +295,16 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             split("train"),
             split("validation"),
             v,
+            &mut progress,
         )
         .with_context(|| format!("training drape/{}", t.name))?;
-        if f.progress.skipped_batches > 0 {
+        drop(progress);
+        let (skipped, first) = f.state.skipped();
+        if skipped > 0 {
             out.failures.push(format!(
-                "drape/{}: {} training batches skipped because the layer failed on them; the first: {}",
+                "drape/{}: {skipped} training batches skipped because the layer failed on them; the first: {}",
                 t.name,
-                f.progress.skipped_batches,
-                f.progress.first_error.clone().unwrap_or_default()
+                first.unwrap_or_default()
             ));
         }
         fitted.push((t.name.clone(), f));
@@ -816,7 +437,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         }
         if let Some(f) = f {
             let per_example =
-                f.progress.training_seconds / (f.progress.epochs_done.max(1) * split("train").len()).max(1) as f64;
+                f.state.train_seconds() / (f.state.epochs_done.max(1) * split("train").len()).max(1) as f64;
             out.record(
                 SCENE,
                 method,
@@ -866,16 +487,16 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         let f = &fitted.iter().find(|(n, _)| *n == name).context("learned-μ model")?.1;
         let mu = f.mu.as_ref().and_then(|m| m.first().copied()).unwrap_or(f64::NAN);
         let path: Vec<String> = f
-            .progress
+            .state
             .history
             .iter()
-            .filter_map(|h| h.mu.map(|m| format!("{m:.4}")))
+            .filter_map(|h| h.extra.get("mu").map(|m| format!("{m:.4}")))
             .collect();
         mu_rows.push(vec![
             format!("{start}"),
             paper_learned_mu(label).map_or("—".into(), |p| format!("{p}")),
             format!("{mu:.4}"),
-            format!("{:?}", f.progress.best_epoch.unwrap_or(0)),
+            format!("{}", f.state.best_epoch),
             path.join(" → "),
         ]);
     }
@@ -993,10 +614,5 @@ mod tests {
         assert_eq!(paper_energies("trained-qs-per-vertex-mu").unwrap()[5], 0.4717);
         assert_eq!(paper_energies("postprocess-socp"), None);
         assert_eq!(paper_learned_mu("0.01"), Some(0.0903));
-    }
-
-    #[test]
-    fn the_mu_checkpoint_sits_beside_the_network_checkpoint() {
-        assert_eq!(mu_dir(Path::new("a/b/best")), Path::new("a/b/best-mu"));
     }
 }

@@ -24,7 +24,6 @@ use super::paper::{Table, format_ms, paper_cell as cell};
 use super::results::{Curve, ExperimentOutput, Scatter, Timing};
 use crate::dataset::Size;
 use crate::output::{Array, write_safetensors};
-use crate::train::{EmbedArgs, TrainCommand};
 
 /// The design's eight cloth scenes (Tan et al.'s SHEET and BALL datasets, Table I) and
 /// the two coarser sheets of the resolution study (Table III): every built-in cloth scene.
@@ -110,131 +109,41 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
     c
 }
 
-/// Whether the model in `out` has finished the last of `stages` under the configuration
-/// in `config` (then there is nothing to resume, and loading the dataset is skipped).
-fn trained(config: &Path, out: &Path, no_pb: bool, stages: &[u8]) -> bool {
-    let Some((want, have)) = configs(config, out, no_pb) else {
-        return false;
-    };
-    let Some(p) = std::fs::read_to_string(out.join("checkpoint/progress.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<weft_nn::embed_training::Progress>(&t).ok())
-    else {
-        return false;
-    };
-    let last = *stages.iter().max().unwrap_or(&3);
-    want.trains_like(&have) && (p.stage > last || (p.stage == last && p.epoch >= have.epochs[last as usize - 1]))
-}
-
-/// The configuration the experiment asks for in `config` (as `cargo xtask train embed
-/// --no-pb` stores it, with `no_pb`) and the one the model in `out` was trained under.
-fn configs(config: &Path, out: &Path, no_pb: bool) -> Option<(EmbedTrainingConfig, EmbedTrainingConfig)> {
-    let read =
-        |p: &Path| -> Option<EmbedTrainingConfig> { serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok() };
-    let (mut want, have) = (read(config)?, read(&out.join("config.json"))?);
+/// The configuration a method trains under: `no-pb` zeroes the physics weights.
+fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConfig {
+    let mut c = config.clone();
     if no_pb {
-        want.weights.ephys = 0.0;
-        want.weights.mphys = 0.0;
+        c.weights.ephys = 0.0;
+        c.weights.mphys = 0.0;
     }
-    Some((want, have))
+    c
 }
 
-/// Whether `out` holds a model trained under another configuration than `config`: one
-/// from an older version of the experiment.
-fn stale(config: &Path, out: &Path, no_pb: bool) -> bool {
-    configs(config, out, no_pb).is_some_and(|(want, have)| !want.trains_like(&have))
+/// Whether `dir` holds a model trained under another configuration than `config`: one
+/// from an older version of the experiment (its epoch counts included).
+fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
+    std::fs::read_to_string(dir.join("config.json"))
+        .ok()
+        .map(|t| serde_json::from_str::<EmbedTrainingConfig>(&t).map_or(true, |have| !config.trains_like(&have)))
+        .unwrap_or(false)
 }
 
-/// Deletes the models in `dirs` if the first was trained under another configuration, so
-/// that they are retrained instead of failing to resume. They are the experiment's own
-/// outputs, rebuilt by the same command.
-fn discard_if_stale(config: &Path, dirs: &[&Path], no_pb: bool) -> anyhow::Result<()> {
-    if dirs.first().is_some_and(|d| stale(config, d, no_pb)) {
-        for d in dirs.iter().filter(|d| d.exists()) {
-            eprintln!(
-                "embed: {} was trained under another configuration; retraining it",
-                d.display()
-            );
-            std::fs::remove_dir_all(d).with_context(|| format!("removing {}", d.display()))?;
-        }
-    }
-    Ok(())
-}
-
-/// Trains (or resumes) one model of the experiment into `out`.
-fn train(
-    ctx: &EvalContext,
-    data_dir: &Path,
-    config: &Path,
-    out: &Path,
-    no_pb: bool,
-    stages: &[u8],
-) -> anyhow::Result<()> {
-    if trained(config, out, no_pb, stages) {
-        return Ok(());
-    }
-    discard_if_stale(config, &[out], no_pb)?;
-    crate::train::run(TrainCommand::Embed(EmbedArgs {
-        data: data_dir.to_path_buf(),
-        config: Some(config.to_path_buf()),
-        no_pb,
-        stages: stages.to_vec(),
-        out: out.to_path_buf(),
-        resume: true,
-        quiet: ctx.quiet,
-    }))
-    .with_context(|| format!("training {}", out.display()))
-}
-
-/// Copies the files of `from` (and its subdirectories) into the new directory `to`.
-fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
-    std::fs::create_dir_all(to)?;
-    for entry in std::fs::read_dir(from)? {
-        let entry = entry?;
-        let target = to.join(entry.file_name());
-        if entry.file_type()?.is_dir() {
-            copy_dir(&entry.path(), &target)?;
-        } else {
-            std::fs::copy(entry.path(), &target)?;
-        }
-    }
-    Ok(())
-}
-
-/// Trains `ours` in `dir`, keeping a copy of it after stage 2 in `dir-stage2` (Tan Table
-/// IV compares the latent simulator before and after the stage-3 fine-tuning). Returns
-/// the snapshot's directory.
-fn train_ours(
-    ctx: &EvalContext,
-    data_dir: &Path,
-    config_path: &Path,
-    config: &EmbedTrainingConfig,
-    dir: &Path,
-) -> anyhow::Result<std::path::PathBuf> {
-    let snapshot = dir.with_file_name(format!(
-        "{}-stage2",
-        dir.file_name().and_then(|n| n.to_str()).unwrap_or("ours")
-    ));
-    discard_if_stale(config_path, &[dir, &snapshot], false)?;
-    train(ctx, data_dir, config_path, dir, false, &[1, 2])?;
-    if !snapshot.join("checkpoint").exists() {
-        let progress: weft_nn::embed_training::Progress =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("checkpoint/progress.json"))?)?;
-        anyhow::ensure!(
-            progress.stage == 2 && progress.epoch == config.epochs[1],
-            "{} is past stage 2 but its stage-2 snapshot {} is missing; delete the model to retrain it",
-            dir.display(),
-            snapshot.display()
+/// Trains (or resumes) one model of the experiment into `dir`, all three stages; a model
+/// trained under another configuration is discarded and retrained (it is the
+/// experiment's own output, rebuilt by the same command).
+fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir: &Path) -> anyhow::Result<()> {
+    if stale(dir, config) {
+        eprintln!(
+            "embed: {} was trained under another configuration; retraining it",
+            dir.display()
         );
-        let partial = snapshot.with_extension("partial");
-        if partial.exists() {
-            std::fs::remove_dir_all(&partial)?;
-        }
-        copy_dir(dir, &partial)?;
-        std::fs::rename(&partial, &snapshot)?;
+        std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;
     }
-    train(ctx, data_dir, config_path, dir, false, &[1, 2, 3])?;
-    Ok(snapshot)
+    let label = format!("embed/{}", dir.display());
+    let mut progress = crate::output::TrainProgress::new(ctx.quiet, &label)?;
+    weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
+        .with_context(|| format!("training {}", dir.display()))?;
+    Ok(())
 }
 
 /// Generates `scene`'s dataset into `dir`, or completes one an interrupted run left there
@@ -695,11 +604,11 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             }
         };
         let models = root.join("models").join(scene);
-        let stage2 = train_ours(ctx, &data_dir, &config_path, &config, &models.join("ours"))?;
-        train(ctx, &data_dir, &config_path, &models.join("no-pb"), true, &[1, 2, 3])?;
+        train(ctx, &data, &method_config(&config, false), &models.join("ours"))?;
+        train(ctx, &data, &method_config(&config, true), &models.join("no-pb"))?;
         let mut ndcg: Vec<(&str, f64)> = Vec::new();
         for method in ["ours", "no-pb"] {
-            let model = EmbedModel::load(&models.join(method), &data)?;
+            let model = EmbedModel::load(&models.join(method), &data, 3)?;
             let codes = model.codes(&data, &data.test_frames)?;
             ndcg.push((method, full_ranking_ndcg(&data, &codes)?));
             if method == "ours" && matches!(scene, "sheet-ms" | "ball-ms") {
@@ -717,7 +626,8 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                 ik_rows.push(inverse_kinematics(scene, &data, &model)?);
             }
             if method == "ours" {
-                let snapshot = EmbedModel::load(&stage2, &data)?;
+                // The model after stage 2: the stage-1 autoencoder and stage-2 simulator.
+                let snapshot = EmbedModel::load(&models.join("ours"), &data, 2)?;
                 table_4.push((scene.into(), "2nd stage", rollout_scores(&data, &snapshot)?));
                 table_4.push((scene.into(), "3rd stage", rollout));
                 if scene == "sheet-ms" {
@@ -736,23 +646,22 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             for ephys in TABLE_II_EPHYS {
                 let mut c = config.clone();
                 c.weights.ephys = ephys;
-                let path = root.join(format!("config-ephys-{ephys}.json"));
-                std::fs::write(&path, serde_json::to_string_pretty(&c)?)?;
                 let dir = models.join(format!("ephys-{ephys}"));
-                train(ctx, &data_dir, &path, &dir, false, &[1, 2, 3])?;
-                let model = EmbedModel::load(&dir, &data)?;
+                train(ctx, &data, &c, &dir)?;
+                let model = EmbedModel::load(&dir, &data, 3)?;
                 let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
                 table_2.push((format!("(1, 1, {ephys})"), score(&data, &predicted)?));
             }
         }
-        // PCA on the training frames' positions, the autoencoder's latent size.
+        // PCA on the frames the embedding trains on (Tan's training frames less the
+        // validation ones), the autoencoder's latent size.
         let train_frames: Vec<Vec<f64>> = data
             .dataset
             .sequences
             .iter()
             .flat_map(|s| {
                 (0..s.num_frames())
-                    .filter(|&m| weft_nn::data::is_train_frame(m))
+                    .filter(|&m| weft_nn::data::is_train_frame(m) && !weft_nn::data::is_validation_frame(m))
                     .map(|m| s.frame(m).to_vec())
             })
             .collect();
@@ -859,46 +768,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_model_counts_as_trained_only_with_its_configuration_and_its_last_epoch() {
-        let dir = std::env::temp_dir().join(format!("weft-embed-trained-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let model = dir.join("model");
-        std::fs::create_dir_all(model.join("checkpoint")).unwrap();
-        let config = training_config(Size::Quick);
-        let config_path = dir.join("config.json");
-        std::fs::write(&config_path, serde_json::to_string(&config).unwrap()).unwrap();
-        let progress = |stage: u8, epoch: usize| {
-            let p = weft_nn::embed_training::Progress { stage, epoch };
-            std::fs::write(
-                model.join("checkpoint/progress.json"),
-                serde_json::to_string(&p).unwrap(),
-            )
-            .unwrap();
-        };
-        // The baseline stores its configuration with the physics weights zeroed.
-        let mut stored = config.clone();
-        stored.weights.ephys = 0.0;
-        stored.weights.mphys = 0.0;
-        std::fs::write(model.join("config.json"), serde_json::to_string(&stored).unwrap()).unwrap();
-        progress(3, config.epochs[2]);
-        assert!(trained(&config_path, &model, true, &[1, 2, 3]));
-        assert!(!trained(&config_path, &model, false, &[1, 2, 3]));
-        progress(3, config.epochs[2] - 1);
-        assert!(!trained(&config_path, &model, true, &[1, 2, 3]));
-        // Stage 2 done counts for the stage-2 snapshot, not for the whole run.
-        progress(2, config.epochs[1]);
-        assert!(trained(&config_path, &model, true, &[1, 2]));
-        assert!(!trained(&config_path, &model, true, &[1, 2, 3]));
-        // Any other change of the configuration means retraining (train refuses to resume).
-        let mut other = config.clone();
-        other.adam.learning_rate *= 2.0;
-        std::fs::write(&config_path, serde_json::to_string(&other).unwrap()).unwrap();
-        assert!(!trained(&config_path, &model, true, &[1, 2]));
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn a_model_trained_before_the_curvature_scale_is_stale_unless_it_has_no_physics() {
+    fn a_model_trained_under_another_configuration_is_stale_unless_only_unused_fields_differ() {
         let dir = std::env::temp_dir().join(format!("weft-embed-stale-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let (ours, baseline) = (dir.join("ours"), dir.join("no-pb"));
@@ -906,8 +776,7 @@ mod tests {
         std::fs::create_dir_all(&baseline).unwrap();
         let config = training_config(Size::Quick);
         assert_eq!(config.phys_scale, weft_nn::embed_training::PhysScale::Curvature);
-        let config_path = dir.join("config.json");
-        std::fs::write(&config_path, serde_json::to_string(&config).unwrap()).unwrap();
+        assert!(!stale(&dir.join("nothing"), &config), "no model is not a stale model");
         // A configuration as stored before the field existed.
         let legacy = |c: &EmbedTrainingConfig| {
             let mut v = serde_json::to_value(c).unwrap();
@@ -915,16 +784,17 @@ mod tests {
             v.to_string()
         };
         std::fs::write(ours.join("config.json"), legacy(&config)).unwrap();
-        let mut zeroed = config.clone();
-        zeroed.weights.ephys = 0.0;
-        zeroed.weights.mphys = 0.0;
+        let zeroed = method_config(&config, true);
         std::fs::write(baseline.join("config.json"), legacy(&zeroed)).unwrap();
-        assert!(stale(&config_path, &ours, false));
+        assert!(stale(&ours, &method_config(&config, false)));
         // The baseline never evaluates L_phys: its scale does not matter.
-        assert!(!stale(&config_path, &baseline, true));
-        discard_if_stale(&config_path, &[&ours], false).unwrap();
-        discard_if_stale(&config_path, &[&baseline], true).unwrap();
-        assert!(!ours.exists() && baseline.exists());
+        assert!(!stale(&baseline, &zeroed));
+        // Any other change, the epochs included, means retraining.
+        let mut more = zeroed.clone();
+        more.epochs[2] += 1;
+        assert!(stale(&baseline, &more));
+        std::fs::write(baseline.join("config.json"), "not json").unwrap();
+        assert!(stale(&baseline, &zeroed));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -32,7 +32,7 @@ use weft_sim::{LinearSolve, PrefactorizedLinear, Quasistatic};
 use super::EvalContext;
 use super::results::{ExperimentOutput, LinePlot, Series, Timing};
 use crate::dataset::Size;
-use crate::train::{NnwarpArgs, TrainCommand, WarpMaterial};
+use crate::train::WarpMaterial;
 
 /// Linear answers' largest displacement at the evaluated loads (unit-sphere units).
 const LEVELS: [f64; 3] = [0.5, 1.0, 1.5];
@@ -645,15 +645,10 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
     let materials = [WarpMaterial::CoRotational, WarpMaterial::Stvk, WarpMaterial::NeoHookean];
     for m in materials {
-        crate::train::run(TrainCommand::Nnwarp(NnwarpArgs {
-            data: data.clone(),
-            material: m,
-            config: Some(config_path.clone()),
-            out: root.join("models").join(m.key()),
-            resume: true,
-            quiet: ctx.quiet,
-        }))
-        .with_context(|| format!("training nnwarp/{}", m.key()))?;
+        let dataset = weft_nn::data::WarpDataset::load(&data, m.key())?;
+        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("nnwarp/{}", m.key()))?;
+        weft_nn::nnwarp::train_model(&root.join("models").join(m.key()), &dataset, &config, &mut progress)
+            .with_context(|| format!("training nnwarp/{}", m.key()))?;
     }
     let direction = Vector3::from(weft_sim::energies::hemisphere_direction(FIELD_ANGLES.0, FIELD_ANGLES.1));
     let field = FieldDirection::Directional(direction);

@@ -565,8 +565,9 @@ pub struct AltConvTrainingConfig {
     /// Sequences per optimiser step.
     pub batch: usize,
     pub adam: crate::adam::AdamSettings,
-    /// Learning-rate factor per epoch (the paper's "weight decay of 0.995").
-    pub lr_decay: f64,
+    /// The learning-rate schedule; by default a factor 0.995 per epoch (the paper's
+    /// "weight decay of 0.995").
+    pub schedule: crate::trainer::Schedule,
     pub seed: u64,
 }
 
@@ -588,11 +589,42 @@ impl AltConvTrainingConfig {
                 learning_rate: 1e-3,
                 ..Default::default()
             },
-            lr_decay: 0.995,
+            schedule: crate::trainer::Schedule {
+                decay: crate::trainer::Decay::Exponential { per_epoch: 0.995 },
+                ..Default::default()
+            },
             seed: 0,
         }
     }
+
+    /// Checks every field before any work: a typed error naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_adam, check_count};
+        check_count("hidden (number of layers)", self.hidden.len(), 64)?;
+        for (i, &w) in self.hidden.iter().enumerate() {
+            check_count(&format!("hidden[{i}]"), w, MAX_WIDTH)?;
+        }
+        check_count("steps", self.steps, 100_000)?;
+        check_count("epochs", self.epochs, MAX_EPOCHS)?;
+        check_count("batch", self.batch, MAX_BATCH)?;
+        check_adam("adam", &self.adam)?;
+        self.schedule.validate("schedule")
+    }
+
+    /// The trainer's part of the configuration.
+    pub fn trainer(&self) -> crate::trainer::TrainerConfig {
+        crate::trainer::TrainerConfig {
+            epochs: self.epochs,
+            batch: self.batch,
+            seed: self.seed,
+            schedule: self.schedule,
+        }
+    }
 }
+
+/// The widest layer a configuration may ask for: a graph ConvLSTM cell of width `w` holds
+/// `8 w²` weights, 512 MB of f32 at this width, before Adam's moments.
+pub const MAX_WIDTH: usize = 4096;
 
 /// One sequence as tensors: its drive and its true surfaces `[1, F, V, 3]` (f32, metres).
 #[derive(Debug, Clone)]
@@ -635,47 +667,52 @@ impl SequenceTensors {
     }
 }
 
-/// One epoch of teacher-forced training (§5.1, loss Eq. 12) over `train` (each holding at
-/// least `config.steps + 1` frames), in an order drawn from SplitMix64(seed, epoch), with
-/// the learning rate decayed to `lr · lr_decay^epoch`; returns the mean batch loss
-/// (metres).
-#[allow(clippy::too_many_arguments)]
-pub fn train_epoch(
-    net: &AltConvNet,
-    params: &Params,
-    adam: &mut crate::adam::Adam,
-    adj: &NormalizedAdjacency,
-    train: &[SequenceTensors],
-    config: &AltConvTrainingConfig,
-    epoch: usize,
-    mut on_batch: impl FnMut(f64),
-) -> Result<f64> {
-    let mut order: Vec<usize> = (0..train.len()).collect();
-    let mut rng = weft_sim::rng::SplitMix64::new(config.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    for i in (1..order.len()).rev() {
-        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        order.swap(i, j);
+/// Teacher-forced training (§5.1, loss Eq. 12) of a network through
+/// [`crate::trainer::Trainer`]: examples are the training sequences (each holding at
+/// least `steps + 1` frames), the validation score is Eq. 12 teacher-forced on the
+/// validation sequences (metres).
+#[derive(Debug)]
+pub struct AltConvTraining<'a> {
+    pub net: &'a AltConvNet,
+    pub params: &'a Params,
+    pub adj: &'a NormalizedAdjacency,
+    pub train: &'a [SequenceTensors],
+    pub validation: &'a [SequenceTensors],
+    pub steps: usize,
+    pub adam: crate::adam::AdamSettings,
+}
+
+impl crate::trainer::Trainable for AltConvTraining<'_> {
+    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
+        vec![crate::trainer::Group {
+            name: "net",
+            params: self.params,
+            adam: self.adam,
+        }]
     }
-    adam.settings.learning_rate = config.adam.learning_rate * config.lr_decay.powi(epoch as i32);
-    let (mut total, mut batches) = (0.0, 0usize);
-    for chunk in order.chunks(config.batch.max(1)) {
-        let items: Vec<&SequenceTensors> = chunk.iter().map(|&k| &train[k]).collect();
+
+    fn num_examples(&self) -> usize {
+        self.train.len()
+    }
+
+    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+        let items: Vec<&SequenceTensors> = batch.iter().map(|&k| &self.train[k]).collect();
         let b = SequenceTensors::batch(&items)?;
-        let predictions = net.run(adj, &b.drive, Some(&b.truth), config.steps)?;
+        let predictions = self.net.run(self.adj, &b.drive, Some(&b.truth), self.steps)?;
         let loss = mean_vertex_error(&predictions, &b.truth)?;
-        let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-        if !value.is_finite() {
-            return Err(Error::NonFinite {
-                what: "Alt-ConvLSTM training loss",
-                index: batches,
+        Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] })
+    }
+
+    fn validation_score(&mut self) -> Result<f64> {
+        if self.validation.is_empty() {
+            return Err(Error::InvalidParameter {
+                name: "validation split",
+                value: "0 sequences".into(),
+                reason: "model selection needs at least one validation sequence",
             });
         }
-        adam.step(params, &loss.backward()?)?;
-        total += value;
-        batches += 1;
-        on_batch(value);
+        mean_error(self.net, self.adj, self.validation, self.steps, true)
     }
-    Ok(total / batches.max(1) as f64)
 }
 
 /// Eq. 12 of a model on `sequences` over `steps` steps, teacher-forced (`single_step`) or
@@ -698,7 +735,7 @@ pub fn mean_error(
 }
 
 /// A trained model directory written by `cargo xtask train altconv`: `config.json`,
-/// `scaling.json` and the latest `checkpoint/`.
+/// `scaling.json` and the trainer's run, loaded at its best validation weights.
 pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingConfig, Params, AltConvNet)> {
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
@@ -724,7 +761,7 @@ pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrai
     };
     let mut params = Params::new(device, config.seed);
     let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?.with_scaling(scaling);
-    crate::checkpoint::load_params(&dir.join("checkpoint"), &params)?;
+    crate::checkpoint::load_params(&dir.join("best").join("net"), &params)?;
     Ok((config, params, net))
 }
 
@@ -802,5 +839,104 @@ pub fn score_sequence(
         rollout: errors(&rolled),
         rollout_surfaces: rolled,
         rollout_seconds,
+    })
+}
+
+/// A model trained by [`train_model`], at its best validation weights.
+#[derive(Debug)]
+pub struct TrainedAltConv {
+    pub state: crate::trainer::TrainingState,
+    pub params: Params,
+    pub net: AltConvNet,
+    pub adj: NormalizedAdjacency,
+}
+
+/// Trains (or continues, up to `config.epochs`) a model on the `limb` dataset into the
+/// model directory `dir`: `config.json`, `scaling.json` (fitted on the training
+/// sequences) and the trainer's run (`training.json`, `train.log`, `best/net`,
+/// `last/net`). The validation split selects the kept weights; the test split is not
+/// read. A directory trained under another configuration (bar the epoch count) is an
+/// error.
+pub fn train_model(
+    dir: &std::path::Path,
+    dataset: &crate::data::LimbDataset,
+    config: &AltConvTrainingConfig,
+    observer: &mut dyn crate::trainer::Observer,
+) -> Result<TrainedAltConv> {
+    config.validate()?;
+    let device = Device::Cpu;
+    let tensors = |split: &str| -> Result<Vec<SequenceTensors>> {
+        dataset
+            .split(split)
+            .map(|s| {
+                if s.skinned.len() <= config.steps {
+                    return Err(Error::InvalidConfig {
+                        field: "steps".into(),
+                        value: config.steps.to_string(),
+                        reason: "exceeds the frames of a dataset sequence (it needs steps + 1 frames)",
+                    });
+                }
+                SequenceTensors::new(s, config.steps + 1, &device)
+            })
+            .collect()
+    };
+    let train = tensors("train")?;
+    let validation = tensors("validation")?;
+    if train.is_empty() || validation.is_empty() {
+        return Err(Error::Dataset {
+            path: dataset.dir.display().to_string(),
+            reason: format!(
+                "needs training and validation sequences (it has {} and {})",
+                train.len(),
+                validation.len()
+            ),
+        });
+    }
+    let adj = NormalizedAdjacency::new(&dataset.rest)?;
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let config_path = dir.join("config.json");
+    let scaling_path = dir.join("scaling.json");
+    let scaling: Scaling = if crate::trainer::has_run(dir) {
+        let stored: AltConvTrainingConfig = crate::checkpoint::read_json(&config_path)?;
+        if (AltConvTrainingConfig {
+            epochs: config.epochs,
+            ..stored
+        }) != *config
+        {
+            return Err(Error::Checkpoint {
+                path: config_path.display().to_string(),
+                reason: "the model was trained under another configuration; continue it with the same one (only \
+                         the epochs may change)"
+                    .into(),
+            });
+        }
+        crate::checkpoint::read_json(&scaling_path)?
+    } else {
+        let s = Scaling::fit(&train, config.variant, config.steps)?;
+        crate::checkpoint::write_json(&scaling_path, &s)?;
+        s
+    };
+    crate::checkpoint::write_json(&config_path, config)?;
+    let mut params = Params::new(&device, config.seed);
+    let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?.with_scaling(scaling);
+    let mut training = AltConvTraining {
+        net: &net,
+        params: &params,
+        adj: &adj,
+        train: &train,
+        validation: &validation,
+        steps: config.steps,
+        adam: config.adam,
+    };
+    let trainer = crate::trainer::Trainer::new(format!("altconv/{}", config.variant.name()), config.trainer());
+    let state = trainer.run(dir, &mut training, observer)?;
+    Ok(TrainedAltConv {
+        state,
+        params,
+        net,
+        adj,
     })
 }
