@@ -488,8 +488,8 @@ mod tests {
             let _ = parse_npy(&random);
             let _ = parse_safetensors_frames(&random, 2);
             let mut npy = npy_bytes(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
-            let arrays = [crate::output::Array::f64("positions", vec![1, 2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])];
-            let mut st = crate::output::safetensors_bytes(&arrays, Default::default()).unwrap();
+            let arrays = [weft_data::files::Array::f64("positions", vec![1, 2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])];
+            let mut st = weft_data::files::safetensors_bytes(&arrays, Default::default()).unwrap();
             for (i, b) in &flips {
                 let k = i.index(npy.len());
                 npy[k] ^= b;

@@ -8,9 +8,8 @@ mod acap;
 mod dataset;
 mod evaluate;
 mod mesh;
-mod output;
+mod progress;
 mod project;
-mod record;
 mod report;
 mod simulate;
 mod stability;
@@ -18,6 +17,13 @@ mod train;
 mod warp;
 
 use clap::{Parser, Subcommand};
+
+/// The code version recorded in manifests and results: the crate version and, when built
+/// from a git checkout, the commit (with `-dirty` for uncommitted changes). Fixed at build
+/// time by `build.rs`, so it names the code this binary runs.
+pub fn code_version() -> String {
+    env!("WEFT_CODE_VERSION").to_string()
+}
 
 /// Training allocates and frees tensors the size of the embedding's dense layers (tens of
 /// MB) every step; glibc's allocator returns each to the kernel and the next one is

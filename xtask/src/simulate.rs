@@ -8,8 +8,8 @@ use serde::Serialize;
 use weft_sim::AnyScene;
 use weft_sim::scenes::volume::LimbResolution;
 
-use crate::output::{progress_bar, write_json, write_safetensors, write_text};
-use crate::record::{FrameStats, Recorder, Recording};
+use weft_data::files::{progress_bar, write_json, write_safetensors, write_text};
+use weft_data::record::{FrameStats, Recorder, Recording};
 
 #[derive(Args)]
 pub struct SimulateArgs {

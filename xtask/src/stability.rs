@@ -22,8 +22,8 @@ use weft_sim::scenes::cloth::{ClothModel, MeshSpec, Motion, MotionSegment};
 use weft_sim::{ClothScene, ClothSimulation, Energy, HessianProjection, ImplicitEuler};
 
 use crate::evaluate::results::{Record, validate};
-use crate::output::{progress_bar, write_json, write_text};
 use crate::report::distinct;
+use weft_data::files::{progress_bar, write_json, write_text};
 
 #[derive(Args)]
 pub struct StabilityArgs {

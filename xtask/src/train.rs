@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
-use crate::output::TrainProgress;
+use crate::progress::TrainProgress;
 
 const EMBED_CONFIG: &str = "\
 Configuration file (--config, JSON; omitted fields keep their defaults):
@@ -309,11 +309,10 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     };
     check_out(&args.out, c.resume)?;
     let dataset =
-        weft_nn::data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+        weft_data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let device = weft_nn::Device::Cpu;
     let split = |name: &str| {
-        dataset
-            .tensors(name, &device)
+        weft_nn::drape::DrapeTensors::of_split(&dataset, name, &device)
             .with_context(|| format!("the {name} split of {}", args.data.display()))
     };
     let (train, validation, test) = (split("train")?, split("validation")?, split("test")?);
@@ -467,7 +466,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
 }
 
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    crate::output::write_text(path, text)
+    Ok(weft_data::files::write_text(path, text)?)
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
@@ -485,7 +484,7 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
     }
     check_out(&args.out, c.resume)?;
     let dataset =
-        weft_nn::data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+        weft_data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let name = dataset.name.clone();
     let data = EmbedData::new(dataset)?;
     eprintln!(
@@ -529,7 +528,7 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
     config.validate()?;
     check_out(&args.out, c.resume)?;
     let dataset =
-        weft_nn::data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+        weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     eprintln!(
         "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices",
         variant.name(),
@@ -594,7 +593,7 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     );
     config.validate()?;
     check_out(&args.out, c.resume)?;
-    let dataset = weft_nn::data::WarpDataset::load(&args.data, material)
+    let dataset = weft_data::WarpDataset::load(&args.data, material)
         .with_context(|| format!("loading {}", args.data.display()))?;
     let mut progress = TrainProgress::new(c.quiet, &format!("nnwarp/{material}"))?;
     let (state, n_train, n_val) = train_model(&args.out, &dataset, &config, &mut progress)?;

@@ -16,7 +16,7 @@ use nalgebra::Vector3;
 use weft_nn::nnwarp::{NnWarpSimulation, load_model, rel_error};
 use weft_sim::{AnyScene, VolumeSimulation};
 
-use crate::output::write_json;
+use weft_data::files::write_json;
 
 #[derive(Args)]
 pub struct WarpArgs {

@@ -140,7 +140,7 @@ fn killed_run_resumed_and_merged_shards_match_an_uninterrupted_run() {
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("checksum"), "{err}");
+    assert!(err.contains("SHA-256") && err.contains(&seq), "{err}");
 
     for d in [full, killed, shards_a, shards_b, merged] {
         let _ = std::fs::remove_dir_all(d);

@@ -179,7 +179,7 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     }
     let (_, mlp) = load_model(&model).unwrap();
     eprintln!("nnwarp kept epoch {} of 40", state(&model)["best_epoch"]);
-    let set = weft_nn::data::WarpDataset::load(&data, "neo-hookean").unwrap();
+    let set = weft_data::WarpDataset::load(&data, "neo-hookean").unwrap();
     let grads = Arc::new(weft_sim::warp::NodalGradients::new(&set.body).unwrap());
     let mut tested = 0;
     // Summed errors over the directional test fields: NNWarp, modal warping.

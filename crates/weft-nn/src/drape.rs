@@ -209,6 +209,15 @@ impl DrapeTensors {
         })
     }
 
+    /// The examples of one split of a `drape` dataset (f32, metres).
+    pub fn of_split(dataset: &weft_data::DrapeDataset, split: &str, device: &Device) -> Result<Self> {
+        let chosen: Vec<&weft_data::DrapeExample> = dataset.split(split).collect();
+        let pose: Vec<f64> = chosen.iter().flat_map(|e| e.pose).collect();
+        let guess: Vec<f64> = chosen.iter().flat_map(|e| e.guess.iter().copied()).collect();
+        let truth: Vec<f64> = chosen.iter().flat_map(|e| e.truth.iter().copied()).collect();
+        Self::new(&pose, &guess, &truth, dataset.sleeve.num_vertices(), device)
+    }
+
     pub fn len(&self) -> usize {
         self.pose.dim(0).unwrap_or(0)
     }

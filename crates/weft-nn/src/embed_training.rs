@@ -19,12 +19,12 @@ use weft_acap::{AcapFeatures, AcapSettings, Feature, FeatureNormalization, Poiss
 use weft_sim::{ClothSimulation, ImplicitEuler};
 
 use crate::adam::AdamSettings;
-use crate::data::{ClothDataset, is_train_frame, is_validation_frame};
 use crate::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
 use crate::error::{Error, Result};
 use crate::graph::MeshGraph;
 use crate::ops::{AcapInverse, LPhys};
 use crate::params::Params;
+use weft_data::{ClothDataset, is_train_frame, is_validation_frame};
 
 /// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "[46] +
 /// L_vert" baseline sets λ_ephys = 0).
@@ -234,7 +234,7 @@ pub struct EmbedData {
     /// sequence, held still (m²/J): [`PhysScale::Curvature`].
     pub curvature_scale: f64,
     /// Training windows (frame `m` and both predecessors training frames, `m` not a
-    /// validation frame; [`crate::data::is_validation_frame`]).
+    /// validation frame; [`weft_data::is_validation_frame`]).
     pub train_windows: Vec<FrameRef>,
     /// Validation windows: frame `m` a validation frame, its predecessors in Tan et al.'s
     /// training frames. Model selection reads these only.
@@ -368,7 +368,7 @@ impl EmbedData {
         frames: &[FrameRef],
         shape: &[usize],
         device: &Device,
-        values: impl Fn(&crate::data::ClothSequence, usize) -> &[f64],
+        values: impl Fn(&weft_data::ClothSequence, usize) -> &[f64],
     ) -> Result<Tensor> {
         let flat: Vec<f32> = frames
             .iter()

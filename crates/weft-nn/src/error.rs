@@ -48,15 +48,9 @@ pub enum Error {
     /// value, or does not fit the rest of the dataset.
     #[error("dataset file {path}: {reason}")]
     Dataset { path: String, reason: String },
-    /// A dataset file's SHA-256 is not the one its manifest recorded.
-    #[error(
-        "dataset file {path}: SHA-256 {actual} does not match the manifest's {expected} (the file changed after it was written)"
-    )]
-    Checksum {
-        path: String,
-        expected: String,
-        actual: String,
-    },
+    /// Reading a dataset failed (a missing or changed file, a bad array).
+    #[error(transparent)]
+    Data(#[from] weft_data::Error),
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

@@ -25,12 +25,13 @@
 //!   early stopping on the validation split only, a checkpoint each epoch and
 //!   bit-identical resume;
 //! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
-//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), the
-//!   pipeline's datasets ([`data`]), and the one f32 ↔ f64 boundary ([`convert`]).
+//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), and the one
+//!   f32 ↔ f64 boundary ([`convert`]). The datasets are read by weft-data.
 //!
 //! What is not here: no physics or geometry of its own (every formula of the simulation
 //! lives in weft-sim, weft-acap or weft-proj and is called, never re-derived in
-//! tensors), no file formats beyond checkpoints and reading the pipeline's datasets, no
+//! tensors), no file formats beyond checkpoints and model directories (datasets are
+//! weft-data's), no
 //! command line (that is xtask's).
 //!
 //! Precision: networks run in f32; everything that crosses into the physics is converted
@@ -56,7 +57,6 @@ pub mod adam;
 pub mod altconv;
 pub mod checkpoint;
 pub mod convert;
-pub mod data;
 pub mod drape;
 pub mod drape_training;
 pub mod embed;

@@ -717,7 +717,7 @@ pub fn field_direction(scene: &weft_sim::VolumeScene) -> Result<FieldDirection> 
 /// The training pairs of one split of a dataset: every free node of every frame after
 /// the first (the rest frame has nothing to correct).
 pub fn collect_pairs(
-    dataset: &crate::data::WarpDataset,
+    dataset: &weft_data::WarpDataset,
     split: &str,
 ) -> Result<(Vec<[f64; INPUTS]>, Vec<[f64; OUTPUTS]>)> {
     let gradients = Arc::new(NodalGradients::new(&dataset.body)?);
@@ -934,7 +934,7 @@ pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
 /// run's state and the pair counts (training, validation).
 pub fn train_model(
     dir: &std::path::Path,
-    dataset: &crate::data::WarpDataset,
+    dataset: &weft_data::WarpDataset,
     config: &WarpTrainingConfig,
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<(crate::trainer::TrainingState, usize, usize)> {

@@ -93,7 +93,7 @@ fn lagging_sequence(mesh: &weft_mesh::TriMesh, frames: usize, phase: f64, memory
         skinned.push(x);
         simulated.push(y);
     }
-    let seq = weft_nn::data::LimbSequence {
+    let seq = weft_data::LimbSequence {
         index: 0,
         split: "train".into(),
         skinned,

@@ -462,7 +462,7 @@ fn cloth_potential_op_is_the_elastic_terms_and_its_gradient_matches_finite_diffe
 }
 
 /// The quick `sheet-ms` simulated for `frames` frames, as an in-memory dataset.
-fn quick_sheet_dataset(frames: usize) -> weft_nn::data::ClothDataset {
+fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
     let scene = ClothScene::builtin("sheet-ms", true).unwrap();
     let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
     let rest = sim.mesh().clone();
@@ -477,8 +477,8 @@ fn quick_sheet_dataset(frames: usize) -> weft_nn::data::ClothDataset {
         }
     }
     let sequence =
-        weft_nn::data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
-    weft_nn::data::ClothDataset {
+        weft_data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
+    weft_data::ClothDataset {
         dir: std::env::temp_dir(),
         name: "sheet-ms".into(),
         scene,

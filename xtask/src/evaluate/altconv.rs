@@ -17,15 +17,15 @@ use std::path::Path;
 
 use anyhow::Context;
 use nalgebra::Vector3;
+use weft_data::{LimbDataset, LimbSequence};
 use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Variant, score_sequence};
-use weft_nn::data::{LimbDataset, LimbSequence};
 use weft_nn::graph::NormalizedAdjacency;
 
 use super::paper::Table;
 use super::results::{ExperimentOutput, LinePlot, Series, Timing};
 use super::{EvalContext, mean_sd};
-use crate::dataset::Size;
 use crate::report::render::{View, error_colors, error_png};
+use weft_data::Size;
 
 const SCENE: &str = "limb";
 const SKINNING: &str = "skinning";
@@ -211,7 +211,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
         let model_dir = root.join("models").join(variant.name());
         discard_if_stale(&model_dir, &config)?;
-        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("altconv/{}", variant.name()))?;
+        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("altconv/{}", variant.name()))?;
         weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
             .with_context(|| format!("training altconv/{}", variant.name()))?;
     }
@@ -366,15 +366,15 @@ fn write_predictions(
              vertices, 3] in metres, the `{source}` sequences of the limb dataset; sequence_index [sequences]"
         ),
     );
-    crate::output::write_safetensors(
+    Ok(weft_data::files::write_safetensors(
         &dir.join(format!("{method}.safetensors")),
         &[
-            crate::output::Array::f64("positions", shape.clone(), &surfaces.concat()),
-            crate::output::Array::f64("ground_truth", shape, &truth),
-            crate::output::Array::i64("sequence_index", &index),
+            weft_data::files::Array::f64("positions", shape.clone(), &surfaces.concat()),
+            weft_data::files::Array::f64("ground_truth", shape, &truth),
+            weft_data::files::Array::i64("sequence_index", &index),
         ],
         meta,
-    )
+    )?)
 }
 
 fn set_split(out: &mut ExperimentOutput, split: &str) {

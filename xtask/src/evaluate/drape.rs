@@ -20,8 +20,8 @@ use std::time::Instant;
 
 use anyhow::Context;
 use nalgebra::Vector3;
+use weft_data::DrapeDataset;
 use weft_nn::Device;
-use weft_nn::data::DrapeDataset;
 use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, predict_each, sqrtmse_maxdist_mm};
 use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
 use weft_nn::params::Params;
@@ -30,9 +30,9 @@ use weft_proj::RestShape;
 use super::EvalContext;
 use super::paper::Table;
 use super::results::{ExperimentOutput, Timing};
-use crate::dataset::Size;
-use crate::output::{progress_bar, write_json};
 use crate::report::render::{View, error_colors, error_png};
+use weft_data::Size;
+use weft_data::files::{progress_bar, write_json};
 
 const SCENE: &str = "sleeve";
 const SPLITS: [&str; 3] = ["train", "validation", "test"];
@@ -212,7 +212,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("drape", ctx.size);
     let root = ctx.out.join("drape");
     let data_dir = root.join("data");
-    crate::evaluate::embed::generate_dataset_frames(crate::dataset::drape::NAME, ctx.size, &data_dir, None)
+    crate::evaluate::embed::generate_dataset_frames(weft_data::drape::NAME, ctx.size, &data_dir, None)
         .context("drape dataset")?;
     let gt = crate::evaluate::embed::ground_truth_seconds(&data_dir)?;
     let dataset = DrapeDataset::load(&data_dir)?;
@@ -223,7 +223,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         .map(|s| {
             Ok((
                 *s,
-                dataset.tensors(s, &device).with_context(|| format!("the {s} split"))?,
+                DrapeTensors::of_split(&dataset, s, &device).with_context(|| format!("the {s} split"))?,
             ))
         })
         .collect::<anyhow::Result<_>>()?;
@@ -286,7 +286,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             },
             retrain_on_mismatch: true,
         };
-        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("drape/{}", t.name))?;
+        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("drape/{}", t.name))?;
         let f = fit(
             &models.join(&t.name),
             &plan,
@@ -543,15 +543,15 @@ fn write_predictions(
          [examples]: each example's index in the split"
             .into(),
     );
-    crate::output::write_safetensors(
+    Ok(weft_data::files::write_safetensors(
         &dir.join(format!("{method}.safetensors")),
         &[
-            crate::output::Array::f64(
+            weft_data::files::Array::f64(
                 "positions",
                 shape.clone(),
                 &pred.iter().flat_map(|p| p.1.iter().copied()).collect::<Vec<_>>(),
             ),
-            crate::output::Array::f64(
+            weft_data::files::Array::f64(
                 "ground_truth",
                 shape,
                 &pred
@@ -559,7 +559,7 @@ fn write_predictions(
                     .flat_map(|(i, _)| truths[*i].iter().copied())
                     .collect::<Vec<_>>(),
             ),
-            crate::output::Array::f64(
+            weft_data::files::Array::f64(
                 "pose",
                 vec![pred.len(), 3],
                 &pred
@@ -567,10 +567,10 @@ fn write_predictions(
                     .flat_map(|(i, _)| poses[3 * i..3 * i + 3].iter().copied())
                     .collect::<Vec<_>>(),
             ),
-            crate::output::Array::i64("example_index", &index),
+            weft_data::files::Array::i64("example_index", &index),
         ],
         meta,
-    )
+    )?)
 }
 
 /// Geng et al. Fig. 10: the learned per-vertex μ_i on the rest sleeve, a PNG in the report

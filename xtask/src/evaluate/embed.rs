@@ -11,8 +11,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::{Args as _, FromArgMatches as _};
-use weft_nn::data::ClothDataset;
+
+use weft_data::ClothDataset;
 use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
@@ -22,8 +22,8 @@ use weft_nn::rollout::LatentRollout;
 use super::EvalContext;
 use super::paper::{Table, format_ms, paper_cell as cell};
 use super::results::{Curve, ExperimentOutput, Scatter, Timing};
-use crate::dataset::Size;
-use crate::output::{Array, write_safetensors};
+use weft_data::Size;
+use weft_data::files::{Array, write_safetensors};
 
 /// The design's eight cloth scenes (Tan et al.'s SHEET and BALL datasets, Table I) and
 /// the two coarser sheets of the resolution study (Table III): every built-in cloth scene.
@@ -140,7 +140,7 @@ fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir:
         std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;
     }
     let label = format!("embed/{}", dir.display());
-    let mut progress = crate::output::TrainProgress::new(ctx.quiet, &label)?;
+    let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
     weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
         .with_context(|| format!("training {}", dir.display()))?;
     Ok(())
@@ -157,21 +157,21 @@ pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<(
 pub fn generate_dataset_frames(scene: &str, size: Size, dir: &Path, frames: Option<usize>) -> anyhow::Result<()> {
     let manifest = dir.join("manifest.json");
     let exists = manifest.exists();
-    if exists && crate::dataset::read_manifest(&manifest)?.is_complete() {
+    if exists && weft_data::read_manifest(&manifest)?.is_complete() {
         return Ok(());
     }
-    let cmd = crate::dataset::DatasetArgs::augment_args(clap::Command::new("dataset"));
-    let dir_arg = dir.display().to_string();
-    let frames_arg = frames.map(|f| f.to_string());
-    let mut args = vec!["dataset", scene, "--size", size.as_str(), "--quiet", "--out", &dir_arg];
-    if let Some(f) = &frames_arg {
-        args.extend(["--frames", f.as_str()]);
+    let mut spec = weft_data::DatasetSpec::new(scene, size)?;
+    if let Some(f) = frames {
+        spec.frames = f;
     }
-    if exists {
-        args.push("--resume");
-    }
-    let matches = cmd.try_get_matches_from(args)?;
-    crate::dataset::run(crate::dataset::DatasetArgs::from_arg_matches(&matches)?)
+    let options = weft_data::GenerateOptions {
+        resume: exists,
+        quiet: true,
+        code_version: crate::code_version(),
+        ..Default::default()
+    };
+    weft_data::generate(&spec, dir, &options)?;
+    Ok(())
 }
 
 /// Ground-truth solver seconds per frame of a dataset (its `timing.json`).
@@ -237,7 +237,7 @@ fn write_predictions(
          [frames * 2]: (sequence, frame) of each"
             .into(),
     );
-    write_safetensors(
+    Ok(write_safetensors(
         &dir.join(format!("{method}.safetensors")),
         &[
             Array::f64("positions", vec![f, v, 3], &predicted.concat()),
@@ -245,7 +245,7 @@ fn write_predictions(
             Array::i64("frame_index", &index),
         ],
         meta,
-    )
+    )?)
 }
 
 /// Frames of one test window, predicted beside the ground truth; frames before
@@ -661,7 +661,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             .iter()
             .flat_map(|s| {
                 (0..s.num_frames())
-                    .filter(|&m| weft_nn::data::is_train_frame(m) && !weft_nn::data::is_validation_frame(m))
+                    .filter(|&m| weft_data::is_train_frame(m) && !weft_data::is_validation_frame(m))
                     .map(|m| s.frame(m).to_vec())
             })
             .collect();

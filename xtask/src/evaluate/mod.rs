@@ -23,9 +23,9 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 
-use crate::dataset::Size;
-use crate::output::write_json;
 pub use results::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
+use weft_data::Size;
+use weft_data::files::write_json;
 
 /// Experiments `evaluate` runs, in order.
 pub const EXPERIMENTS: [&str; 6] = ["sim", "proj", "embed", "nnwarp", "altconv", "drape"];
@@ -33,7 +33,7 @@ pub const EXPERIMENTS: [&str; 6] = ["sim", "proj", "embed", "nnwarp", "altconv",
 #[derive(Args)]
 pub struct EvaluateArgs {
     /// quick (minutes; small meshes) or standard (the committed evaluation in docs/results/).
-    #[arg(long, value_enum, default_value_t = Size::Standard)]
+    #[arg(long, default_value_t = Size::Standard)]
     size: Size,
     /// Shorthand for --size quick.
     #[arg(long)]
@@ -120,7 +120,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         };
         output.wall_seconds = t.elapsed().as_secs_f64();
         output.command = format!("cargo xtask {}", std::env::args().skip(1).collect::<Vec<_>>().join(" "));
-        output.code_version = crate::dataset::code_version();
+        output.code_version = crate::code_version();
         results::validate(&output.records)?;
         write_json(&cache, &output)?;
         ran.push(name);
@@ -212,10 +212,10 @@ fn publish(out: &Path, dest: &Path, ran: &[&str], outputs: &[ExperimentOutput]) 
         list(ran),
         out.display(),
         list(&reused),
-        crate::dataset::code_version(),
+        crate::code_version(),
         out.display()
     ) + &provenance_per_experiment(outputs);
-    crate::output::write_text(&dest.join("PROVENANCE.md"), &text)
+    Ok(weft_data::files::write_text(&dest.join("PROVENANCE.md"), &text)?)
 }
 
 /// One line per experiment: the command and code version that produced it.

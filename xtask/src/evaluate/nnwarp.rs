@@ -31,8 +31,8 @@ use weft_sim::{LinearSolve, PrefactorizedLinear, Quasistatic};
 
 use super::EvalContext;
 use super::results::{ExperimentOutput, LinePlot, Series, Timing};
-use crate::dataset::Size;
 use crate::train::WarpMaterial;
+use weft_data::Size;
 
 /// Linear answers' largest displacement at the evaluated loads (unit-sphere units).
 const LEVELS: [f64; 3] = [0.5, 1.0, 1.5];
@@ -319,9 +319,9 @@ impl Reference {
             let seconds = t.elapsed().as_secs_f64();
             self.seconds += seconds;
             std::fs::create_dir_all(&self.cache)?;
-            crate::output::write_safetensors(
+            weft_data::files::write_safetensors(
                 &path,
-                &[crate::output::Array::f64("positions", vec![self.x.len()], &self.x)],
+                &[weft_data::files::Array::f64("positions", vec![self.x.len()], &self.x)],
                 [("seconds".to_string(), seconds.to_string())].into(),
             )?;
         }
@@ -637,16 +637,15 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("nnwarp", ctx.size);
     let root = ctx.out.join("nnwarp");
     let data = root.join("data");
-    crate::evaluate::embed::generate_dataset(crate::dataset::nnwarp::NAME, ctx.size, &data)
-        .context("nnwarp dataset")?;
+    crate::evaluate::embed::generate_dataset(weft_data::nnwarp::NAME, ctx.size, &data).context("nnwarp dataset")?;
     let config = training_config(ctx.size);
     std::fs::create_dir_all(&root)?;
     let config_path = root.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
     let materials = [WarpMaterial::CoRotational, WarpMaterial::Stvk, WarpMaterial::NeoHookean];
     for m in materials {
-        let dataset = weft_nn::data::WarpDataset::load(&data, m.key())?;
-        let mut progress = crate::output::TrainProgress::new(ctx.quiet, &format!("nnwarp/{}", m.key()))?;
+        let dataset = weft_data::WarpDataset::load(&data, m.key())?;
+        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("nnwarp/{}", m.key()))?;
         weft_nn::nnwarp::train_model(&root.join("models").join(m.key()), &dataset, &config, &mut progress)
             .with_context(|| format!("training nnwarp/{}", m.key()))?;
     }
@@ -704,7 +703,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
         rows: timing_rows,
     });
     // Scenes, then the three figures' runs: load (two beams), direction, trajectories.
-    let bar = crate::output::progress_bar(
+    let bar = weft_data::files::progress_bar(
         ctx.quiet,
         (shapes.len() * materials.len() + 3 + TRAJECTORY_STEPS.len()) as u64,
         "nnwarp",

@@ -20,9 +20,9 @@ use weft_proj::{
 
 use super::EvalContext;
 use super::results::{ExperimentOutput, Timing};
-use crate::dataset::Size;
-use crate::output::{Array, progress_bar, write_safetensors};
 use crate::report::render::{View, error_png};
+use weft_data::Size;
+use weft_data::files::{Array, progress_bar, write_safetensors};
 
 /// The inextensibility bound ε of every SOCP method (edges may stretch 10 %).
 const EPSILON: f64 = 0.1;

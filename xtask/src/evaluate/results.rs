@@ -5,7 +5,7 @@ use anyhow::ensure;
 use serde::{Deserialize, Serialize};
 
 use super::paper::Table;
-use crate::dataset::Size;
+use weft_data::Size;
 
 /// One measured figure. Field names and meanings are documented in `docs/RESULTS.md`;
 /// fields that do not apply are `null`.

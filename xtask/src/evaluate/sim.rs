@@ -29,9 +29,9 @@ use weft_sim::{ClothScene, ClothSimulation, Energy, LinearSolve, PrefactorizedLi
 
 use super::EvalContext;
 use super::results::{Curve, ExperimentOutput, RmsAccumulator, Timing};
-use crate::dataset::Size;
-use crate::output::{Array, progress_bar, write_safetensors};
 use crate::report::render::{View, error_png};
+use weft_data::Size;
+use weft_data::files::{Array, progress_bar, write_safetensors};
 
 pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("sim", ctx.size);

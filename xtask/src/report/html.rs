@@ -7,9 +7,9 @@ use std::path::Path;
 use base64::Engine;
 
 use super::Charts;
-use crate::dataset::Size;
 use crate::evaluate::paper::Table;
 use crate::evaluate::results::ExperimentOutput;
+use weft_data::Size;
 
 fn escape(s: &str) -> String {
     s.replace('&', "&amp;")

@@ -11,11 +11,11 @@ use std::path::Path;
 use anyhow::{Context, ensure};
 use clap::Args;
 
-use crate::dataset::Size;
 use crate::evaluate::paper;
 use crate::evaluate::results::{self, ExperimentOutput, Record};
-use crate::output::{write_json, write_text};
 use plots::ParetoPoint;
+use weft_data::Size;
+use weft_data::files::{write_json, write_text};
 
 /// Fonts for PNG text: DejaVu Sans, embedded, so no system font is needed.
 pub mod fonts {

@@ -635,7 +635,7 @@ pub struct SequenceTensors {
 
 impl SequenceTensors {
     /// The first `frames` frames of `seq` (all of them if it has fewer).
-    pub fn new(seq: &crate::data::LimbSequence, frames: usize, device: &Device) -> Result<Self> {
+    pub fn new(seq: &weft_data::LimbSequence, frames: usize, device: &Device) -> Result<Self> {
         let f = frames.min(seq.skinned.len());
         let v = seq.skinned[0].len() / 3;
         let stack = |frames: &[Vec<f64>], what: &'static str| -> Result<Tensor> {
@@ -783,7 +783,7 @@ pub struct SequenceErrors {
 pub fn score_sequence(
     net: Option<&AltConvNet>,
     adj: &NormalizedAdjacency,
-    seq: &crate::data::LimbSequence,
+    seq: &weft_data::LimbSequence,
     steps: usize,
 ) -> Result<SequenceErrors> {
     if steps == 0 || steps >= seq.skinned.len() {
@@ -859,7 +859,7 @@ pub struct TrainedAltConv {
 /// error.
 pub fn train_model(
     dir: &std::path::Path,
-    dataset: &crate::data::LimbDataset,
+    dataset: &weft_data::LimbDataset,
     config: &AltConvTrainingConfig,
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<TrainedAltConv> {

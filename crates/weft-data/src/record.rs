@@ -10,7 +10,7 @@ use serde::Serialize;
 use weft_sim::scenes::soft_tissue::SoftTissue;
 use weft_sim::{AnyScene, ClothSimulation, LoadedScene, MotionLabel, VolumeSimulation};
 
-use crate::output::Array;
+use crate::files::Array;
 
 /// A runnable scene of any kind.
 pub enum Recorder {
@@ -33,6 +33,7 @@ pub struct FrameStats {
 }
 
 /// Every frame of a run, frame 0 being the initial (rest or settled) state.
+#[derive(Debug)]
 pub struct Recording {
     pub scene: String,
     /// Vertices per frame of `positions` (the surface for soft tissue, all nodes otherwise).
@@ -49,8 +50,18 @@ pub struct Recording {
     pub metadata: HashMap<String, String>,
 }
 
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Cloth(_) => "Recorder::Cloth",
+            Self::Volume(_) => "Recorder::Volume",
+            Self::SoftTissue(_) => "Recorder::SoftTissue",
+        })
+    }
+}
+
 impl Recorder {
-    pub fn new(loaded: &LoadedScene) -> anyhow::Result<Self> {
+    pub fn new(loaded: &LoadedScene) -> crate::Result<Self> {
         let base = loaded.base_dir.as_deref();
         Ok(match &loaded.scene {
             AnyScene::Cloth(s) => Self::Cloth(ClothSimulation::new(s.clone(), base)?),
@@ -164,7 +175,7 @@ impl Recorder {
     }
 
     /// Advances one frame and appends it to `rec`.
-    fn step_into(&mut self, rec: &mut Recording) -> anyhow::Result<()> {
+    fn step_into(&mut self, rec: &mut Recording) -> crate::Result<()> {
         let frame = rec.per_frame.len() + 1;
         let stats = match self {
             Self::Cloth(s) => {
@@ -233,8 +244,8 @@ impl Recorder {
         name: &str,
         frames: usize,
         bar: &ProgressBar,
-        mut on_frame: impl FnMut(usize, &Self) -> anyhow::Result<()>,
-    ) -> anyhow::Result<Recording> {
+        mut on_frame: impl FnMut(usize, &Self) -> crate::Result<()>,
+    ) -> crate::Result<Recording> {
         let mut rec = self.empty_recording(name);
         let start = Instant::now();
         for _ in 0..frames {

@@ -12,15 +12,15 @@
 
 use std::collections::HashMap;
 
-use anyhow::Context;
+use crate::error::Context;
 use nalgebra::Vector3;
 use weft_mesh::TetMesh;
 use weft_sim::energies::Material;
 use weft_sim::rng::SplitMix64;
 use weft_sim::warp::{FieldDirection, SequenceSettings, register_sequence, unit_sphere_normalization};
 
-use super::{DatasetSpec, StoredSequence};
-use crate::output::Array;
+use crate::files::Array;
+use crate::generate::{DatasetSpec, StoredSequence};
 
 /// The dataset's name.
 pub const NAME: &str = "nnwarp";
@@ -39,9 +39,11 @@ pub fn material_key(m: Material) -> &'static str {
 }
 
 /// The training beam scaled into the unit sphere, and its clamped nodes (the −x face).
-pub fn training_body(spec: &DatasetSpec) -> anyhow::Result<(TetMesh, Vec<usize>)> {
+pub fn training_body(spec: &DatasetSpec) -> crate::Result<(TetMesh, Vec<usize>)> {
     let weft_sim::AnyScene::Volume(scene) = &spec.scene else {
-        anyhow::bail!("the nnwarp dataset is built on a volumetric scene");
+        return Err(crate::Error::Invalid(
+            "the nnwarp dataset is built on a volumetric scene".into(),
+        ));
     };
     let mesh = scene.build_mesh(None)?;
     let (center, scale) = unit_sphere_normalization(mesh.positions());
@@ -85,7 +87,7 @@ fn field_json(field: FieldDirection) -> serde_json::Value {
 }
 
 /// Generates sequence `i` (seeded by `seed`, the sequence's own seed).
-pub fn sequence(spec: &DatasetSpec, seed: u64, i: usize) -> anyhow::Result<StoredSequence> {
+pub fn sequence(spec: &DatasetSpec, seed: u64, i: usize) -> crate::Result<StoredSequence> {
     let (body, anchors) = training_body(spec)?;
     let (field, poisson) = sequence_field(&body, &anchors, seed, i);
     let settings = SequenceSettings {

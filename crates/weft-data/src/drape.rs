@@ -12,15 +12,15 @@
 
 use std::collections::HashMap;
 
-use anyhow::Context;
+use crate::error::Context;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use weft_sim::rng::SplitMix64;
 use weft_sim::scenes::drape::{Drape, DrapeExample, DrapeParams};
 use weft_sim::scenes::soft_tissue::ArmPose;
 
-use super::{DatasetSpec, Size, StoredSequence};
-use crate::output::Array;
+use crate::files::Array;
+use crate::generate::{DatasetSpec, Size, StoredSequence};
 
 /// The dataset's name.
 pub const NAME: &str = "drape";
@@ -49,8 +49,8 @@ pub fn params(size: Size) -> DrapeParams {
 
 /// Solves example `j` of the chunk with sequence seed `seed`; returns it and the poses
 /// that were replaced, each with its solver's error.
-pub fn example(drape: &Drape, seed: u64, j: usize) -> anyhow::Result<(DrapeExample, Vec<(ArmPose, String)>)> {
-    let mut rng = SplitMix64::new(super::sequence_seed(seed, j));
+pub fn example(drape: &Drape, seed: u64, j: usize) -> crate::Result<(DrapeExample, Vec<(ArmPose, String)>)> {
+    let mut rng = SplitMix64::new(crate::generate::sequence_seed(seed, j));
     let mut rejected = Vec::new();
     for _ in 0..MAX_DRAWS {
         let pose = ArmPose::sample(&mut rng);
@@ -59,14 +59,14 @@ pub fn example(drape: &Drape, seed: u64, j: usize) -> anyhow::Result<(DrapeExamp
             Err(e) => rejected.push((pose, e.to_string())),
         }
     }
-    anyhow::bail!(
+    Err(crate::Error::Incomplete(format!(
         "{MAX_DRAWS} poses in a row did not converge; the last: {}",
         rejected.last().map_or("", |r| r.1.as_str())
-    )
+    )))
 }
 
 /// Generates chunk `i` (sequence seed `seed`).
-pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> anyhow::Result<StoredSequence> {
+pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> crate::Result<StoredSequence> {
     let drape = Drape::new(params(spec.size))?;
     let start = std::time::Instant::now();
     let solved: Vec<(DrapeExample, Vec<(ArmPose, String)>)> = (0..spec.frames)
@@ -76,7 +76,7 @@ pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> anyh
             bar.inc(1);
             r
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::Result<_>>()?;
     let seconds = start.elapsed().as_secs_f64();
     let (f, v) = (solved.len(), drape.sleeve().num_vertices());
     let poses: Vec<f64> = solved.iter().flat_map(|(e, _)| e.pose.angles()).collect();

@@ -5,12 +5,14 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use safetensors::tensor::Dtype;
 use sha2::{Digest, Sha256};
 
+use crate::error::{Error, Result, ensure};
+
 /// A named array with its shape, as little-endian bytes.
+#[derive(Debug, Clone)]
 pub struct Array {
     pub name: String,
     pub shape: Vec<usize>,
@@ -55,7 +57,7 @@ impl Array {
 /// built here with sorted metadata keys and the tensors in the order given (the format:
 /// an 8-byte little-endian header length, a JSON header padded with spaces to a multiple
 /// of 8 bytes, then the tensors' bytes back to back).
-pub fn safetensors_bytes(arrays: &[Array], metadata: HashMap<String, String>) -> anyhow::Result<Vec<u8>> {
+pub fn safetensors_bytes(arrays: &[Array], metadata: HashMap<String, String>) -> Result<Vec<u8>> {
     let mut header = serde_json::Map::new();
     let sorted: std::collections::BTreeMap<_, _> = metadata.into_iter().collect();
     header.insert("__metadata__".into(), serde_json::to_value(sorted)?);
@@ -65,10 +67,15 @@ pub fn safetensors_bytes(arrays: &[Array], metadata: HashMap<String, String>) ->
             Dtype::F64 => "F64",
             Dtype::U8 => "U8",
             Dtype::I64 => "I64",
-            other => anyhow::bail!("array {}: dtype {other:?} is not written by weft", a.name),
+            other => {
+                return Err(Error::Invalid(format!(
+                    "array {}: dtype {other:?} is not written by weft",
+                    a.name
+                )));
+            }
         };
         let width = if a.dtype == Dtype::U8 { 1 } else { 8 };
-        anyhow::ensure!(
+        ensure!(
             a.shape.iter().product::<usize>() * width == a.bytes.len(),
             "array {}: shape {:?} does not match its {} bytes",
             a.name,
@@ -94,24 +101,24 @@ pub fn safetensors_bytes(arrays: &[Array], metadata: HashMap<String, String>) ->
     Ok(out)
 }
 
-pub fn write_safetensors(path: &Path, arrays: &[Array], metadata: HashMap<String, String>) -> anyhow::Result<()> {
+pub fn write_safetensors(path: &Path, arrays: &[Array], metadata: HashMap<String, String>) -> Result<()> {
     write_bytes(path, &safetensors_bytes(arrays, metadata)?)
 }
 
 /// Writes `bytes` to `path.tmp`, then renames it into place.
-pub fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = std::path::PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))
+    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
 }
 
-pub fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
     write_bytes(path, text.as_bytes())
 }
 
-pub fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     let mut text = serde_json::to_string_pretty(value)?;
     text.push('\n');
     write_text(path, &text)
@@ -123,13 +130,13 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 /// SHA-256 of a file's contents.
-pub fn sha256_file(path: &Path) -> anyhow::Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+pub fn sha256_file(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     Ok(sha256_hex(&bytes))
 }
 
 /// A progress bar with rate and ETA (hidden with `quiet`).
-pub fn progress_bar(quiet: bool, len: u64, prefix: &str, unit: &str) -> anyhow::Result<ProgressBar> {
+pub fn progress_bar(quiet: bool, len: u64, prefix: &str, unit: &str) -> Result<ProgressBar> {
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -143,52 +150,6 @@ pub fn progress_bar(quiet: bool, len: u64, prefix: &str, unit: &str) -> anyhow::
     );
     bar.set_prefix(prefix.to_string());
     Ok(bar)
-}
-
-/// A training run's progress: a bar over its batches (on a terminal) and its epoch lines
-/// above it — or, off a terminal where indicatif hides the bar, on standard error. With
-/// `quiet`, neither (the lines are in the run's `train.log` all the same).
-pub struct TrainProgress {
-    bar: ProgressBar,
-    quiet: bool,
-}
-
-impl TrainProgress {
-    pub fn new(quiet: bool, prefix: &str) -> anyhow::Result<Self> {
-        Ok(Self {
-            bar: progress_bar(quiet, 0, prefix, "batches")?,
-            quiet,
-        })
-    }
-}
-
-impl weft_nn::trainer::Observer for TrainProgress {
-    fn start(&mut self, batches: u64) {
-        self.bar.set_length(batches);
-        self.bar.set_position(0);
-    }
-
-    fn batch(&mut self, epoch: usize, loss: f64) {
-        self.bar.set_message(format!("epoch {} loss {loss:.3e}", epoch + 1));
-        self.bar.inc(1);
-    }
-
-    fn epoch(&mut self, line: &str) {
-        if self.quiet {
-            return;
-        }
-        if self.bar.is_hidden() {
-            eprintln!("{line}");
-        } else {
-            self.bar.println(line);
-        }
-    }
-}
-
-impl Drop for TrainProgress {
-    fn drop(&mut self) {
-        self.bar.finish_and_clear();
-    }
 }
 
 #[cfg(test)]

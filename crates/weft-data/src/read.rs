@@ -515,12 +515,8 @@ impl DrapeDataset {
         })
     }
 
-    /// The examples of one split as tensors (f32, metres).
-    pub fn tensors(&self, split: &str, device: &candle_core::Device) -> Result<crate::drape::DrapeTensors> {
-        let chosen: Vec<&DrapeExample> = self.examples.iter().filter(|e| e.split == split).collect();
-        let pose: Vec<f64> = chosen.iter().flat_map(|e| e.pose).collect();
-        let guess: Vec<f64> = chosen.iter().flat_map(|e| e.guess.iter().copied()).collect();
-        let truth: Vec<f64> = chosen.iter().flat_map(|e| e.truth.iter().copied()).collect();
-        crate::drape::DrapeTensors::new(&pose, &guess, &truth, self.sleeve.num_vertices(), device)
+    /// The examples of one split.
+    pub fn split<'a>(&'a self, name: &'a str) -> impl Iterator<Item = &'a DrapeExample> + 'a {
+        self.examples.iter().filter(move |e| e.split == name)
     }
 }
