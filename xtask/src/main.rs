@@ -8,9 +8,7 @@ mod acap;
 mod dataset;
 mod evaluate;
 mod mesh;
-mod progress;
 mod project;
-mod report;
 mod simulate;
 mod stability;
 mod train;
@@ -62,7 +60,7 @@ enum Command {
     /// Run every method against its reference and write results.json, tables.md, plots and index.html.
     Evaluate(evaluate::EvaluateArgs),
     /// Check that an evaluation's outputs exist and parse, including every record's fields (CI runs this).
-    CheckReport(report::CheckArgs),
+    CheckReport(evaluate::CheckArgs),
     /// Sweep every simulator over extreme parameters and publish the outcome of each cell (docs/STABILITY.md).
     Stability(stability::StabilityArgs),
     /// Train a neural model on a dataset (resumable from checkpoints, progress bars with the losses).
@@ -83,7 +81,7 @@ fn main() -> anyhow::Result<()> {
         Command::Evaluate(args) => evaluate::run(args),
         Command::Train(cmd) => train::run(cmd),
         Command::Warp(args) => warp::run(args),
-        Command::CheckReport(args) => report::check(args),
+        Command::CheckReport(args) => evaluate::check(args),
         Command::Stability(args) => stability::run(args),
     }
 }

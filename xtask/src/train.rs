@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
-use crate::progress::TrainProgress;
+use weft_experiments::evaluate::nnwarp::WarpMaterial;
+use weft_experiments::progress::TrainProgress;
 
 const EMBED_CONFIG: &str = "\
 Configuration file (--config, JSON; omitted fields keep their defaults):
@@ -178,32 +179,14 @@ pub struct AltconvArgs {
     pub common: Common,
 }
 
-/// The nonlinear materials an NNWarp network is trained for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum WarpMaterial {
-    CoRotational,
-    Stvk,
-    NeoHookean,
-}
-
-impl WarpMaterial {
-    /// The dataset's array name.
-    pub fn key(self) -> &'static str {
-        match self {
-            Self::CoRotational => "co-rotational",
-            Self::Stvk => "stvk",
-            Self::NeoHookean => "neo-hookean",
-        }
-    }
-}
-
 #[derive(Args)]
 pub struct NnwarpArgs {
     /// An `nnwarp` dataset directory written by `cargo xtask dataset nnwarp`.
     #[arg(long)]
     pub data: PathBuf,
-    /// The material whose registered shapes the network learns.
-    #[arg(long, value_enum)]
+    /// The material whose registered shapes the network learns: co-rotational, stvk or
+    /// neo-hookean.
+    #[arg(long)]
     pub material: WarpMaterial,
     /// Where the model is written.
     #[arg(long)]
@@ -278,7 +261,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use crate::evaluate::drape::score;
+    use weft_experiments::evaluate::drape::score;
     use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
@@ -393,7 +376,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
     // (the median over epochs of |mean| / sd of the per-batch gradient).
     let late = &p.history[p.history.len() / 2..];
-    let (val_mean, val_sd) = crate::evaluate::mean_sd(late.iter().map(|h| h.validation));
+    let (val_mean, val_sd) = weft_experiments::records::mean_sd(late.iter().map(|h| h.validation));
     let mut signal: Vec<f64> = late
         .iter()
         .filter_map(|h| Some((*h.extra.get("mu_gradient_mean")?, *h.extra.get("mu_gradient_sd")?)))

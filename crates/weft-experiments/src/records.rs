@@ -1,10 +1,10 @@
 //! The evaluation's data: tidy records (one per measured figure, the rows of
 //! `results.json`), roll-out curves and energies for the plots, and shared error metrics.
 
-use anyhow::ensure;
+use crate::error::ensure;
 use serde::{Deserialize, Serialize};
 
-use super::paper::Table;
+use crate::paper::Table;
 use weft_data::Size;
 
 /// One measured figure. Field names and meanings are documented in `docs/RESULTS.md`;
@@ -187,7 +187,7 @@ impl Timing {
 
 /// Every name is lower-case kebab-case and every number finite: the checks CI runs on a
 /// report (and `evaluate` runs before writing one).
-pub fn validate(records: &[Record]) -> anyhow::Result<()> {
+pub fn validate(records: &[Record]) -> crate::Result<()> {
     let kebab = |s: &str| {
         !s.is_empty()
             && s.chars()
@@ -223,6 +223,26 @@ pub fn validate(records: &[Record]) -> anyhow::Result<()> {
 }
 
 pub use weft_nn::metrics::RmsAccumulator;
+
+/// Mean and (population) standard deviation of `samples`; (0, 0) for none.
+pub fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
+    let v: Vec<f64> = samples.collect();
+    let n = v.len().max(1) as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}
+
+/// The distinct names of `names`, in first-seen order.
+pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut v: Vec<&str> = Vec::new();
+    for n in names {
+        if !v.contains(&n) {
+            v.push(n);
+        }
+    }
+    v
+}
 
 #[cfg(test)]
 mod tests {

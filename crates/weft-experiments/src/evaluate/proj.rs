@@ -12,15 +12,15 @@
 
 use std::collections::HashMap;
 
-use anyhow::Context;
+use crate::error::Context;
 use weft_proj::{
     ConicSolver, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, RestShape, SocpSettings, ZeroLengthScaling,
     strain_summary,
 };
 
-use super::EvalContext;
-use super::results::{ExperimentOutput, Timing};
-use crate::report::render::{View, error_png};
+use super::context::EvalContext;
+use crate::records::{ExperimentOutput, Timing};
+use crate::render::{View, error_png};
 use weft_data::Size;
 use weft_data::files::{Array, progress_bar, write_safetensors};
 
@@ -56,7 +56,7 @@ fn socp(solver: ConicSolver, tolerance: f64, polish: bool) -> SocpSettings {
     }
 }
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("proj", ctx.size);
     let quick = ctx.size == Size::Quick;
     let (n, examples) = if quick { (17, 2) } else { (55, 4) };

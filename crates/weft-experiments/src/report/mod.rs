@@ -4,36 +4,17 @@
 
 pub mod html;
 pub mod plots;
-pub mod render;
 
 use std::path::Path;
 
-use anyhow::{Context, ensure};
-use clap::Args;
+use crate::error::{Context, ensure};
 
-use crate::evaluate::paper;
-use crate::evaluate::results::{self, ExperimentOutput, Record};
+use crate::paper;
+use crate::records::distinct;
+use crate::records::{ExperimentOutput, Record};
 use plots::ParetoPoint;
 use weft_data::Size;
 use weft_data::files::{write_json, write_text};
-
-/// Fonts for PNG text: DejaVu Sans, embedded, so no system font is needed.
-pub mod fonts {
-    use std::sync::Once;
-
-    static REGISTER: Once = Once::new();
-
-    pub fn register() {
-        REGISTER.call_once(|| {
-            // Registering an embedded, valid TTF cannot fail but for a malformed font.
-            let _ = plotters::style::register_font(
-                "sans-serif",
-                plotters::style::FontStyle::Normal,
-                dejavu::sans::regular(),
-            );
-        });
-    }
-}
 
 /// The error metric each experiment's Pareto plot uses, and the split it is read on
 /// (`None`: every record of the metric).
@@ -52,6 +33,7 @@ fn pareto_metric(experiment: &str) -> (&'static str, &'static str, Option<&'stat
 }
 
 /// The charts of one experiment, as (title, file stem relative to the report).
+#[derive(Debug, Default)]
 pub struct Charts {
     pub pareto: Vec<(String, String)>,
     pub rollout: Vec<(String, String)>,
@@ -60,9 +42,9 @@ pub struct Charts {
     pub lines: Vec<(String, String)>,
 }
 
-pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> anyhow::Result<()> {
+pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> crate::Result<()> {
     let records: Vec<Record> = outputs.iter().flat_map(|o| o.records.iter().cloned()).collect();
-    results::validate(&records)?;
+    crate::records::validate(&records)?;
     write_json(&out.join("results.json"), &records)?;
     let plot_dir = out.join("plots");
     std::fs::create_dir_all(&plot_dir)?;
@@ -138,16 +120,6 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
 }
 
 /// Distinct names in first-seen order.
-pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
-    let mut v: Vec<&str> = Vec::new();
-    for n in names {
-        if !v.contains(&n) {
-            v.push(n);
-        }
-    }
-    v
-}
-
 fn slug(s: &str) -> String {
     s.replace('/', "-")
 }
@@ -185,21 +157,19 @@ fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Ta
     s
 }
 
-#[derive(Args)]
-pub struct CheckArgs {
-    /// A directory written by `cargo xtask evaluate`.
-    dir: std::path::PathBuf,
-    /// The directory is a published report (`evaluate --publish`, e.g. `docs/results`): its
-    /// `PROVENANCE.md` must exist, and the predictions, which are not committed, are not
-    /// required.
-    #[arg(long)]
-    published: bool,
+/// What [`check`] found in a report.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CheckSummary {
+    pub records: usize,
+    /// Plot, render and prediction files read back.
+    pub files: usize,
 }
 
 /// `cargo xtask check-report DIR`: every output exists and parses, every record has every
-/// field with a valid value, every prediction file reads back with matching shapes.
-pub fn check(args: CheckArgs) -> anyhow::Result<()> {
-    let dir = &args.dir;
+/// field with a valid value, every prediction file reads back with matching shapes. A
+/// `published` report (`evaluate --publish`, e.g. `docs/results`) must have its
+/// `PROVENANCE.md`, and its predictions, which are not committed, are not required.
+pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
     let text = std::fs::read_to_string(dir.join("results.json")).context("reading results.json")?;
     let raw: Vec<serde_json::Value> = serde_json::from_str(&text).context("results.json is not a JSON array")?;
     ensure!(!raw.is_empty(), "results.json holds no record");
@@ -226,7 +196,7 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         );
     }
     let records: Vec<Record> = serde_json::from_str(&text).context("results.json records do not parse")?;
-    results::validate(&records)?;
+    crate::records::validate(&records)?;
     for f in ["tables.md", "index.html"] {
         let t = std::fs::read_to_string(dir.join(f)).with_context(|| format!("reading {f}"))?;
         ensure!(t.len() > 100, "{f} is nearly empty");
@@ -236,13 +206,13 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         !html.contains("src=\"plots/") && !html.contains("src=\"renders/"),
         "index.html links files instead of embedding them"
     );
-    if args.published {
+    if published {
         let t = std::fs::read_to_string(dir.join("PROVENANCE.md")).context("reading PROVENANCE.md")?;
         ensure!(t.contains("cargo xtask"), "PROVENANCE.md names no command");
     }
     let mut files = 0;
     for sub in ["plots", "renders", "predictions"] {
-        if args.published && sub == "predictions" && !dir.join(sub).exists() {
+        if published && sub == "predictions" && !dir.join(sub).exists() {
             continue;
         }
         for path in walk(&dir.join(sub))? {
@@ -276,7 +246,7 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
     }
     // Every experiment/scene/method with an error metric has its predictions (a published
     // report leaves them out).
-    let predictions = !args.published || dir.join("predictions").exists();
+    let predictions = !published || dir.join("predictions").exists();
     for r in records.iter().filter(|_| predictions).filter(|r| {
         r.metric == "m-rms"
             || r.metric == "sqrt-mse"
@@ -290,18 +260,16 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
             .join(format!("{}.safetensors", r.method));
         ensure!(p.exists(), "{} is missing", p.display());
     }
-    println!(
-        "{}: {} records, {files} plot, render and prediction files — all parse",
-        dir.display(),
-        records.len()
-    );
-    Ok(())
+    Ok(CheckSummary {
+        records: records.len(),
+        files,
+    })
 }
 
-fn walk(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+fn walk(dir: &Path) -> crate::Result<Vec<std::path::PathBuf>> {
     let mut out = Vec::new();
     if !dir.exists() {
-        anyhow::bail!("{} is missing", dir.display());
+        crate::error::bail!("{} is missing", dir.display());
     }
     for e in std::fs::read_dir(dir)? {
         let p = e?.path();

@@ -18,7 +18,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
+use crate::error::Context;
 use nalgebra::Vector3;
 use weft_data::DrapeDataset;
 use weft_nn::Device;
@@ -27,10 +27,10 @@ use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, 
 use weft_nn::params::Params;
 use weft_proj::RestShape;
 
-use super::EvalContext;
-use super::paper::Table;
-use super::results::{ExperimentOutput, Timing};
-use crate::report::render::{View, error_colors, error_png};
+use super::context::EvalContext;
+use crate::paper::Table;
+use crate::records::{ExperimentOutput, Timing};
+use crate::render::{View, error_colors, error_png};
 use weft_data::Size;
 use weft_data::files::{progress_bar, write_json};
 
@@ -107,6 +107,7 @@ fn paper_learned_mu(start: &str) -> Option<f64> {
 }
 
 /// Per-split scores of one method, over the examples its postprocess succeeded on.
+#[derive(Debug, Clone)]
 pub struct Scores {
     pub sqrtmse: f64,
     /// The training loss's measure: the mean of the squared per-example SqrtMSE (mm²).
@@ -128,7 +129,7 @@ pub fn score(
     rest: &RestShape,
     k: f64,
     batch: usize,
-) -> anyhow::Result<(Scores, Vec<(usize, Vec<f64>)>)> {
+) -> crate::Result<(Scores, Vec<(usize, Vec<f64>)>)> {
     let start = Instant::now();
     let pred = predict_each(model, data, batch)?;
     let seconds_per_example = start.elapsed().as_secs_f64() / pred.len().max(1) as f64;
@@ -165,7 +166,7 @@ pub fn score(
         s.stretching += 1e3 * (a.stretching_energy - b.stretching_energy).abs();
         kept.push((i, p));
     }
-    anyhow::ensure!(
+    crate::error::ensure!(
         !kept.is_empty(),
         "the postprocess failed on every example: {}",
         s.first_error.clone().unwrap_or_default()
@@ -187,7 +188,7 @@ fn set_split(out: &mut ExperimentOutput, split: &str) {
 
 /// How far the kinematic guess r̃(θ) alone is from the truth on each split: the size of what
 /// the network's offsets have to supply, and how much it varies from pose to pose.
-fn guess_note(dataset: &DrapeDataset) -> anyhow::Result<String> {
+fn guess_note(dataset: &DrapeDataset) -> crate::Result<String> {
     let mut parts = Vec::new();
     for split in SPLITS {
         let errors: Vec<f64> = dataset
@@ -196,7 +197,7 @@ fn guess_note(dataset: &DrapeDataset) -> anyhow::Result<String> {
             .filter(|e| e.split == split)
             .map(|e| sqrtmse_maxdist_mm(&e.guess, &e.truth).map(|(s, _)| s))
             .collect::<Result<_, _>>()?;
-        let (mean, sd) = super::mean_sd(errors.iter().copied());
+        let (mean, sd) = crate::records::mean_sd(errors.iter().copied());
         let (lo, hi) = errors
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| (a.min(e), b.max(e)));
@@ -208,13 +209,12 @@ fn guess_note(dataset: &DrapeDataset) -> anyhow::Result<String> {
     ))
 }
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("drape", ctx.size);
     let root = ctx.out.join("drape");
     let data_dir = root.join("data");
-    crate::evaluate::embed::generate_dataset_frames(weft_data::drape::NAME, ctx.size, &data_dir, None)
-        .context("drape dataset")?;
-    let gt = crate::evaluate::embed::ground_truth_seconds(&data_dir)?;
+    super::context::generate_dataset_frames(ctx, weft_data::drape::NAME, &data_dir, None).context("drape dataset")?;
+    let gt = super::context::ground_truth_seconds(&data_dir)?;
     let dataset = DrapeDataset::load(&data_dir)?;
     let device = Device::Cpu;
     let v = dataset.sleeve.num_vertices();
@@ -226,7 +226,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
                 DrapeTensors::of_split(&dataset, s, &device).with_context(|| format!("the {s} split"))?,
             ))
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::Result<_>>()?;
     let split = |name: &str| &splits.iter().find(|(s, _)| *s == name).expect("split").1;
     let config = training_config(ctx.size);
     write_json(&root.join("config.json"), &config)?;
@@ -527,7 +527,7 @@ fn write_predictions(
     method: &str,
     data: &DrapeTensors,
     pred: &[(usize, Vec<f64>)],
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let dir = ctx.out.join("predictions").join("drape").join(SCENE);
     std::fs::create_dir_all(&dir)?;
     let v = pred.first().map_or(0, |p| p.1.len() / 3);
@@ -575,7 +575,7 @@ fn write_predictions(
 
 /// Geng et al. Fig. 10: the learned per-vertex μ_i on the rest sleeve, a PNG in the report
 /// and a PLY with per-vertex colours (the colour scale runs to the largest μ_i).
-fn render_mu(ctx: &EvalContext, out: &mut ExperimentOutput, dataset: &DrapeDataset, mu: &[f64]) -> anyhow::Result<()> {
+fn render_mu(ctx: &EvalContext, out: &mut ExperimentOutput, dataset: &DrapeDataset, mu: &[f64]) -> crate::Result<()> {
     let dir = Path::new("renders").join("drape").join(SCENE);
     std::fs::create_dir_all(ctx.out.join(&dir))?;
     let scale = mu.iter().copied().fold(0.0f64, f64::max).max(1e-12);

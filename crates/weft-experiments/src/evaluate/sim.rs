@@ -20,20 +20,20 @@
 use std::collections::HashMap;
 use std::time::Instant;
 
-use anyhow::Context;
+use crate::error::Context;
 use weft_mesh::limb::limb;
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
 use weft_sim::scenes::cloth::MeshSpec;
 use weft_sim::scenes::volume::{LimbResolution, SoftTissueScene, VolumeSolve};
 use weft_sim::{ClothScene, ClothSimulation, Energy, LinearSolve, PrefactorizedLinear, VolumeScene, VolumeSimulation};
 
-use super::EvalContext;
-use super::results::{Curve, ExperimentOutput, RmsAccumulator, Timing};
-use crate::report::render::{View, error_png};
+use super::context::EvalContext;
+use crate::records::{Curve, ExperimentOutput, RmsAccumulator, Timing};
+use crate::render::{View, error_png};
 use weft_data::Size;
 use weft_data::files::{Array, progress_bar, write_safetensors};
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("sim", ctx.size);
     let quick = ctx.size == Size::Quick;
     // Simulated time per scene: enough motion to separate the methods, within the
@@ -79,9 +79,9 @@ struct Reference {
 
 impl Reference {
     /// The reference frame at time `t` (an exact multiple of its step).
-    fn at(&self, t: f64) -> anyhow::Result<&[f64]> {
+    fn at(&self, t: f64) -> crate::Result<&[f64]> {
         let k = (t / self.dt).round();
-        anyhow::ensure!(
+        crate::error::ensure!(
             (t / self.dt - k).abs() < 1e-6 && k >= 1.0,
             "time {t} s is not on the reference's grid of {} s",
             self.dt
@@ -97,7 +97,7 @@ fn simulate_cloth(
     scene: &ClothScene,
     duration: f64,
     bar: &indicatif::ProgressBar,
-) -> anyhow::Result<(ClothSimulation, Run)> {
+) -> crate::Result<(ClothSimulation, Run)> {
     let steps = (duration / scene.dt).round() as usize;
     let mut s = scene.clone();
     s.frames = steps;
@@ -129,7 +129,7 @@ fn simulate_cloth(
 }
 
 /// Maps each vertex of `coarse` to the vertex of `fine` at the same rest position.
-fn nested_vertex_map(coarse: &[nalgebra::Vector3<f64>], fine: &[nalgebra::Vector3<f64>]) -> anyhow::Result<Vec<usize>> {
+fn nested_vertex_map(coarse: &[nalgebra::Vector3<f64>], fine: &[nalgebra::Vector3<f64>]) -> crate::Result<Vec<usize>> {
     let key = |p: &nalgebra::Vector3<f64>| [p.x, p.y, p.z].map(|c| (c * 1e9).round() as i64);
     let index: HashMap<_, _> = fine.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
     coarse
@@ -149,7 +149,7 @@ fn cloth(
     name: &str,
     frames: usize,
     resolutions: bool,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let base = ClothScene::builtin(name, ctx.size == Size::Quick)?;
     let dt0 = base.dt;
     let duration = frames as f64 * dt0;
@@ -226,7 +226,7 @@ fn score(
     runs: Vec<Run>,
     frame_dt: f64,
     view: View,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let gt = runs
         .first()
         .filter(|r| r.method == "implicit-euler" || r.method == "neo-hookean")
@@ -329,14 +329,14 @@ fn simulate_volume(
     energy: &TetElasticity,
     masses: &[f64],
     bar: &indicatif::ProgressBar,
-) -> anyhow::Result<(VolumeSimulation, Run)> {
+) -> crate::Result<(VolumeSimulation, Run)> {
     let mut s = scene.clone();
     s.frames = steps;
     let dt = match s.solve {
         VolumeSolve::ImplicitEuler { dt } | VolumeSolve::Newmark { dt, .. } | VolumeSolve::DynamicLinear { dt, .. } => {
             dt
         }
-        _ => anyhow::bail!("the beam comparison needs a dynamic solve"),
+        _ => crate::error::bail!("the beam comparison needs a dynamic solve"),
     };
     let mut sim = VolumeSimulation::new(s, None)?;
     if let (Some(f), Some(settings)) = (tighten, sim.newton_settings_mut()) {
@@ -385,10 +385,10 @@ fn simulate_volume(
     Ok((sim, run))
 }
 
-fn beam(ctx: &EvalContext, out: &mut ExperimentOutput, frames: usize) -> anyhow::Result<()> {
+fn beam(ctx: &EvalContext, out: &mut ExperimentOutput, frames: usize) -> crate::Result<()> {
     let base = VolumeScene::builtin("beam-neo-hookean", ctx.size == Size::Quick)?;
     let VolumeSolve::ImplicitEuler { dt: dt0 } = base.solve else {
-        anyhow::bail!("beam-neo-hookean is expected to use implicit Euler");
+        crate::error::bail!("beam-neo-hookean is expected to use implicit Euler");
     };
     let mesh = base.build_mesh(None)?;
     let lame = LameParameters::from_young_poisson(base.young, base.poisson)?;
@@ -465,7 +465,7 @@ fn beam(ctx: &EvalContext, out: &mut ExperimentOutput, frames: usize) -> anyhow:
 
 /// NNWarp Table 1 layout: tetrahedra, pre-factorisation and solve of linear FEM, beside
 /// one full Neo-Hookean frame on the same body.
-fn linear_timings(ctx: &EvalContext, out: &mut ExperimentOutput) -> anyhow::Result<()> {
+fn linear_timings(ctx: &EvalContext, out: &mut ExperimentOutput) -> crate::Result<()> {
     let quick = ctx.size == Size::Quick;
     // The beam: the built-in clamped beam (NNWarp's training beam has 2629 tets).
     let beam = VolumeScene::builtin("beam-neo-hookean", quick)?;
@@ -528,7 +528,7 @@ fn prefactorized_row(
     poisson: f64,
     full_frame_seconds: f64,
     paper: (f64, f64, Option<f64>),
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let lame = LameParameters::from_young_poisson(young, poisson)?;
     let elastic = TetElasticity::new(mesh, Material::Linear, lame)?;
     let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), 1000.0);

@@ -2,7 +2,7 @@
 //! plain data ([`Table`]) rendered to Markdown (`tables.md`) and HTML (`index.html`).
 //! Paper figures are quoted as printed; ours come from the records of this run.
 
-use super::results::{ExperimentOutput, Record};
+use crate::records::{ExperimentOutput, Record};
 
 /// A table: title, caption, header and rows of cells.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -254,7 +254,7 @@ fn geng_timings(records: &[Record]) -> Table {
 
 /// Ours only (no paper measures it): every method's time and error per scene.
 fn speed_accuracy(o: &ExperimentOutput, metric: &str, label: &str) -> Vec<Table> {
-    crate::report::distinct(
+    crate::records::distinct(
         o.records
             .iter()
             .filter(|r| r.metric == metric)

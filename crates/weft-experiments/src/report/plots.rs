@@ -6,8 +6,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::fonts;
-use crate::evaluate::{Curve, EnergyBar, LinePlot, Scatter};
+use crate::records::{Curve, EnergyBar, LinePlot, Scatter, distinct};
+use crate::render::fonts;
 
 /// One method's point on a Pareto plot.
 #[derive(Debug, Clone)]
@@ -37,11 +37,11 @@ fn palette(i: usize) -> RGBColor {
 }
 
 /// Renders `draw` to `stem.png` and `stem.svg`.
-fn both(
+pub(crate) fn both(
     stem: &Path,
-    draw: impl Fn(DrawingArea<SVGBackend, Shift>) -> anyhow::Result<()>,
-    draw_png: impl Fn(DrawingArea<BitMapBackend, Shift>) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
+    draw: impl Fn(DrawingArea<SVGBackend, Shift>) -> crate::Result<()>,
+    draw_png: impl Fn(DrawingArea<BitMapBackend, Shift>) -> crate::Result<()>,
+) -> crate::Result<()> {
     fonts::register();
     let png = stem.with_extension("png");
     let svg = stem.with_extension("svg");
@@ -58,7 +58,7 @@ fn finish<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
     root: &DrawingArea<DB, Shift>,
     chart: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
-) -> anyhow::Result<()>
+) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -68,8 +68,8 @@ where
         .border_style(BLACK.mix(0.3))
         .position(position)
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
+    root.present().map_err(crate::Error::plot)?;
     Ok(())
 }
 
@@ -105,11 +105,11 @@ fn pareto_on<DB: DrawingBackend>(
     title: &str,
     error_label: &str,
     points: &[ParetoPoint],
-) -> anyhow::Result<()>
+) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.fill(&WHITE).map_err(crate::Error::plot)?;
     // A zero error (a method identical to the reference) sits at the axis floor.
     let (ylo, yhi) = log_range(points.iter().map(|p| p.error));
     let (xlo, xhi) = log_range(points.iter().map(|p| p.time_ratio));
@@ -119,7 +119,7 @@ where
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d((xlo..xhi).log_scale(), (ylo..yhi).log_scale())
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
         .x_desc("time per frame / ground truth's (same run)")
@@ -127,7 +127,7 @@ where
         .x_label_formatter(&|v| format!("{v:.1e}"))
         .y_label_formatter(&|v| format!("{v:.1e}"))
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     let clamp = |p: &ParetoPoint| (p.time_ratio.max(xlo), p.error.max(ylo));
     let front = pareto_front(points);
     chart
@@ -135,21 +135,21 @@ where
             front.iter().map(|&i| clamp(&points[i])),
             ShapeStyle::from(&BLACK.mix(0.4)).stroke_width(2),
         ))
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?
+        .map_err(crate::Error::plot)?
         .label("Pareto front")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.mix(0.4)));
     for (i, p) in points.iter().enumerate() {
         let c = palette(i);
         chart
             .draw_series(std::iter::once(Circle::new(clamp(p), 6, c.filled())))
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .map_err(crate::Error::plot)?
             .label(p.method.clone())
             .legend(move |(x, y)| Circle::new((x + 9, y), 5, c.filled()));
     }
     finish(&root, &mut chart, SeriesLabelPosition::UpperRight)
 }
 
-pub fn pareto(stem: &Path, title: &str, error_label: &str, points: &[ParetoPoint]) -> anyhow::Result<()> {
+pub fn pareto(stem: &Path, title: &str, error_label: &str, points: &[ParetoPoint]) -> crate::Result<()> {
     both(
         stem,
         |r| pareto_on(r, title, error_label, points),
@@ -157,11 +157,11 @@ pub fn pareto(stem: &Path, title: &str, error_label: &str, points: &[ParetoPoint
     )
 }
 
-fn rollout_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, curves: &[&Curve]) -> anyhow::Result<()>
+fn rollout_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, curves: &[&Curve]) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.fill(&WHITE).map_err(crate::Error::plot)?;
     let xmax = curves
         .iter()
         .flat_map(|c| c.frames.iter().copied())
@@ -173,14 +173,14 @@ where
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d(0.0..xmax, (ylo..yhi).log_scale())
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
         .x_desc("frame")
         .y_desc("M_rms of the frame (mm)")
         .y_label_formatter(&|v| format!("{v:.1e}"))
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     for (i, c) in curves.iter().enumerate() {
         let colour = palette(i);
         chart
@@ -188,24 +188,24 @@ where
                 c.frames.iter().zip(&c.error_mm).map(|(x, y)| (*x, y.max(ylo))),
                 ShapeStyle::from(&colour).stroke_width(2),
             ))
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .map_err(crate::Error::plot)?
             .label(c.method.clone())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
     }
     finish(&root, &mut chart, SeriesLabelPosition::LowerRight)
 }
 
-pub fn rollout(stem: &Path, title: &str, curves: &[&Curve]) -> anyhow::Result<()> {
+pub fn rollout(stem: &Path, title: &str, curves: &[&Curve]) -> crate::Result<()> {
     both(stem, |r| rollout_on(r, title, curves), |r| rollout_on(r, title, curves))
 }
 
-fn energy_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<()>
+fn energy_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, title: &str, bars: &[&EnergyBar]) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let methods = super::distinct(bars.iter().map(|b| b.method.as_str()));
-    let kinds = super::distinct(bars.iter().map(|b| b.kind.as_str()));
+    root.fill(&WHITE).map_err(crate::Error::plot)?;
+    let methods = distinct(bars.iter().map(|b| b.method.as_str()));
+    let kinds = distinct(bars.iter().map(|b| b.kind.as_str()));
     let unit = bars.first().map_or("J", |b| b.unit.as_str());
     let xmax = bars.iter().map(|b| b.value.abs()).fold(0.0f64, f64::max).max(1e-30) * 1.4;
     let n = methods.len() as f64;
@@ -216,7 +216,7 @@ where
         .x_label_area_size(45)
         .y_label_area_size(190)
         .build_cartesian_2d(0.0..xmax, 0.0..n)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     let names = methods.clone();
     chart
         .configure_mesh()
@@ -234,7 +234,7 @@ where
         .x_desc(format!("mean energy ({unit})"))
         .x_label_formatter(&|v| format!("{v:.2e}"))
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     let width = 0.8 / kinds.len() as f64;
     for (k, kind) in kinds.iter().enumerate() {
         let colour = palette(k);
@@ -252,22 +252,22 @@ where
             .collect();
         chart
             .draw_series(rects)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .map_err(crate::Error::plot)?
             .label(kind.to_string())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
     }
     finish(&root, &mut chart, SeriesLabelPosition::LowerRight)
 }
 
-pub fn energy(stem: &Path, title: &str, bars: &[&EnergyBar]) -> anyhow::Result<()> {
+pub fn energy(stem: &Path, title: &str, bars: &[&EnergyBar]) -> crate::Result<()> {
     both(stem, |r| energy_on(r, title, bars), |r| energy_on(r, title, bars))
 }
 
-fn scatter_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, s: &Scatter) -> anyhow::Result<()>
+fn scatter_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, s: &Scatter) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.fill(&WHITE).map_err(crate::Error::plot)?;
     let range = |k: usize| {
         let (lo, hi) = s
             .points
@@ -284,7 +284,7 @@ where
         .x_label_area_size(45)
         .y_label_area_size(60)
         .build_cartesian_2d(range(0), range(1))
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
         .x_desc(s.x_label.as_str())
@@ -292,11 +292,8 @@ where
         .x_label_formatter(&|v| format!("{v:.2}"))
         .y_label_formatter(&|v| format!("{v:.2}"))
         .draw()
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    for (i, label) in super::distinct(s.labels.iter().map(String::as_str))
-        .into_iter()
-        .enumerate()
-    {
+        .map_err(crate::Error::plot)?;
+    for (i, label) in distinct(s.labels.iter().map(String::as_str)).into_iter().enumerate() {
         let colour = palette(i);
         let points = s
             .points
@@ -306,7 +303,7 @@ where
             .map(|(p, _)| Circle::new((p[0], p[1]), 4, colour.filled()));
         chart
             .draw_series(points)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .map_err(crate::Error::plot)?
             .label(label.to_string())
             .legend(move |(x, y)| Circle::new((x + 6, y), 4, colour.filled()));
     }
@@ -314,15 +311,15 @@ where
 }
 
 /// A labelled 2-D scatter, one colour per label.
-pub fn scatter(stem: &Path, s: &Scatter) -> anyhow::Result<()> {
+pub fn scatter(stem: &Path, s: &Scatter) -> crate::Result<()> {
     both(stem, |r| scatter_on(r, s), |r| scatter_on(r, s))
 }
 
-fn lines_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &LinePlot) -> anyhow::Result<()>
+fn lines_on<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &LinePlot) -> crate::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    root.fill(&WHITE).map_err(crate::Error::plot)?;
     let finite = |v: &&f64| v.is_finite();
     let (xlo, xhi) = p
         .series
@@ -331,7 +328,7 @@ where
         .fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
     let (xlo, xhi) = if xlo < xhi { (xlo, xhi) } else { (0.0, 1.0) };
     let ys = || p.series.iter().flat_map(|s| s.y.iter().filter(finite).copied());
-    let e = |e| anyhow::anyhow!("{e:?}");
+    let e = |e| crate::Error::plot(e);
     let mut builder = ChartBuilder::on(&root);
     builder
         .caption(&p.title, ("sans-serif", 20))
@@ -384,89 +381,8 @@ where
 }
 
 /// A line chart of several series (NNWarp's trajectory and extrapolation figures).
-pub fn lines(stem: &Path, p: &LinePlot) -> anyhow::Result<()> {
+pub fn lines(stem: &Path, p: &LinePlot) -> crate::Result<()> {
     both(stem, |r| lines_on(r, p), |r| lines_on(r, p))
-}
-
-fn heat_map_on<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
-    title: &str,
-    cells: &[&crate::stability::Cell],
-) -> anyhow::Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    use crate::stability::Outcome;
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
-    root.fill(&WHITE).map_err(e)?;
-    let root = root.titled(title, ("sans-serif", 20)).map_err(e)?;
-    let panels = super::distinct(cells.iter().map(|c| c.panel.as_str()));
-    let per_row = panels.len().min(3);
-    let grid_rows = panels.len().div_ceil(per_row);
-    let areas = root.split_evenly((grid_rows, per_row));
-    for (panel, area) in panels.iter().zip(areas) {
-        let pc: Vec<&&crate::stability::Cell> = cells.iter().filter(|c| c.panel == *panel).collect();
-        let rows = super::distinct(pc.iter().map(|c| c.row.as_str()));
-        let cols = super::distinct(pc.iter().map(|c| c.col.as_str()));
-        let (w, h) = area.dim_in_pixel();
-        let (left, top) = (110i32, 44i32);
-        let cw = ((w as i32 - left - 8) / cols.len().max(1) as i32).max(10);
-        let ch = ((h as i32 - top - 8) / rows.len().max(1) as i32).clamp(10, 40);
-        area.draw(&Text::new(panel.to_string(), (4, 4), ("sans-serif", 14).into_font()))
-            .map_err(e)?;
-        for (j, col) in cols.iter().enumerate() {
-            area.draw(&Text::new(
-                col.to_string(),
-                (left + j as i32 * cw + 2, 24),
-                ("sans-serif", 11).into_font(),
-            ))
-            .map_err(e)?;
-        }
-        for (i, row) in rows.iter().enumerate() {
-            let y = top + i as i32 * ch;
-            area.draw(&Text::new(
-                row.to_string(),
-                (4, y + ch / 2 - 6),
-                ("sans-serif", 11).into_font(),
-            ))
-            .map_err(e)?;
-            for (j, col) in cols.iter().enumerate() {
-                let Some(c) = pc.iter().find(|c| c.row == *row && c.col == *col) else {
-                    continue;
-                };
-                let colour = match c.outcome {
-                    Outcome::Converged => RGBColor(110, 180, 110),
-                    Outcome::Clamped => RGBColor(235, 200, 80),
-                    Outcome::TypedError => RGBColor(170, 170, 190),
-                    Outcome::Failure => RGBColor(210, 40, 40),
-                };
-                let x = left + j as i32 * cw;
-                area.draw(&Rectangle::new([(x, y), (x + cw - 2, y + ch - 2)], colour.filled()))
-                    .map_err(e)?;
-                let label = match (c.outcome, c.iterations) {
-                    (Outcome::TypedError, _) => "error".to_string(),
-                    (Outcome::Failure, _) => "FAIL".to_string(),
-                    (_, Some(it)) => format!("{it:.1}"),
-                    _ => String::new(),
-                };
-                area.draw(&Text::new(
-                    label,
-                    (x + 4, y + ch / 2 - 6),
-                    ("sans-serif", 11).into_font(),
-                ))
-                .map_err(e)?;
-            }
-        }
-    }
-    root.present().map_err(e)?;
-    Ok(())
-}
-
-/// A stability heat map: one panel per held value, cells coloured by outcome (green
-/// converged, yellow clamped, grey typed error, red failure) and labelled with the mean
-/// iterations per step.
-pub fn heat_map(stem: &Path, title: &str, cells: &[&crate::stability::Cell]) -> anyhow::Result<()> {
-    both(stem, |r| heat_map_on(r, title, cells), |r| heat_map_on(r, title, cells))
 }
 
 #[cfg(test)]

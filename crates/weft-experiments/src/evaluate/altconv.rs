@@ -15,16 +15,17 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::Context;
 use nalgebra::Vector3;
 use weft_data::{LimbDataset, LimbSequence};
 use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Variant, score_sequence};
 use weft_nn::graph::NormalizedAdjacency;
 
-use super::paper::Table;
-use super::results::{ExperimentOutput, LinePlot, Series, Timing};
-use super::{EvalContext, mean_sd};
-use crate::report::render::{View, error_colors, error_png};
+use super::context::EvalContext;
+use crate::paper::Table;
+use crate::records::mean_sd;
+use crate::records::{ExperimentOutput, LinePlot, Series, Timing};
+use crate::render::{View, error_colors, error_png};
 use weft_data::Size;
 
 const SCENE: &str = "limb";
@@ -116,7 +117,7 @@ const STANDARD_EPOCHS: usize = 12;
 
 /// Removes a model directory trained under another configuration than `config` (or
 /// whose configuration cannot be read), so that it is retrained rather than refused.
-fn discard_if_stale(dir: &Path, config: &AltConvTrainingConfig) -> anyhow::Result<()> {
+fn discard_if_stale(dir: &Path, config: &AltConvTrainingConfig) -> crate::Result<()> {
     let path = dir.join("config.json");
     if !path.exists() {
         return Ok(());
@@ -167,7 +168,7 @@ fn score(
     adj: &NormalizedAdjacency,
     sequences: &[&LimbSequence],
     horizon: usize,
-) -> anyhow::Result<Errors> {
+) -> crate::Result<Errors> {
     let mut single = vec![Vec::new(); horizon];
     let mut rollout = vec![Vec::new(); horizon];
     let mut seconds = 0.0;
@@ -194,13 +195,13 @@ fn score(
     })
 }
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("altconv", ctx.size);
     let root = ctx.out.join("altconv");
     let data = root.join("data");
     let frames = (ctx.size == Size::Quick).then_some(QUICK_FRAMES);
-    crate::evaluate::embed::generate_dataset_frames(SCENE, ctx.size, &data, frames).context("limb dataset")?;
-    let gt = crate::evaluate::embed::ground_truth_seconds(&data)?;
+    super::context::generate_dataset_frames(ctx, SCENE, &data, frames).context("limb dataset")?;
+    let gt = super::context::ground_truth_seconds(&data)?;
     let dataset = LimbDataset::load(&data)?;
     let adj = NormalizedAdjacency::new(&dataset.rest)?;
     let device = weft_nn::Device::Cpu;
@@ -217,7 +218,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     }
     let longest_common = dataset.sequences.iter().map(|s| s.skinned.len() - 1).min().unwrap_or(0);
     let horizon = longest_common.min(*WINDOWS.last().unwrap_or(&50));
-    anyhow::ensure!(horizon >= 1, "the limb sequences hold no step");
+    crate::error::ensure!(horizon >= 1, "the limb sequences hold no step");
     let windows: Vec<usize> = WINDOWS.iter().copied().filter(|&w| w <= horizon).collect();
     let train_steps = training_config(ctx.size, Variant::Alt).steps;
     out.notes.push(format!(
@@ -348,7 +349,7 @@ fn write_predictions(
     source: &str,
     horizon: usize,
     surfaces: &[Vec<f64>],
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let dir = ctx.out.join("predictions").join("altconv").join(SCENE);
     std::fs::create_dir_all(&dir)?;
     let sequences: Vec<_> = dataset.split(source).collect();
@@ -392,7 +393,7 @@ fn render_heat_maps(
     dataset: &LimbDataset,
     heat: &[(String, Vec<f64>, Vec<f64>)],
     horizon: usize,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let scale = heat
         .iter()
         .find(|(m, _, _)| m == SKINNING)

@@ -7,13 +7,14 @@ use weft_data::files::progress_bar;
 /// A training run's progress: a bar over its batches (on a terminal) and its epoch lines
 /// above it — or, off a terminal where indicatif hides the bar, on standard error. With
 /// `quiet`, neither (the lines are in the run's `train.log` all the same).
+#[derive(Debug)]
 pub struct TrainProgress {
     bar: ProgressBar,
     quiet: bool,
 }
 
 impl TrainProgress {
-    pub fn new(quiet: bool, prefix: &str) -> anyhow::Result<Self> {
+    pub fn new(quiet: bool, prefix: &str) -> crate::Result<Self> {
         Ok(Self {
             bar: progress_bar(quiet, 0, prefix, "batches")?,
             quiet,

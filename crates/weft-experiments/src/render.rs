@@ -9,8 +9,6 @@ use nalgebra::Vector3;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
 
-use super::fonts;
-
 /// Orthographic camera: the direction it looks along and the world's up axis.
 #[derive(Debug, Clone, Copy)]
 pub struct View {
@@ -62,7 +60,7 @@ pub fn error_png(
     scale: f64,
     title: &str,
     view: View,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     fonts::register();
     let f = Vector3::from(view.look).normalize();
     let right = f.cross(&Vector3::from(view.up)).normalize();
@@ -139,4 +137,22 @@ pub fn error_png(
     ))?;
     root.present()?;
     Ok(())
+}
+
+/// Fonts for PNG text: DejaVu Sans, embedded, so no system font is needed.
+pub mod fonts {
+    use std::sync::Once;
+
+    static REGISTER: Once = Once::new();
+
+    pub fn register() {
+        REGISTER.call_once(|| {
+            // Registering an embedded, valid TTF cannot fail but for a malformed font.
+            let _ = plotters::style::register_font(
+                "sans-serif",
+                plotters::style::FontStyle::Normal,
+                dejavu::sans::regular(),
+            );
+        });
+    }
 }

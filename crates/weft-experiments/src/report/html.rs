@@ -7,8 +7,8 @@ use std::path::Path;
 use base64::Engine;
 
 use super::Charts;
-use crate::evaluate::paper::Table;
-use crate::evaluate::results::ExperimentOutput;
+use crate::paper::Table;
+use crate::records::ExperimentOutput;
 use weft_data::Size;
 
 fn escape(s: &str) -> String {
@@ -52,14 +52,14 @@ fn table_html(t: &Table) -> String {
     s
 }
 
-fn svg_inline(dir: &Path, stem: &str) -> anyhow::Result<String> {
+fn svg_inline(dir: &Path, stem: &str) -> crate::Result<String> {
     let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg")))?;
     // Drop any XML prolog; the <svg> element embeds as is.
     let start = svg.find("<svg").unwrap_or(0);
     Ok(format!("<div class=\"chart\">{}</div>\n", &svg[start..]))
 }
 
-fn png_inline(dir: &Path, rel: &str) -> anyhow::Result<String> {
+fn png_inline(dir: &Path, rel: &str) -> crate::Result<String> {
     let bytes = std::fs::read(dir.join(rel))?;
     let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
     Ok(format!(
@@ -75,7 +75,7 @@ pub fn page(
     tables: &[Table],
     charts: &[Charts],
     wall: f64,
-) -> anyhow::Result<String> {
+) -> crate::Result<String> {
     let mut body = String::new();
     body.push_str(&format!(
         "<h1>weft evaluation — {} size</h1>\n<p>Every figure on this page was measured by <code>cargo xtask evaluate \
@@ -92,7 +92,7 @@ pub fn page(
     }
     body.push_str("<h3>Tables that later experiments fill</h3>\n<ul>\n");
     let ran: Vec<&str> = outputs.iter().map(|o| o.experiment.as_str()).collect();
-    for (what, exp) in crate::evaluate::paper::pending(&ran) {
+    for (what, exp) in crate::paper::pending(&ran) {
         body.push_str(&format!("<li>{} — experiment <code>{exp}</code></li>\n", escape(what)));
     }
     body.push_str("</ul>\n");

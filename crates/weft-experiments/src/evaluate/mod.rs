@@ -9,72 +9,85 @@
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
 pub mod altconv;
+pub mod context;
 pub mod drape;
 pub mod embed;
 pub mod nnwarp;
-pub mod paper;
 pub mod proj;
-pub mod results;
 pub mod sim;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
-use clap::Args;
+use crate::error::Context;
 
-pub use results::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
+pub use crate::records::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
+use context::EvalContext;
 use weft_data::Size;
 use weft_data::files::write_json;
 
 /// Experiments `evaluate` runs, in order.
 pub const EXPERIMENTS: [&str; 6] = ["sim", "proj", "embed", "nnwarp", "altconv", "drape"];
 
-#[derive(Args)]
-pub struct EvaluateArgs {
-    /// quick (minutes; small meshes) or standard (the committed evaluation in docs/results/).
-    #[arg(long, default_value_t = Size::Standard)]
-    size: Size,
-    /// Shorthand for --size quick.
-    #[arg(long)]
-    quick: bool,
-    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv, drape.
-    #[arg(long, value_delimiter = ',')]
-    only: Vec<String>,
-    /// Output directory (default: out/evaluate-<size>).
-    #[arg(long)]
-    out: Option<PathBuf>,
-    /// Re-run experiments whose cached output exists in OUT/experiments/ (default: resume, reusing them).
-    #[arg(long)]
-    force: bool,
-    /// Hide progress bars.
-    #[arg(long)]
-    quiet: bool,
-    /// After the run, copy the report (results.json, tables.md, index.html, plots/, renders/; not the large
-    /// predictions/) to this directory with a PROVENANCE.md naming the command, machine and code version —
-    /// how docs/results/ is made.
-    #[arg(long)]
-    publish: Option<PathBuf>,
-}
-
-/// What an experiment needs from the command line.
-pub struct EvalContext {
+/// How an evaluation runs: the command line's `cargo xtask evaluate` options.
+#[derive(Debug, Clone)]
+pub struct EvaluateOptions {
+    /// `Quick` (minutes; small meshes) or `Standard` (the committed evaluation).
     pub size: Size,
+    /// Run only these experiments (empty: all of [`EXPERIMENTS`]).
+    pub only: Vec<String>,
+    /// The output directory.
     pub out: PathBuf,
+    /// Re-run experiments whose cached output exists in `out/experiments/`.
+    pub force: bool,
+    /// Hide progress bars.
     pub quiet: bool,
+    /// After the run, copy the report (not the large predictions) to this directory with a
+    /// `PROVENANCE.md` — how `docs/results/` is made.
+    pub publish: Option<PathBuf>,
+    /// The command that ran the evaluation, recorded with every experiment.
+    pub command: String,
+    /// The code version recorded with every experiment and dataset.
+    pub code_version: String,
 }
 
-pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
-    let size = if args.quick { Size::Quick } else { args.size };
+impl EvaluateOptions {
+    /// The defaults of `cargo xtask evaluate --size SIZE`: every experiment, into
+    /// `out/evaluate-SIZE`.
+    pub fn new(size: Size) -> Self {
+        Self {
+            size,
+            only: Vec::new(),
+            out: PathBuf::from(format!("out/evaluate-{}", size.as_str())),
+            force: false,
+            quiet: true,
+            publish: None,
+            command: format!("evaluate --size {size}"),
+            code_version: concat!("weft-experiments ", env!("CARGO_PKG_VERSION")).to_string(),
+        }
+    }
+}
+
+/// Runs the selected experiments (each resumed from its cached output unless `force`),
+/// then rebuilds the report from every experiment cached in `out` at this size, and
+/// publishes it if asked.
+pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
+    let size = args.size;
     if size == Size::Paper {
-        bail!("evaluate runs at --size quick or standard; paper-size datasets are for training (cargo xtask dataset)");
+        return Err(crate::Error::Invalid(
+            "evaluate runs at --size quick or standard; paper-size datasets are for training (cargo xtask dataset)"
+                .into(),
+        ));
     }
     let selected: Vec<&str> = if args.only.is_empty() {
         EXPERIMENTS.to_vec()
     } else {
         for o in &args.only {
             if !EXPERIMENTS.contains(&o.as_str()) {
-                bail!("--only {o:?}: experiments are {}", EXPERIMENTS.join(", "));
+                return Err(crate::Error::Invalid(format!(
+                    "--only {o:?}: experiments are {}",
+                    EXPERIMENTS.join(", ")
+                )));
             }
         }
         EXPERIMENTS
@@ -83,15 +96,13 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             .filter(|e| args.only.iter().any(|o| o == e))
             .collect()
     };
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("out/evaluate-{}", size.as_str())));
+    let out = args.out.clone();
     std::fs::create_dir_all(out.join("experiments")).with_context(|| format!("creating {}", out.display()))?;
     let ctx = EvalContext {
         size,
         out: out.clone(),
         quiet: args.quiet,
+        code_version: args.code_version.clone(),
     };
     let start = Instant::now();
     let mut ran: Vec<&str> = Vec::new();
@@ -119,9 +130,9 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         output.wall_seconds = t.elapsed().as_secs_f64();
-        output.command = format!("cargo xtask {}", std::env::args().skip(1).collect::<Vec<_>>().join(" "));
-        output.code_version = crate::code_version();
-        results::validate(&output.records)?;
+        output.command = format!("cargo xtask {}", args.command);
+        output.code_version = args.code_version.clone();
+        crate::records::validate(&output.records)?;
         write_json(&cache, &output)?;
         ran.push(name);
         eprintln!(
@@ -144,29 +155,26 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         }
     }
     crate::report::write(&out, size, &outputs, start.elapsed().as_secs_f64())?;
-    println!(
+    eprintln!(
         "report: {} (results.json, tables.md, plots/, predictions/, renders/)",
         out.join("index.html").display()
     );
     if let Some(dest) = &args.publish {
-        publish(&out, dest, &ran, &outputs)?;
-        println!("published to {}", dest.display());
+        publish(&out, dest, &ran, &outputs, args)?;
+        eprintln!("published to {}", dest.display());
     }
     Ok(())
 }
 
 /// Copies the report to `dest` with its provenance: the command, and which experiments it
 /// ran and which it took from earlier runs cached in the same output directory.
-/// Mean and (population) standard deviation of `samples`; (0, 0) for none.
-pub(crate) fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
-    let v: Vec<f64> = samples.collect();
-    let n = v.len().max(1) as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
-    (mean, var.sqrt())
-}
-
-fn publish(out: &Path, dest: &Path, ran: &[&str], outputs: &[ExperimentOutput]) -> anyhow::Result<()> {
+fn publish(
+    out: &Path,
+    dest: &Path,
+    ran: &[&str],
+    outputs: &[ExperimentOutput],
+    args: &EvaluateOptions,
+) -> crate::Result<()> {
     let reused: Vec<&str> = outputs
         .iter()
         .map(|o| o.experiment.as_str())
@@ -208,11 +216,11 @@ fn publish(out: &Path, dest: &Path, ran: &[&str], outputs: &[ExperimentOutput]) 
          (each experiment's wall time is at the top of `tables.md`; `--only NAME --force` reruns one). \
          Machine: {cores} cores of {cpu}; code version {}. `index.html` is the whole report in one file. The predictions (every method's positions beside the reference) are not committed: the same \
          command writes them to `{}/predictions/`.\n",
-        std::env::args().skip(1).collect::<Vec<_>>().join(" "),
+        args.command,
         list(ran),
         out.display(),
         list(&reused),
-        crate::code_version(),
+        args.code_version,
         out.display()
     ) + &provenance_per_experiment(outputs);
     Ok(weft_data::files::write_text(&dest.join("PROVENANCE.md"), &text)?)
@@ -237,7 +245,7 @@ fn provenance_per_experiment(outputs: &[ExperimentOutput]) -> String {
     s
 }
 
-fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
+fn copy_tree(from: &Path, to: &Path) -> crate::Result<()> {
     std::fs::create_dir_all(to)?;
     for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
         let p = e?.path();
@@ -251,19 +259,19 @@ fn copy_tree(from: &Path, to: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn read_cached(path: &Path, size: Size) -> anyhow::Result<Option<ExperimentOutput>> {
+fn read_cached(path: &Path, size: Size) -> crate::Result<Option<ExperimentOutput>> {
     if !path.exists() {
         return Ok(None);
     }
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     match serde_json::from_slice::<ExperimentOutput>(&bytes) {
         Ok(o) if o.size == size => Ok(Some(o)),
-        Ok(o) => bail!(
+        Ok(o) => Err(crate::Error::Invalid(format!(
             "{} holds a {} evaluation; use another --out for {} or pass --force",
             path.display(),
             o.size.as_str(),
             size.as_str()
-        ),
+        ))),
         // An output of an older format is recomputed rather than trusted.
         Err(_) => Ok(None),
     }

@@ -17,7 +17,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::Context;
+use crate::error::Context;
 use nalgebra::Vector3;
 use weft_mesh::TetMesh;
 use weft_mesh::generators::{BeamParams, beam, bent_beam, t_beam, tapered_beam};
@@ -29,9 +29,8 @@ use weft_sim::warp::{
 };
 use weft_sim::{LinearSolve, PrefactorizedLinear, Quasistatic};
 
-use super::EvalContext;
-use super::results::{ExperimentOutput, LinePlot, Series, Timing};
-use crate::train::WarpMaterial;
+use super::context::EvalContext;
+use crate::records::{ExperimentOutput, LinePlot, Series, Timing};
 use weft_data::Size;
 
 /// Linear answers' largest displacement at the evaluated loads (unit-sphere units).
@@ -70,7 +69,7 @@ fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
 }
 
 /// The training beam, three unseen beams and the limb body (15 k tets at standard size).
-fn shapes(size: Size) -> anyhow::Result<Vec<Shape>> {
+fn shapes(size: Size) -> crate::Result<Vec<Shape>> {
     let quick = size == Size::Quick;
     let params = BeamParams {
         cells: if quick { [6, 3, 3] } else { [12, 6, 6] },
@@ -104,7 +103,7 @@ fn shapes(size: Size) -> anyhow::Result<Vec<Shape>> {
 }
 
 /// The `limb` body at `resolution`, clamped at its bones.
-fn limb(resolution: LimbResolution) -> anyhow::Result<Shape> {
+fn limb(resolution: LimbResolution) -> crate::Result<Shape> {
     let limb = weft_mesh::limb::limb(&resolution.params())?;
     Ok(Shape {
         name: "limb",
@@ -128,6 +127,37 @@ fn material_of(m: WarpMaterial) -> Material {
         WarpMaterial::CoRotational => Material::CoRotational,
         WarpMaterial::Stvk => Material::StVK,
         WarpMaterial::NeoHookean => Material::NeoHookean,
+    }
+}
+
+/// The nonlinear materials an NNWarp network is trained for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WarpMaterial {
+    CoRotational,
+    Stvk,
+    NeoHookean,
+}
+
+impl WarpMaterial {
+    pub const ALL: [WarpMaterial; 3] = [Self::CoRotational, Self::Stvk, Self::NeoHookean];
+
+    /// The dataset's array name.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::CoRotational => "co-rotational",
+            Self::Stvk => "stvk",
+            Self::NeoHookean => "neo-hookean",
+        }
+    }
+}
+
+impl std::str::FromStr for WarpMaterial {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.key() == s)
+            .ok_or_else(|| format!("{s:?} is not a material (co-rotational, stvk or neo-hookean)"))
     }
 }
 
@@ -160,8 +190,8 @@ struct Bench<'a> {
 }
 
 impl<'a> Bench<'a> {
-    fn new(shape: &'a Shape, direction: Vector3<f64>, lame: LameParameters) -> anyhow::Result<Self> {
-        anyhow::ensure!(!shape.anchors.is_empty(), "{} has no anchored node", shape.name);
+    fn new(shape: &'a Shape, direction: Vector3<f64>, lame: LameParameters) -> crate::Result<Self> {
+        crate::error::ensure!(!shape.anchors.is_empty(), "{} has no anchored node", shape.name);
         let mesh = &shape.mesh;
         let n = 3 * mesh.num_vertices();
         let rest = mesh.flat_positions();
@@ -176,7 +206,7 @@ impl<'a> Bench<'a> {
         let (_, scale) = unit_sphere_normalization(mesh.positions());
         linear.step(&unit_force, &[])?;
         let reach = max_node_displacement(linear.displacements());
-        anyhow::ensure!(reach > 0.0, "{}: the field moves no node", shape.name);
+        crate::error::ensure!(reach > 0.0, "{}: the field moves no node", shape.name);
         let gradients = Arc::new(NodalGradients::new(mesh)?);
         let mut anchored = vec![false; n / 3];
         shape.anchors.iter().for_each(|&i| anchored[i] = true);
@@ -200,7 +230,7 @@ impl<'a> Bench<'a> {
         self.unit_force.iter().map(|f| f * a).collect()
     }
 
-    fn nnwarp(&self, root: &Path, m: WarpMaterial, field: FieldDirection) -> anyhow::Result<NnWarp> {
+    fn nnwarp(&self, root: &Path, m: WarpMaterial, field: FieldDirection) -> crate::Result<NnWarp> {
         let (_, mlp) = load_model(&root.join("models").join(m.key()))?;
         let context = WarpContext::with_gradients(
             &self.shape.mesh,
@@ -218,7 +248,7 @@ impl<'a> Bench<'a> {
     /// runtime (§4) and modal warping (Choi & Ko) both see the load in each node's rest
     /// frame, and only then is the registration target `f_int(u) = 𝓡 K ũ` the equilibrium
     /// under `f` (docs/NNWARP.md). `linear` is the plain solve.
-    fn score(&mut self, nnwarp: &NnWarp, reference: &mut Reference, level: f64) -> anyhow::Result<Scored> {
+    fn score(&mut self, nnwarp: &NnWarp, reference: &mut Reference, level: f64) -> crate::Result<Scored> {
         let load = self.load(level);
         let truth = reference.advance(level, &load, &self.rest)?;
         let t = Instant::now();
@@ -279,7 +309,7 @@ struct Reference {
 
 impl Reference {
     /// `field` names the load's direction in the cache.
-    fn new(root: &Path, bench: &Bench, m: WarpMaterial, lame: LameParameters, field: &str) -> anyhow::Result<Self> {
+    fn new(root: &Path, bench: &Bench, m: WarpMaterial, lame: LameParameters, field: &str) -> crate::Result<Self> {
         let elastic = TetElasticity::new(&bench.shape.mesh, material_of(m), lame)?;
         let mut quasistatic = Quasistatic::new(bench.rest.len(), &[&elastic], bench.fixed.clone())?;
         // A load the material cannot follow (StVK's collapse, an inverted element) should
@@ -300,7 +330,7 @@ impl Reference {
     /// Moves to the equilibrium under `load` (the one whose linear answer reaches `level`)
     /// in `REFERENCE_STEPS` increments from the last one, or reads it from the cache, and
     /// returns its displacements from `rest`.
-    fn advance(&mut self, level: f64, load: &[f64], rest: &[f64]) -> anyhow::Result<Vec<f64>> {
+    fn advance(&mut self, level: f64, load: &[f64], rest: &[f64]) -> crate::Result<Vec<f64>> {
         let path = self.cache.join(format!("level-{level:.4}.safetensors"));
         if let Some((x, seconds)) = read_reference(&path, self.x.len()) {
             self.x = x;
@@ -390,7 +420,7 @@ fn load_extrapolation(
     field: FieldDirection,
     lame: LameParameters,
     size: Size,
-) -> anyhow::Result<LinePlot> {
+) -> crate::Result<LinePlot> {
     let mut bench = Bench::new(shape, direction, lame)?;
     let nnwarp = bench.nnwarp(root, WarpMaterial::NeoHookean, field)?;
     let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(FIELD_ANGLES.0))?;
@@ -407,7 +437,7 @@ fn load_extrapolation(
         };
         push_point(&mut series, level, &scored);
     }
-    anyhow::ensure!(!series[0].x.is_empty(), "no load could be scored");
+    crate::error::ensure!(!series[0].x.is_empty(), "no load could be scored");
     Ok(LinePlot {
         name: format!("extrapolation-load-{}", shape.name),
         title: format!(
@@ -424,7 +454,7 @@ fn load_extrapolation(
 /// NNWarp Fig. 19: `rel-error` as the field's azimuth α leaves the trained quarter
 /// hemisphere (α ∈ [0, π/2]; β fixed), at the middle load, Neo-Hookean. Each direction is
 /// a fresh body: its contextual features and its reference depend on the field.
-fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, size: Size) -> anyhow::Result<LinePlot> {
+fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, size: Size) -> crate::Result<LinePlot> {
     let alphas: Vec<f64> = if size == Size::Quick {
         vec![0.4, 1.2, 2.4]
     } else {
@@ -441,7 +471,7 @@ fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, siz
         };
         push_point(&mut series, alpha, &scored);
     }
-    anyhow::ensure!(!series[0].x.is_empty(), "no direction could be scored");
+    crate::error::ensure!(!series[0].x.is_empty(), "no direction could be scored");
     Ok(LinePlot {
         name: format!("extrapolation-direction-{}", shape.name),
         title: format!(
@@ -458,7 +488,7 @@ fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, siz
 /// NNWarp Fig. 15: the beam's tip node over time under a suddenly applied field, full
 /// Neo-Hookean implicit Euler against NNWarp's runtime and linear FEM at time step `dt`.
 /// Returns the plot and a note with each method's mean `rel-error` over the frames.
-fn trajectory(root: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> anyhow::Result<(LinePlot, String)> {
+fn trajectory(root: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> crate::Result<(LinePlot, String)> {
     use weft_sim::scenes::volume::{ForceField, VolumeSolve};
     let quick = size == Size::Quick;
     let mut scene = weft_sim::VolumeScene::builtin("beam-neo-hookean-field", quick)?;
@@ -563,7 +593,7 @@ fn timing_row(
     shape: &Shape,
     model: &std::path::Path,
     lame: LameParameters,
-) -> anyhow::Result<Vec<String>> {
+) -> crate::Result<Vec<String>> {
     const REPEATS: usize = 20;
     let mesh = &shape.mesh;
     let rest = mesh.flat_positions();
@@ -625,19 +655,19 @@ fn timing_row(
     Ok(vec![
         format!("`{}`", shape.name),
         mesh.num_tets().to_string(),
-        super::paper::format_ms(linear.factorization_seconds()),
-        super::paper::format_ms(solve),
-        super::paper::format_ms(correction),
+        crate::paper::format_ms(linear.factorization_seconds()),
+        crate::paper::format_ms(solve),
+        crate::paper::format_ms(correction),
         format!("{:.0}", 1.0 / (solve + correction)),
-        super::paper::format_ms(full_seconds),
+        crate::paper::format_ms(full_seconds),
     ])
 }
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("nnwarp", ctx.size);
     let root = ctx.out.join("nnwarp");
     let data = root.join("data");
-    crate::evaluate::embed::generate_dataset(weft_data::nnwarp::NAME, ctx.size, &data).context("nnwarp dataset")?;
+    super::context::generate_dataset(ctx, weft_data::nnwarp::NAME, &data).context("nnwarp dataset")?;
     let config = training_config(ctx.size);
     std::fs::create_dir_all(&root)?;
     let config_path = root.join("config.json");
@@ -681,7 +711,7 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
             lame,
         )?);
     }
-    out.tables.push(super::paper::Table {
+    out.tables.push(crate::paper::Table {
         title: "NNWarp (Luo et al.) Table 1 — time performance, ours (paper beside)".into(),
         caption: "All columns measured in this run on this machine: pre-factorised linear FEM (factorisation, one \
                   static solve), the Neo-Hookean network's node-wise correction, frames per second of solve and \

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
+use crate::error::Context;
 
 use weft_data::ClothDataset;
 use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
@@ -19,9 +19,9 @@ use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
 use weft_nn::rollout::LatentRollout;
 
-use super::EvalContext;
-use super::paper::{Table, format_ms, paper_cell as cell};
-use super::results::{Curve, ExperimentOutput, Scatter, Timing};
+use super::context::EvalContext;
+use crate::paper::{Table, format_ms, paper_cell as cell};
+use crate::records::{Curve, ExperimentOutput, Scatter, Timing};
 use weft_data::Size;
 use weft_data::files::{Array, write_safetensors};
 
@@ -131,7 +131,7 @@ fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
 /// Trains (or resumes) one model of the experiment into `dir`, all three stages; a model
 /// trained under another configuration is discarded and retrained (it is the
 /// experiment's own output, rebuilt by the same command).
-fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir: &Path) -> anyhow::Result<()> {
+fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir: &Path) -> crate::Result<()> {
     if stale(dir, config) {
         eprintln!(
             "embed: {} was trained under another configuration; retraining it",
@@ -144,50 +144,6 @@ fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir:
     weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
         .with_context(|| format!("training {}", dir.display()))?;
     Ok(())
-}
-
-/// Generates `scene`'s dataset into `dir`, or completes one an interrupted run left there
-/// (the generator rewrites its manifest after every sequence, so a manifest alone does
-/// not mean the dataset is whole).
-pub fn generate_dataset(scene: &str, size: Size, dir: &Path) -> anyhow::Result<()> {
-    generate_dataset_frames(scene, size, dir, None)
-}
-
-/// [`generate_dataset`] with the size's frames per sequence overridden.
-pub fn generate_dataset_frames(scene: &str, size: Size, dir: &Path, frames: Option<usize>) -> anyhow::Result<()> {
-    let manifest = dir.join("manifest.json");
-    let exists = manifest.exists();
-    if exists && weft_data::read_manifest(&manifest)?.is_complete() {
-        return Ok(());
-    }
-    let mut spec = weft_data::DatasetSpec::new(scene, size)?;
-    if let Some(f) = frames {
-        spec.frames = f;
-    }
-    let options = weft_data::GenerateOptions {
-        resume: exists,
-        quiet: true,
-        code_version: crate::code_version(),
-        ..Default::default()
-    };
-    weft_data::generate(&spec, dir, &options)?;
-    Ok(())
-}
-
-/// Ground-truth solver seconds per frame of a dataset (its `timing.json`).
-pub(crate) fn ground_truth_seconds(dir: &Path) -> anyhow::Result<f64> {
-    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("timing.json"))?)?;
-    let (mut frames, mut seconds) = (0.0, 0.0);
-    for v in t["sequences"]
-        .as_object()
-        .context("timing.json lists no sequences")?
-        .values()
-    {
-        frames += v[0].as_f64().unwrap_or(0.0);
-        seconds += v[1].as_f64().unwrap_or(0.0);
-    }
-    anyhow::ensure!(frames > 0.0, "timing.json counts no frames");
-    Ok(seconds / frames)
 }
 
 /// The test frames grouped by window (sequence, block of 17).
@@ -216,7 +172,7 @@ fn write_predictions(
     method: &str,
     data: &EmbedData,
     predicted: &[Vec<f64>],
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let dir = ctx.out.join("predictions").join("embed").join(scene);
     std::fs::create_dir_all(&dir)?;
     let (f, v) = (predicted.len(), data.num_vertices());
@@ -259,7 +215,7 @@ struct Window {
 /// M_rms over the scored frames, M_STED per window (all its frames), and M_phys of every
 /// scored frame from the third of its window on, with the window's own frames as its
 /// predecessors (docs/RESULTS.md).
-fn score_windows(data: &EmbedData, windows: &[Window]) -> anyhow::Result<Scores> {
+fn score_windows(data: &EmbedData, windows: &[Window]) -> crate::Result<Scores> {
     let map: Vec<usize> = (0..data.num_vertices()).collect();
     let edges = weft_mesh::Topology::new(&data.dataset.rest).edges;
     let params = StedParams {
@@ -289,7 +245,7 @@ fn score_windows(data: &EmbedData, windows: &[Window]) -> anyhow::Result<Scores>
 }
 
 /// The test split's scores of reconstructions `predicted` (one per test frame).
-fn score(data: &EmbedData, predicted: &[Vec<f64>]) -> anyhow::Result<Scores> {
+fn score(data: &EmbedData, predicted: &[Vec<f64>]) -> crate::Result<Scores> {
     let frames = &data.test_frames;
     let windows: Vec<Window> = windows(frames)
         .into_iter()
@@ -311,7 +267,7 @@ fn score(data: &EmbedData, predicted: &[Vec<f64>]) -> anyhow::Result<Scores> {
 
 /// nDCG over the full ranking (K = N − 1) of the test frames' codes by their motion
 /// labels (Tan et al. §VI-C; docs/RESULTS.md).
-fn full_ranking_ndcg(data: &EmbedData, codes: &[Vec<f64>]) -> anyhow::Result<f64> {
+fn full_ranking_ndcg(data: &EmbedData, codes: &[Vec<f64>]) -> crate::Result<f64> {
     let labels: Vec<u8> = data
         .test_frames
         .iter()
@@ -322,11 +278,7 @@ fn full_ranking_ndcg(data: &EmbedData, codes: &[Vec<f64>]) -> anyhow::Result<f64
 }
 
 /// A latent roll-out started from the encoded ground-truth frames `start`.
-fn rollout_from<'a>(
-    data: &EmbedData,
-    model: &'a EmbedModel,
-    start: [FrameRef; 2],
-) -> anyhow::Result<LatentRollout<'a>> {
+fn rollout_from<'a>(data: &EmbedData, model: &'a EmbedModel, start: [FrameRef; 2]) -> crate::Result<LatentRollout<'a>> {
     let codes = model.codes(data, &start)?;
     Ok(LatentRollout::new(
         &model.autoencoder,
@@ -342,7 +294,7 @@ fn rollout_from<'a>(
 /// let the latent simulator predict the other three from their controls and decode them
 /// (`LatentRollout`); the scores of the predicted frames (the given two count in M_STED's
 /// window and as M_phys's predecessors).
-fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> anyhow::Result<Scores> {
+fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<Scores> {
     let frames = &data.test_frames;
     let mut scored = Vec::new();
     for w in windows(frames) {
@@ -375,7 +327,7 @@ fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> anyhow::Result<Scores
 /// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
 /// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
 /// ground truth shows how the error grows with the number of frames N.
-fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> anyhow::Result<Curve> {
+fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> crate::Result<Curve> {
     let seq = &data.dataset.sequences[0];
     let mut rollout = rollout_from(data, model, [0, 1].map(|frame| FrameRef { sequence: 0, frame }))?;
     let map: Vec<usize> = (0..data.num_vertices()).collect();
@@ -396,7 +348,7 @@ fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel)
 
 /// Tan et al. Fig. 6: the test frames' latent codes projected on their two principal
 /// axes, coloured by motion label.
-fn embedding_scatter(scene: &str, method: &str, data: &EmbedData, codes: &[Vec<f64>]) -> anyhow::Result<Scatter> {
+fn embedding_scatter(scene: &str, method: &str, data: &EmbedData, codes: &[Vec<f64>]) -> crate::Result<Scatter> {
     let pca = PositionPca::fit(codes, 2)?;
     Ok(Scatter {
         scene: scene.into(),
@@ -449,7 +401,7 @@ struct IkRow {
 /// Tan et al. §V-A: for each target (new grasp positions from a test frame), minimise
 /// `P_s + P_b` over `ours`'s code from the code of the dataset's first frame, and over
 /// every vertex with weft-sim's Newton solver from the same start positions.
-fn inverse_kinematics(scene: &str, data: &EmbedData, model: &EmbedModel) -> anyhow::Result<IkRow> {
+fn inverse_kinematics(scene: &str, data: &EmbedData, model: &EmbedModel) -> crate::Result<IkRow> {
     let groups = windows(&data.test_frames);
     let step = groups.len().div_ceil(IK_TARGETS).max(1);
     let z0 = model.codes(data, &[FrameRef { sequence: 0, frame: 0 }])?.remove(0);
@@ -547,7 +499,7 @@ fn ik_table(rows: &[IkRow], settings: IkSettings) -> Table {
     }
 }
 
-pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("embed", ctx.size);
     let root = ctx.out.join("embed");
     let config = training_config(ctx.size);
@@ -572,8 +524,8 @@ pub fn run(ctx: &EvalContext) -> anyhow::Result<ExperimentOutput> {
     let mut ik_rows: Vec<IkRow> = Vec::new();
     for &scene in scenes() {
         let data_dir = root.join("data").join(scene);
-        generate_dataset(scene, ctx.size, &data_dir).with_context(|| format!("dataset {scene}"))?;
-        let gt = ground_truth_seconds(&data_dir)?;
+        super::context::generate_dataset(ctx, scene, &data_dir).with_context(|| format!("dataset {scene}"))?;
+        let gt = super::context::ground_truth_seconds(&data_dir)?;
         let dataset = ClothDataset::load(&data_dir)?;
         let data = EmbedData::new(dataset)?;
         let push = |out: &mut ExperimentOutput, method: &str, s: &Scores, seconds: f64| {

@@ -1,0 +1,73 @@
+//! `cargo xtask evaluate` and `cargo xtask check-report`: argument parsing for
+//! weft-experiments' evaluation and report check.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use weft_data::Size;
+use weft_experiments::evaluate::EvaluateOptions;
+
+#[derive(Args)]
+pub struct EvaluateArgs {
+    /// quick (minutes; small meshes) or standard (the committed evaluation in docs/results/).
+    #[arg(long, default_value_t = Size::Standard)]
+    size: Size,
+    /// Shorthand for --size quick.
+    #[arg(long)]
+    quick: bool,
+    /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv, drape.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Output directory (default: out/evaluate-<size>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Re-run experiments whose cached output exists in OUT/experiments/ (default: resume, reusing them).
+    #[arg(long)]
+    force: bool,
+    /// Hide progress bars.
+    #[arg(long)]
+    quiet: bool,
+    /// After the run, copy the report (results.json, tables.md, index.html, plots/, renders/; not the large
+    /// predictions/) to this directory with a PROVENANCE.md naming the command, machine and code version —
+    /// how docs/results/ is made.
+    #[arg(long)]
+    publish: Option<PathBuf>,
+}
+
+pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
+    let size = if args.quick { Size::Quick } else { args.size };
+    let mut options = EvaluateOptions::new(size);
+    if let Some(o) = args.out {
+        options.out = o;
+    }
+    options.only = args.only;
+    options.force = args.force;
+    options.quiet = args.quiet;
+    options.publish = args.publish;
+    options.command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
+    options.code_version = crate::code_version();
+    weft_experiments::evaluate::run(&options)?;
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct CheckArgs {
+    /// A directory written by `cargo xtask evaluate`.
+    dir: PathBuf,
+    /// The directory is a published report (`evaluate --publish`, e.g. `docs/results`): its
+    /// `PROVENANCE.md` must exist, and the predictions, which are not committed, are not
+    /// required.
+    #[arg(long)]
+    published: bool,
+}
+
+pub fn check(args: CheckArgs) -> anyhow::Result<()> {
+    let s = weft_experiments::report::check(&args.dir, args.published)?;
+    println!(
+        "{}: {} records, {} plot, render and prediction files — all parse",
+        args.dir.display(),
+        s.records,
+        s.files
+    );
+    Ok(())
+}
