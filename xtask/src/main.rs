@@ -9,6 +9,7 @@ mod dataset;
 mod evaluate;
 mod mesh;
 mod project;
+mod score;
 mod simulate;
 mod stability;
 mod train;
@@ -66,6 +67,8 @@ enum Command {
     /// Train a neural model on a dataset (resumable from checkpoints, progress bars with the losses).
     #[command(subcommand)]
     Train(train::TrainCommand),
+    /// Score a trained model on any dataset of its kind (another seed or size) without retraining: results.json and predictions.
+    Score(score::ScoreArgs),
     /// Run a volumetric scene as pre-factorised linear FEM corrected by a trained NNWarp network (VTK per frame).
     Warp(warp::WarpArgs),
 }
@@ -80,6 +83,7 @@ fn main() -> anyhow::Result<()> {
         Command::Dataset(args) => dataset::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::Train(cmd) => train::run(cmd),
+        Command::Score(args) => score::run(args),
         Command::Warp(args) => warp::run(args),
         Command::CheckReport(args) => evaluate::check(args),
         Command::Stability(args) => stability::run(args),

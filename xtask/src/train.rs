@@ -261,7 +261,6 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_experiments::evaluate::drape::score;
     use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
@@ -336,120 +335,19 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         &mut progress,
     )?;
     drop(progress);
-    let p = &fitted.state;
-    let (skipped, first) = p.skipped();
-    if skipped > 0 {
-        eprintln!(
-            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
-            first.unwrap_or_default()
-        );
-    }
-    // The kept model, scored with cold solves as the evaluation scores it.
-    let rest = weft_proj::RestShape::new(&dataset.sleeve)?;
-    let k = config.quasistatic.stretch_stiffness;
-    let mut scores = serde_json::Map::new();
-    for (split, data) in [("validation", &validation), ("test", &test)] {
-        if data.is_empty() {
-            continue;
-        }
-        let (s, _) = score(&fitted.model, data, &rest, k, config.batch)?;
-        eprintln!(
-            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
-            p.best_epoch, s.sqrtmse, s.maxdist, s.failed
-        );
-        scores.insert(
-            split.into(),
-            serde_json::json!({
-                "sqrtmse-mm": s.sqrtmse,
-                "maxdist-mm": s.maxdist,
-                "compression-energy-error": s.compression,
-                "stretching-energy-error": s.stretching,
-                "failed": s.failed,
-            }),
-        );
-    }
-    let mu = fitted
-        .mu
-        .as_ref()
-        .map(|m| m.iter().sum::<f64>() / m.len().max(1) as f64);
-    // Where training settles, over its second half: how much the validation error scatters
-    // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
-    // (the median over epochs of |mean| / sd of the per-batch gradient).
-    let late = &p.history[p.history.len() / 2..];
-    let (val_mean, val_sd) = weft_experiments::records::mean_sd(late.iter().map(|h| h.validation));
-    let mut signal: Vec<f64> = late
-        .iter()
-        .filter_map(|h| Some((*h.extra.get("mu_gradient_mean")?, *h.extra.get("mu_gradient_sd")?)))
-        .filter(|(_, sd)| *sd > 0.0)
-        .map(|(mean, sd)| mean.abs() / sd)
-        .collect();
-    signal.sort_by(f64::total_cmp);
-    let second_half = serde_json::json!({
-        "epochs": [p.history.len() / 2 + 1, p.history.len()],
-        "validation_sqrtmse_mm_mean": val_mean,
-        "validation_sqrtmse_mm_sd": val_sd,
-        "last_mu": late.last().and_then(|h| h.extra.get("mu")),
-        "mu_gradient_mean_over_sd_median": signal.get(signal.len() / 2),
-    });
-    if late.len() > 1 {
-        eprintln!(
-            "drape/{name}: epochs {}-{}: validation SqrtMSE {val_mean:.4} ± {val_sd:.4} mm{}",
-            p.history.len() / 2 + 1,
-            p.history.len(),
-            signal
-                .get(signal.len() / 2)
-                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
-        );
-    }
-    write_atomic(
-        &args.out.join("scores.json"),
-        &serde_json::to_string_pretty(&serde_json::json!({
-            "kept_epoch": p.best_epoch,
-            "epochs": p.epochs_done,
-            "kept_mu_mean": mu,
-            "second_half": second_half,
-            "scores": scores,
-        }))?,
+    weft_experiments::evaluate::drape::summarize_trained(
+        &args.out,
+        &name,
+        &fitted,
+        &layers,
+        &config,
+        &validation,
+        &test,
+        &dataset.sleeve,
+        &args.scan_mu,
     )?;
-    if !args.scan_mu.is_empty() {
-        // The same cold solves as the scores: the loss (mean squared SqrtMSE, mm²) and the
-        // SqrtMSE of the kept network as μ alone varies.
-        let mut scan = Vec::with_capacity(args.scan_mu.len());
-        for &m in &args.scan_mu {
-            let (s, _) = score(
-                &layers.at_fixed_mu(&fitted.model.net, m),
-                &validation,
-                &rest,
-                k,
-                config.batch,
-            )?;
-            let loss = s.loss_mm2;
-            eprintln!(
-                "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {loss:.5} mm² ({} examples failed)",
-                s.sqrtmse, s.failed
-            );
-            scan.push(serde_json::json!({
-                "mu": m,
-                "validation_sqrtmse_mm": s.sqrtmse,
-                "validation_loss_mm2": loss,
-                "failed": s.failed,
-            }));
-        }
-        write_atomic(
-            &args.out.join("mu-scan.json"),
-            &serde_json::to_string_pretty(&serde_json::json!({
-                "kept_epoch": p.best_epoch,
-                "kept_mu_mean": mu,
-                "scan": scan,
-            }))?,
-        )?;
-    }
     eprintln!("model → {}", args.out.display());
     Ok(())
-}
-
-fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    Ok(weft_data::files::write_text(path, text)?)
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
@@ -530,30 +428,7 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         trained.state.epochs_done,
         1e3 * trained.state.best_validation
     );
-    // Where the model stands on unseen motions: the roll-out against skinning alone.
-    let test: Vec<_> = dataset.split("test").collect();
-    if let Some(frames) = test.iter().map(|s| s.skinned.len()).min() {
-        let horizon = (frames - 1).min(50);
-        let mut scores = serde_json::Map::new();
-        for (name, model) in [("skinning", None), (variant.name(), Some(&trained.net))] {
-            let mut sum = (0.0, 0usize);
-            for s in &test {
-                let e = weft_nn::altconv::score_sequence(model, &trained.adj, s, horizon)?;
-                sum.0 += e.rollout.iter().flatten().sum::<f64>();
-                sum.1 += e.rollout.iter().map(Vec::len).sum::<usize>();
-            }
-            let mm = 1e3 * sum.0 / sum.1.max(1) as f64;
-            eprintln!(
-                "altconv/{}: {name} roll-out error over steps 1-{horizon} of the test sequences: {mm:.3} mm",
-                variant.name()
-            );
-            scores.insert(name.to_string(), serde_json::json!(mm));
-        }
-        write_atomic(
-            &args.out.join("scores.json"),
-            &serde_json::to_string_pretty(&serde_json::json!({ "steps": horizon, "test_rollout_mm": scores }))?,
-        )?;
-    }
+    weft_experiments::evaluate::altconv::summarize_trained(&args.out, &dataset, &trained)?;
     eprintln!("model → {}", args.out.display());
     Ok(())
 }

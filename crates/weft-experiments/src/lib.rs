@@ -12,6 +12,8 @@
 //!   [`paper`]: the papers' tables beside ours;
 //! - [`report`]: `results.json`, `tables.md`, plots, renders and one self-contained
 //!   `index.html`, rebuilt from every cached experiment, and [`report::check`];
+//! - [`score`]: any trained model scored on any dataset of its kind, in the evaluation's
+//!   records and prediction files;
 //! - [`render`]: per-vertex error images; [`stability`]: the stability map;
 //! - [`progress`]: a training run's progress bar and epoch lines.
 //!
@@ -36,6 +38,7 @@ pub mod progress;
 pub mod records;
 pub mod render;
 pub mod report;
+pub mod score;
 pub mod stability;
 
 pub use error::{Context, Error, Result};

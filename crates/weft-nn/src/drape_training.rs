@@ -321,3 +321,29 @@ pub fn fit(
     let mu = model.learned_mu()?;
     Ok(Fitted { model, state, mu })
 }
+
+/// A trained drape model from its directory (written by [`fit`]): the network and its
+/// layer at the best validation weights, rebuilt on `sleeve` from the stored stamp.
+/// Returns the model, its layer and its training configuration.
+pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingConfig)> {
+    let stamp: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
+    let bad = |reason: String| Error::Checkpoint {
+        path: dir.join("config.json").display().to_string(),
+        reason,
+    };
+    let config: DrapeTrainingConfig =
+        serde_json::from_value(stamp["config"].clone()).map_err(|e| bad(format!("config: {e}")))?;
+    let layer: Layer = serde_json::from_value(stamp["layer"].clone()).map_err(|e| bad(format!("layer: {e}")))?;
+    let layers = Layers::new(sleeve, &config)?;
+    let v = sleeve.num_vertices();
+    let device = candle_core::Device::Cpu;
+    let mut net_params = Params::new(&device, config.seed);
+    let net = DrapeNet::new(&mut net_params, &config.net, v)?;
+    let mut mu_params = Params::new(&device, config.seed + 1);
+    let post = layers.postprocess(layer, &mut mu_params, v)?;
+    crate::checkpoint::load_params(&best_net_dir(dir), &net_params)?;
+    if matches!(layer, Layer::LearnedMu { .. }) {
+        crate::checkpoint::load_params(&dir.join("best").join("mu"), &mu_params)?;
+    }
+    Ok((DrapeModel { net, post }, layer, config))
+}

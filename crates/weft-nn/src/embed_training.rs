@@ -251,6 +251,17 @@ impl EmbedData {
     /// Encodes every frame (as a sequence, so log-rotations stay continuous in time) and
     /// fits the normalisation on the training frames only.
     pub fn new(dataset: ClothDataset) -> Result<Self> {
+        Self::build(dataset, None)
+    }
+
+    /// The dataset prepared for a trained model: its features normalised by the model's
+    /// own normalisation (`normalization.json`), not one refitted on this dataset — how a
+    /// model is scored on data it never saw.
+    pub fn with_normalization(dataset: ClothDataset, normalization: FeatureNormalization) -> Result<Self> {
+        Self::build(dataset, Some(normalization))
+    }
+
+    fn build(dataset: ClothDataset, normalization: Option<FeatureNormalization>) -> Result<Self> {
         let acap = AcapFeatures::new(&dataset.rest, AcapSettings::default())?;
         let raw: Vec<Vec<Vec<Feature>>> = dataset
             .sequences
@@ -260,12 +271,15 @@ impl EmbedData {
                 acap.encode_sequence(&frames)
             })
             .collect::<std::result::Result<_, _>>()?;
-        let normalization = FeatureNormalization::fit_per_block(raw.iter().flat_map(|seq| {
-            seq.iter()
-                .enumerate()
-                .filter(|(m, _)| is_train_frame(*m) && !is_validation_frame(*m))
-                .flat_map(|(_, f)| f)
-        }))?;
+        let normalization = match normalization {
+            Some(n) => n,
+            None => FeatureNormalization::fit_per_block(raw.iter().flat_map(|seq| {
+                seq.iter()
+                    .enumerate()
+                    .filter(|(m, _)| is_train_frame(*m) && !is_validation_frame(*m))
+                    .flat_map(|(_, f)| f)
+            }))?,
+        };
         let features = raw
             .iter()
             .map(|seq| seq.iter().map(|f| normalization.normalize_all(f)).collect())

@@ -425,6 +425,103 @@ fn render_heat_maps(
     Ok(())
 }
 
+/// Scores the model in `model_dir` (`cargo xtask train altconv`) on the `split` sequences
+/// of the `limb` dataset in `data_dir`, beside skinning alone, with the evaluation's
+/// metrics: `error-mm-step1` and `error-mm-rollout{10,…,50}` (windows up to the shortest
+/// sequence), and each method's predictions under `ctx.out/predictions/altconv/limb/`.
+pub fn score_model(
+    ctx: &EvalContext,
+    model_dir: &Path,
+    data_dir: &Path,
+    split: &str,
+) -> crate::Result<ExperimentOutput> {
+    let dataset = LimbDataset::load(data_dir)?;
+    let (config, _, net) = weft_nn::altconv::load_model(model_dir, &weft_nn::Device::Cpu)
+        .with_context(|| format!("loading the model in {}", model_dir.display()))?;
+    let adj = NormalizedAdjacency::new(&dataset.rest)?;
+    let sequences: Vec<&LimbSequence> = dataset.split(split).collect();
+    crate::error::ensure!(!sequences.is_empty(), "{} has no {split} sequence", data_dir.display());
+    let horizon = sequences
+        .iter()
+        .map(|s| s.skinned.len() - 1)
+        .min()
+        .unwrap_or(0)
+        .min(*WINDOWS.last().unwrap_or(&50));
+    crate::error::ensure!(horizon >= 1, "the {split} sequences hold no step");
+    let gt = super::context::ground_truth_seconds(data_dir).ok();
+    let mut out = ExperimentOutput::new("altconv", ctx.size);
+    out.notes.push(format!(
+        "altconv score: {} on the {split} sequences of {} ({} of them, steps 1–{horizon}), beside skinning",
+        model_dir.display(),
+        data_dir.display(),
+        sequences.len()
+    ));
+    for (method, model) in [(SKINNING, None), (config.variant.name(), Some(&net))] {
+        let e = score(model, &adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?;
+        let timing = Timing {
+            seconds_per_frame: Some(e.seconds_per_frame),
+            ground_truth_seconds_per_frame: gt,
+        };
+        out.record(
+            SCENE,
+            method,
+            "error-mm-step1",
+            window(&e.single, horizon).0,
+            "mm",
+            timing,
+        );
+        set_split(&mut out, split);
+        for w in WINDOWS.into_iter().filter(|&w| w <= horizon) {
+            out.record(
+                SCENE,
+                method,
+                &format!("error-mm-rollout{w}"),
+                window(&e.rollout, w).0,
+                "mm",
+                timing,
+            );
+            set_split(&mut out, split);
+        }
+        write_predictions(ctx, method, &dataset, split, horizon, &e.surfaces)?;
+    }
+    Ok(out)
+}
+
+/// What `cargo xtask train altconv` reports of a model it trained: its roll-out error over
+/// up to 50 steps of the dataset's test sequences beside skinning alone, printed and
+/// written to `scores.json` in the model directory.
+pub fn summarize_trained(
+    out: &Path,
+    dataset: &LimbDataset,
+    trained: &weft_nn::altconv::TrainedAltConv,
+) -> crate::Result<()> {
+    // Where the model stands on unseen motions: the roll-out against skinning alone.
+    let test: Vec<_> = dataset.split("test").collect();
+    if let Some(frames) = test.iter().map(|s| s.skinned.len()).min() {
+        let horizon = (frames - 1).min(50);
+        let mut scores = serde_json::Map::new();
+        for (name, model) in [("skinning", None), (trained.net.variant().name(), Some(&trained.net))] {
+            let mut sum = (0.0, 0usize);
+            for s in &test {
+                let e = weft_nn::altconv::score_sequence(model, &trained.adj, s, horizon)?;
+                sum.0 += e.rollout.iter().flatten().sum::<f64>();
+                sum.1 += e.rollout.iter().map(Vec::len).sum::<usize>();
+            }
+            let mm = 1e3 * sum.0 / sum.1.max(1) as f64;
+            eprintln!(
+                "altconv/{}: {name} roll-out error over steps 1-{horizon} of the test sequences: {mm:.3} mm",
+                trained.net.variant().name()
+            );
+            scores.insert(name.to_string(), serde_json::json!(mm));
+        }
+        weft_data::files::write_text(
+            &out.join("scores.json"),
+            &serde_json::to_string_pretty(&serde_json::json!({ "steps": horizon, "test_rollout_mm": scores }))?,
+        )?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

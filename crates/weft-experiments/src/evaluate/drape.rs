@@ -601,9 +601,216 @@ fn render_mu(ctx: &EvalContext, out: &mut ExperimentOutput, dataset: &DrapeDatas
     Ok(())
 }
 
+/// The evaluation's method name of a model trained through `layer`.
+pub fn method_name(layer: Layer) -> String {
+    match layer {
+        Layer::None => "network-only".into(),
+        Layer::Socp => "trained-socp".into(),
+        Layer::Quasistatic(mu) => FIXED_MU
+            .iter()
+            .find(|(m, _)| *m == mu)
+            .map_or_else(|| format!("trained-qs-mu{mu}"), |(_, s)| format!("trained-qs-{s}")),
+        Layer::LearnedMu { per_vertex: true, .. } => "trained-qs-per-vertex-mu".into(),
+        Layer::LearnedMu { start: 0.1, .. } => "trained-qs-learned-mu".into(),
+        Layer::LearnedMu { start, .. } => format!("learned-mu-from-{start}"),
+    }
+}
+
+/// Scores the model in `model_dir` (`cargo xtask train drape`, or one of the evaluation's)
+/// on the `split` examples of the `drape` dataset in `data_dir`, with the evaluation's
+/// metrics (`sqrtmse-mm`, `maxdist-mm`, `compression-energy-error`,
+/// `stretching-energy-error`; cold layer solves) and its predictions under
+/// `ctx.out/predictions/drape/sleeve/`. Examples the layer fails on are left out and
+/// reported in the output's failures.
+pub fn score_model(
+    ctx: &EvalContext,
+    model_dir: &Path,
+    data_dir: &Path,
+    split: &str,
+) -> crate::Result<ExperimentOutput> {
+    let dataset = DrapeDataset::load(data_dir)?;
+    let (model, layer, config) = weft_nn::drape_training::load_model(model_dir, &dataset.sleeve)
+        .with_context(|| format!("loading the model in {}", model_dir.display()))?;
+    let data = DrapeTensors::of_split(&dataset, split, &Device::Cpu)?;
+    crate::error::ensure!(!data.is_empty(), "{} has no {split} example", data_dir.display());
+    let rest = RestShape::new(&dataset.sleeve)?;
+    let (s, pred) = score(&model, &data, &rest, config.quasistatic.stretch_stiffness, config.batch)?;
+    let method = method_name(layer);
+    let mut out = ExperimentOutput::new("drape", ctx.size);
+    out.notes.push(format!(
+        "drape score: {} ({layer}) on the {} {split} examples of {}",
+        model_dir.display(),
+        data.len(),
+        data_dir.display()
+    ));
+    if s.failed > 0 {
+        out.failures.push(format!(
+            "drape/{method}/{split}: the postprocess failed on {} of {} examples, left out of its scores; the first: {}",
+            s.failed,
+            data.len(),
+            s.first_error.clone().unwrap_or_default()
+        ));
+    }
+    let timing = Timing {
+        seconds_per_frame: Some(s.seconds_per_example),
+        ground_truth_seconds_per_frame: super::context::ground_truth_seconds(data_dir).ok(),
+    };
+    for (metric, value, unit) in [
+        ("sqrtmse-mm", s.sqrtmse, "mm"),
+        ("maxdist-mm", s.maxdist, "mm"),
+        ("compression-energy-error", s.compression, "mJ"),
+        ("stretching-energy-error", s.stretching, "mJ"),
+    ] {
+        out.record(SCENE, &method, metric, value, unit, timing);
+        set_split(&mut out, split);
+    }
+    write_predictions(ctx, &method, &data, &pred)?;
+    Ok(out)
+}
+
+/// What `cargo xtask train drape` reports of a model it trained: batches the layer failed
+/// on, the last epoch, the kept model scored on the validation and test splits with cold
+/// solves as the evaluation scores it (`scores.json`), the second half of training (the
+/// validation error's scatter, the last μ, the strength of μ's gradient against its noise),
+/// and with `scan_mu` the validation loss of the kept network at each fixed μ
+/// (`mu-scan.json`; docs/DRAPE.md, the μ study).
+#[allow(clippy::too_many_arguments)]
+pub fn summarize_trained(
+    out: &Path,
+    name: &str,
+    fitted: &Fitted,
+    layers: &Layers,
+    config: &DrapeTrainingConfig,
+    validation: &DrapeTensors,
+    test: &DrapeTensors,
+    sleeve: &weft_mesh::TriMesh,
+    scan_mu: &[f64],
+) -> crate::Result<()> {
+    let p = &fitted.state;
+    let (skipped, first) = p.skipped();
+    if skipped > 0 {
+        eprintln!(
+            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
+            first.unwrap_or_default()
+        );
+    }
+    // The kept model, scored with cold solves as the evaluation scores it.
+    let rest = RestShape::new(sleeve)?;
+    let k = config.quasistatic.stretch_stiffness;
+    let mut scores = serde_json::Map::new();
+    for (split, data) in [("validation", validation), ("test", test)] {
+        if data.is_empty() {
+            continue;
+        }
+        let (s, _) = score(&fitted.model, data, &rest, k, config.batch)?;
+        eprintln!(
+            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
+            p.best_epoch, s.sqrtmse, s.maxdist, s.failed
+        );
+        scores.insert(
+            split.into(),
+            serde_json::json!({
+                "sqrtmse-mm": s.sqrtmse,
+                "maxdist-mm": s.maxdist,
+                "compression-energy-error": s.compression,
+                "stretching-energy-error": s.stretching,
+                "failed": s.failed,
+            }),
+        );
+    }
+    let mu = fitted
+        .mu
+        .as_ref()
+        .map(|m| m.iter().sum::<f64>() / m.len().max(1) as f64);
+    // Where training settles, over its second half: how much the validation error scatters
+    // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
+    // (the median over epochs of |mean| / sd of the per-batch gradient).
+    let late = &p.history[p.history.len() / 2..];
+    let (val_mean, val_sd) = crate::records::mean_sd(late.iter().map(|h| h.validation));
+    let mut signal: Vec<f64> = late
+        .iter()
+        .filter_map(|h| Some((*h.extra.get("mu_gradient_mean")?, *h.extra.get("mu_gradient_sd")?)))
+        .filter(|(_, sd)| *sd > 0.0)
+        .map(|(mean, sd)| mean.abs() / sd)
+        .collect();
+    signal.sort_by(f64::total_cmp);
+    let second_half = serde_json::json!({
+        "epochs": [p.history.len() / 2 + 1, p.history.len()],
+        "validation_sqrtmse_mm_mean": val_mean,
+        "validation_sqrtmse_mm_sd": val_sd,
+        "last_mu": late.last().and_then(|h| h.extra.get("mu")),
+        "mu_gradient_mean_over_sd_median": signal.get(signal.len() / 2),
+    });
+    if late.len() > 1 {
+        eprintln!(
+            "drape/{name}: epochs {}-{}: validation SqrtMSE {val_mean:.4} ± {val_sd:.4} mm{}",
+            p.history.len() / 2 + 1,
+            p.history.len(),
+            signal
+                .get(signal.len() / 2)
+                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
+        );
+    }
+    weft_data::files::write_text(
+        &out.join("scores.json"),
+        &serde_json::to_string_pretty(&serde_json::json!({
+            "kept_epoch": p.best_epoch,
+            "epochs": p.epochs_done,
+            "kept_mu_mean": mu,
+            "second_half": second_half,
+            "scores": scores,
+        }))?,
+    )?;
+    if !scan_mu.is_empty() {
+        // The same cold solves as the scores: the loss (mean squared SqrtMSE, mm²) and the
+        // SqrtMSE of the kept network as μ alone varies.
+        let mut scan = Vec::with_capacity(scan_mu.len());
+        for &m in scan_mu {
+            let (s, _) = score(
+                &layers.at_fixed_mu(&fitted.model.net, m),
+                validation,
+                &rest,
+                k,
+                config.batch,
+            )?;
+            let loss = s.loss_mm2;
+            eprintln!(
+                "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {loss:.5} mm² ({} examples failed)",
+                s.sqrtmse, s.failed
+            );
+            scan.push(serde_json::json!({
+                "mu": m,
+                "validation_sqrtmse_mm": s.sqrtmse,
+                "validation_loss_mm2": loss,
+                "failed": s.failed,
+            }));
+        }
+        weft_data::files::write_text(
+            &out.join("mu-scan.json"),
+            &serde_json::to_string_pretty(&serde_json::json!({
+                "kept_epoch": p.best_epoch,
+                "kept_mu_mean": mu,
+                "scan": scan,
+            }))?,
+        )?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scored_models_are_named_as_the_evaluation_names_them() {
+        assert_eq!(method_name(Layer::None), "network-only");
+        assert_eq!(method_name(Layer::Quasistatic(0.1)), "trained-qs-mu0.1");
+        assert_eq!(method_name(Layer::Quasistatic(0.5)), "trained-qs-mu0.5");
+        let learned = |start, per_vertex| method_name(Layer::LearnedMu { start, per_vertex });
+        assert_eq!(learned(0.1, false), "trained-qs-learned-mu");
+        assert_eq!(learned(1.0, false), "learned-mu-from-1");
+        assert_eq!(learned(0.1, true), "trained-qs-per-vertex-mu");
+    }
 
     #[test]
     fn paper_rows_are_geng_et_al_tables() {

@@ -715,6 +715,64 @@ fn tan_table_4(rows: &[(String, &str, Scores)]) -> Table {
     }
 }
 
+/// Scores the model in `model_dir` (`cargo xtask train embed`) on the test frames (the
+/// last 5 of every 17, Tan et al. §VI) of the cloth dataset in `data_dir`, with the
+/// evaluation's metrics (`m-rms`, `m-sted`, `m-phys`) and its reconstructions under
+/// `ctx.out/predictions/embed/<scene>/`. The features are normalised by the model's own
+/// `normalization.json`, so a dataset of another seed or size is read as the model was
+/// trained. The method is `ours`, or `no-pb` for a model trained without the physics terms.
+pub fn score_model(
+    ctx: &EvalContext,
+    model_dir: &Path,
+    data_dir: &Path,
+    split: &str,
+) -> crate::Result<ExperimentOutput> {
+    if split != "test" {
+        return Err(crate::Error::Invalid(format!(
+            "embed models are scored on Tan et al.'s test frames (the last 5 of every 17), not {split:?}: use --split test"
+        )));
+    }
+    let dataset = ClothDataset::load(data_dir)?;
+    let scene = dataset.name.clone();
+    let normalization = weft_nn::checkpoint::read_json(&model_dir.join("normalization.json"))?;
+    let data = EmbedData::with_normalization(dataset, normalization)?;
+    let model = EmbedModel::load(model_dir, &data, 3)
+        .with_context(|| format!("loading the model in {}", model_dir.display()))?;
+    let w = model.config.weights;
+    let method = if w.ephys == 0.0 && w.mphys == 0.0 {
+        "no-pb"
+    } else {
+        "ours"
+    };
+    let t = Instant::now();
+    let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
+    let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
+    let scores = score(&data, &predicted)?;
+    let timing = Timing {
+        seconds_per_frame: Some(seconds),
+        ground_truth_seconds_per_frame: super::context::ground_truth_seconds(data_dir).ok(),
+    };
+    let mut out = ExperimentOutput::new("embed", ctx.size);
+    out.notes.push(format!(
+        "embed score: {} ({method}) on the {} test frames of {}",
+        model_dir.display(),
+        data.test_frames.len(),
+        data_dir.display()
+    ));
+    for (metric, value, unit) in [
+        ("m-rms", scores.m_rms, "mm"),
+        ("m-sted", scores.m_sted, "1"),
+        ("m-phys", scores.m_phys, "N^2"),
+    ] {
+        out.record(&scene, method, metric, value, unit, timing);
+        if let Some(r) = out.records.last_mut() {
+            r.split = Some("test".into());
+        }
+    }
+    write_predictions(ctx, &scene, method, &data, &predicted)?;
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

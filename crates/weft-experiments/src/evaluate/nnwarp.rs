@@ -838,3 +838,88 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     bar.finish_and_clear();
     Ok(out)
 }
+
+/// Scores the NNWarp model in `model_dir` (`cargo xtask train nnwarp`) on the `split`
+/// sequences of the `nnwarp` dataset in `data_dir`: per frame after the first, `rel-error`
+/// of the corrected linear displacement against the material's registered one, beside
+/// modal warping and the linear displacement itself (scene `beam/<material>`, the
+/// dataset's body), and NNWarp's displacements under `ctx.out/predictions/nnwarp/beam/`.
+pub fn score_model(
+    ctx: &EvalContext,
+    model_dir: &Path,
+    data_dir: &Path,
+    split: &str,
+) -> crate::Result<ExperimentOutput> {
+    let (config, mlp) =
+        load_model(model_dir).with_context(|| format!("loading the model in {}", model_dir.display()))?;
+    let dataset = weft_data::WarpDataset::load(data_dir, &config.material)?;
+    let gradients = Arc::new(NodalGradients::new(&dataset.body)?);
+    let sequences: Vec<&weft_data::WarpSequence> = dataset.sequences.iter().filter(|s| s.split == split).collect();
+    crate::error::ensure!(!sequences.is_empty(), "{} has no {split} sequence", data_dir.display());
+    let scene = format!("beam/{}", config.material);
+    let mut sums = [0.0f64; 3];
+    let mut seconds = [0.0f64; 3];
+    let (mut frames, mut predicted, mut truth) = (0usize, Vec::new(), Vec::new());
+    for s in &sequences {
+        // The dataset's body is already in the unit sphere: scale 1.
+        let context = WarpContext::with_gradients(
+            &dataset.body,
+            gradients.clone(),
+            &dataset.anchors,
+            s.field,
+            s.poisson,
+            1.0,
+        )?;
+        let warp = NnWarp::new(context, mlp.clone());
+        for (lin, reference) in s.linear.iter().zip(&s.nonlinear).skip(1) {
+            let t = Instant::now();
+            let corrected = warp.warp(lin)?;
+            seconds[0] += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let modal = modal_warp(&gradients, lin)?;
+            seconds[1] += t.elapsed().as_secs_f64();
+            for (k, u) in [&corrected, &modal, lin].into_iter().enumerate() {
+                sums[k] += rel_error(u, reference);
+            }
+            predicted.extend_from_slice(&corrected);
+            truth.extend_from_slice(reference);
+            frames += 1;
+        }
+    }
+    crate::error::ensure!(frames > 0, "the {split} sequences hold no frame after the first");
+    let mut out = ExperimentOutput::new("nnwarp", ctx.size);
+    out.notes.push(format!(
+        "nnwarp score: {} on the {} {split} sequences of {} ({frames} frames), against the registered {} shapes",
+        model_dir.display(),
+        sequences.len(),
+        data_dir.display(),
+        config.material
+    ));
+    for (k, method) in ["nnwarp", "modal-warping", "linear"].into_iter().enumerate() {
+        let timing = Timing {
+            seconds_per_frame: Some(seconds[k] / frames as f64),
+            ground_truth_seconds_per_frame: None,
+        };
+        out.record(&scene, method, "rel-error", sums[k] / frames as f64, "1", timing);
+        if let Some(r) = out.records.last_mut() {
+            r.split = Some(split.into());
+        }
+    }
+    let dir = ctx.out.join("predictions").join("nnwarp").join("beam");
+    std::fs::create_dir_all(&dir)?;
+    let v = dataset.body.num_vertices();
+    weft_data::files::write_safetensors(
+        &dir.join(format!("{}.safetensors", config.material)),
+        &[
+            weft_data::files::Array::f64("positions", vec![frames, v, 3], &predicted),
+            weft_data::files::Array::f64("ground_truth", vec![frames, v, 3], &truth),
+        ],
+        std::collections::HashMap::from([(
+            "units".to_string(),
+            "displacements [frames, nodes, 3] in the dataset's unit-sphere units: NNWarp's (positions) and the \
+             registered nonlinear (ground_truth)"
+                .to_string(),
+        )]),
+    )?;
+    Ok(out)
+}
