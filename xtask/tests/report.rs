@@ -43,6 +43,17 @@ fn quick_projection_evaluation_passes_the_report_check_and_tampering_fails_it() 
     std::fs::write(&results, serde_json::to_string(&records).unwrap()).unwrap();
     assert!(!check(&dir).0);
 
+    // The page opens with the claims; a report whose page misses an experiment the
+    // records hold fails.
+    std::fs::write(&results, &original).unwrap();
+    let page = dir.join("index.html");
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(html.contains("id=\"claims\"") && html.contains("id=\"experiment-proj\""));
+    std::fs::write(&page, html.replace("id=\"experiment-proj\"", "id=\"other\"")).unwrap();
+    let (ok, err) = check(&dir);
+    assert!(!ok && err.contains("\"proj\""), "{err}");
+    std::fs::write(&page, &html).unwrap();
+
     // A second run resumes: the cached experiment is reused, not recomputed.
     std::fs::write(&results, &original).unwrap();
     let out = Command::new(XTASK)
@@ -53,6 +64,44 @@ fn quick_projection_evaluation_passes_the_report_check_and_tampering_fails_it() 
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("reusing"));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Publishing one experiment rebuilds the whole published report: the experiments
+/// published before are taken from its committed outputs, and the page and records hold
+/// them all.
+#[test]
+fn republishing_one_experiment_keeps_the_others() {
+    let root = std::env::temp_dir().join(format!("weft-publish-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let dest = root.join("published");
+    for (only, out) in [("proj", "a"), ("sim", "b")] {
+        let o = Command::new(XTASK)
+            .args(["evaluate", "--quick", "--quiet", "--only", only, "--out"])
+            .arg(root.join(out))
+            .arg("--publish")
+            .arg(&dest)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let records: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(dest.join("results.json")).unwrap()).unwrap();
+    for e in ["proj", "sim"] {
+        assert!(records.iter().any(|r| r["experiment"] == e), "{e} missing");
+        assert!(dest.join("experiments").join(format!("{e}.json")).exists());
+    }
+    let provenance = std::fs::read_to_string(dest.join("PROVENANCE.md")).unwrap();
+    assert!(
+        provenance.contains("taken from the report published here before"),
+        "{provenance}"
+    );
+    let out = Command::new(XTASK)
+        .args(["check-report", "--published"])
+        .arg(&dest)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let _ = std::fs::remove_dir_all(&root);
 }
 
 /// The committed report in `docs/results` passes the check as a published report (its

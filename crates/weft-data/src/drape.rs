@@ -20,24 +20,15 @@ use weft_sim::scenes::drape::{Drape, DrapeExample, DrapeParams};
 use weft_sim::scenes::soft_tissue::ArmPose;
 
 use crate::files::Array;
-use crate::generate::{DatasetSpec, Size, StoredSequence};
+use crate::spec::{DatasetSpec, Size, StoredSequence};
 
 /// The dataset's name.
-pub const NAME: &str = "drape";
+pub const NAME: &str = crate::spec::DRAPE;
 
 /// Draws of a pose before an example slot gives up.
 pub const MAX_DRAWS: usize = 8;
 
-/// Examples per split and per chunk at a size: (train, validation, test, chunk).
-/// Geng et al. §4.1: 1000 training examples (Table 1) and 8000 (Table 2); the
-/// validation and test sets are not sized in the paper, we use 200 each.
-pub fn counts(size: Size) -> (usize, usize, usize, usize) {
-    match size {
-        Size::Quick => (16, 4, 4, 4),
-        Size::Standard => (1000, 200, 200, 50),
-        Size::Paper => (8000, 200, 200, 50),
-    }
-}
+pub use crate::spec::drape_counts as counts;
 
 /// The scene's parameters at a size.
 pub fn params(size: Size) -> DrapeParams {
@@ -50,7 +41,7 @@ pub fn params(size: Size) -> DrapeParams {
 /// Solves example `j` of the chunk with sequence seed `seed`; returns it and the poses
 /// that were replaced, each with its solver's error.
 pub fn example(drape: &Drape, seed: u64, j: usize) -> crate::Result<(DrapeExample, Vec<(ArmPose, String)>)> {
-    let mut rng = SplitMix64::new(crate::generate::sequence_seed(seed, j));
+    let mut rng = SplitMix64::new(crate::spec::sequence_seed(seed, j));
     let mut rejected = Vec::new();
     for _ in 0..MAX_DRAWS {
         let pose = ArmPose::sample(&mut rng);

@@ -41,14 +41,15 @@ pub mod generate;
 pub mod nnwarp;
 pub mod read;
 pub mod record;
+pub mod spec;
 
 pub use error::{Context, Error, Result};
 pub use generate::{
-    DatasetSpec, FileEntry, GenerateOptions, Manifest, SequenceEntry, Shard, Size, Split, StoredSequence, Timing,
-    dataset_names, generate, merge, read_manifest, sequence_seed, verify,
+    FileEntry, GenerateOptions, Manifest, SequenceEntry, Shard, Timing, generate, merge, read_manifest, verify,
 };
 pub use read::{
     ClothDataset, ClothSequence, DrapeDataset, DrapeExample, LimbDataset, LimbSequence, WarpDataset, WarpSequence,
     is_train_frame, is_validation_frame,
 };
 pub use record::{FrameStats, Recorder, Recording};
+pub use spec::{DatasetSpec, Size, Split, StoredSequence, dataset_names, sequence_seed};

@@ -20,10 +20,10 @@ use weft_sim::rng::SplitMix64;
 use weft_sim::warp::{FieldDirection, SequenceSettings, register_sequence, unit_sphere_normalization};
 
 use crate::files::Array;
-use crate::generate::{DatasetSpec, StoredSequence};
+use crate::spec::{DatasetSpec, StoredSequence};
 
 /// The dataset's name.
-pub const NAME: &str = "nnwarp";
+pub const NAME: &str = crate::spec::NNWARP;
 
 /// The materials every linear frame is registered to, in the stored order.
 pub const MATERIALS: [Material; 3] = [Material::CoRotational, Material::StVK, Material::NeoHookean];

@@ -21,6 +21,35 @@
 //! weft-acap, weft-proj, weft-nn), no dataset format (weft-data), no command line (xtask
 //! parses arguments into [`evaluate::EvaluateOptions`] and the like).
 //!
+//! A quick dataset, a model trained on it, scored on a dataset of another seed:
+//!
+//! ```no_run
+//! use weft_data::{DatasetSpec, GenerateOptions, LimbDataset, Size, generate};
+//! use weft_experiments::score::{ModelKind, ScoreOptions, score};
+//! let spec = DatasetSpec::new("limb", Size::Quick)?;
+//! generate(&spec, "data/limb".as_ref(), &GenerateOptions::default())?;
+//! let other = GenerateOptions { seed: 1, ..GenerateOptions::default() };
+//! generate(&spec, "data/limb-seed1".as_ref(), &other)?;
+//! let mut config = weft_nn::altconv::AltConvTrainingConfig::default();
+//! config.hidden = vec![8, 8];
+//! config.steps = 4;
+//! config.epochs = 2;
+//! let limb = LimbDataset::load("data/limb".as_ref())?;
+//! let mut progress = weft_nn::trainer::EpochLines;
+//! weft_nn::altconv::train_model("models/alt".as_ref(), &limb, &config, &mut progress)?;
+//! let output = score(&ScoreOptions {
+//!     kind: ModelKind::Altconv,
+//!     model: "models/alt".into(),
+//!     data: "data/limb-seed1".into(),
+//!     split: "test".into(),
+//!     out: "scores/alt".into(), // results.json and predictions/
+//! })?;
+//! assert!(output.records.iter().all(|r| r.value.is_finite()));
+//! # Ok::<(), weft_experiments::Error>(())
+//! ```
+//!
+//! The whole evaluation of one experiment, with its report:
+//!
 //! ```no_run
 //! use weft_experiments::evaluate::{EvaluateOptions, run};
 //! use weft_data::Size;

@@ -4,27 +4,7 @@
 
 use crate::records::{ExperimentOutput, Record};
 
-/// A table: title, caption, header and rows of cells.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Table {
-    pub title: String,
-    pub caption: String,
-    pub header: Vec<String>,
-    pub rows: Vec<Vec<String>>,
-}
-
-impl Table {
-    pub fn markdown(&self) -> String {
-        let mut s = format!("### {}\n\n{}\n\n", self.title, self.caption);
-        s.push_str(&format!("| {} |\n", self.header.join(" | ")));
-        s.push_str(&format!("|{}\n", "---|".repeat(self.header.len())));
-        for r in &self.rows {
-            s.push_str(&format!("| {} |\n", r.join(" | ")));
-        }
-        s.push('\n');
-        s
-    }
-}
+pub use crate::records::Table;
 
 fn find<'a>(records: &'a [Record], scene: &str, method: &str, metric: &str) -> Option<&'a Record> {
     records

@@ -4,8 +4,29 @@
 use crate::error::ensure;
 use serde::{Deserialize, Serialize};
 
-use crate::paper::Table;
 use weft_data::Size;
+
+/// A table: title, caption, header and rows of cells.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Table {
+    pub title: String,
+    pub caption: String,
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    pub fn markdown(&self) -> String {
+        let mut s = format!("### {}\n\n{}\n\n", self.title, self.caption);
+        s.push_str(&format!("| {} |\n", self.header.join(" | ")));
+        s.push_str(&format!("|{}\n", "---|".repeat(self.header.len())));
+        for r in &self.rows {
+            s.push_str(&format!("| {} |\n", r.join(" | ")));
+        }
+        s.push('\n');
+        s
+    }
+}
 
 /// One measured figure. Field names and meanings are documented in `docs/RESULTS.md`;
 /// fields that do not apply are `null`.

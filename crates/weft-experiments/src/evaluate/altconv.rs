@@ -200,7 +200,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let root = ctx.out.join("altconv");
     let data = root.join("data");
     let frames = (ctx.size == Size::Quick).then_some(QUICK_FRAMES);
-    super::context::generate_dataset_frames(ctx, SCENE, &data, frames).context("limb dataset")?;
+    let stopped = super::context::generate_dataset_frames(ctx, SCENE, &data, frames).context("limb dataset")?;
+    out.failures.extend(stopped);
     let gt = super::context::ground_truth_seconds(&data)?;
     let dataset = LimbDataset::load(&data)?;
     let adj = NormalizedAdjacency::new(&dataset.rest)?;

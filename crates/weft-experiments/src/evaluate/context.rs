@@ -20,17 +20,43 @@ pub struct EvalContext {
 
 /// Generates `scene`'s dataset into `dir`, or completes one an interrupted run left there
 /// (the generator rewrites its manifest after every sequence, so a manifest alone does
-/// not mean the dataset is whole).
-pub fn generate_dataset(ctx: &EvalContext, scene: &str, dir: &Path) -> crate::Result<()> {
+/// not mean the dataset is whole). Returns the sequences that stopped early — a solve
+/// that did not converge; their frames up to it are stored and used — for the
+/// experiment's failures, on every run that reads the dataset.
+pub fn generate_dataset(ctx: &EvalContext, scene: &str, dir: &Path) -> crate::Result<Vec<String>> {
     generate_dataset_frames(ctx, scene, dir, None)
 }
 
+/// The sequences of a complete dataset that stopped early, as failure lines.
+fn stopped_early(scene: &str, manifest: &weft_data::Manifest) -> Vec<String> {
+    manifest
+        .sequences
+        .iter()
+        .filter_map(|s| {
+            s.error.as_ref().map(|e| {
+                format!(
+                    "{scene} dataset: sequence {} stopped early ({} frames kept): {e}",
+                    s.index, s.frames
+                )
+            })
+        })
+        .collect()
+}
+
 /// [`generate_dataset`] with the size's frames per sequence overridden.
-pub fn generate_dataset_frames(ctx: &EvalContext, scene: &str, dir: &Path, frames: Option<usize>) -> crate::Result<()> {
+pub fn generate_dataset_frames(
+    ctx: &EvalContext,
+    scene: &str,
+    dir: &Path,
+    frames: Option<usize>,
+) -> crate::Result<Vec<String>> {
     let manifest = dir.join("manifest.json");
     let exists = manifest.exists();
-    if exists && weft_data::read_manifest(&manifest)?.is_complete() {
-        return Ok(());
+    if exists {
+        let m = weft_data::read_manifest(&manifest)?;
+        if m.is_complete() {
+            return Ok(stopped_early(scene, &m));
+        }
     }
     let mut spec = weft_data::DatasetSpec::new(scene, ctx.size)?;
     if let Some(f) = frames {
@@ -42,8 +68,13 @@ pub fn generate_dataset_frames(ctx: &EvalContext, scene: &str, dir: &Path, frame
         code_version: ctx.code_version.clone(),
         ..Default::default()
     };
-    weft_data::generate(&spec, dir, &options)?;
-    Ok(())
+    match weft_data::generate(&spec, dir, &options) {
+        // Sequences that stopped early are stored up to the failure: the experiment uses
+        // them and reports which.
+        Ok(m) => Ok(stopped_early(scene, &m)),
+        Err(weft_data::Error::Incomplete(_)) => Ok(stopped_early(scene, &weft_data::read_manifest(&manifest)?)),
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// Ground-truth solver seconds per frame of a dataset (its `timing.json`).

@@ -213,7 +213,9 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("drape", ctx.size);
     let root = ctx.out.join("drape");
     let data_dir = root.join("data");
-    super::context::generate_dataset_frames(ctx, weft_data::drape::NAME, &data_dir, None).context("drape dataset")?;
+    let stopped = super::context::generate_dataset_frames(ctx, weft_data::drape::NAME, &data_dir, None)
+        .context("drape dataset")?;
+    out.failures.extend(stopped);
     let gt = super::context::ground_truth_seconds(&data_dir)?;
     let dataset = DrapeDataset::load(&data_dir)?;
     let device = Device::Cpu;

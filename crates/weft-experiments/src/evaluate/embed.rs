@@ -524,7 +524,9 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut ik_rows: Vec<IkRow> = Vec::new();
     for &scene in scenes() {
         let data_dir = root.join("data").join(scene);
-        super::context::generate_dataset(ctx, scene, &data_dir).with_context(|| format!("dataset {scene}"))?;
+        let stopped =
+            super::context::generate_dataset(ctx, scene, &data_dir).with_context(|| format!("dataset {scene}"))?;
+        out.failures.extend(stopped);
         let gt = super::context::ground_truth_seconds(&data_dir)?;
         let dataset = ClothDataset::load(&data_dir)?;
         let data = EmbedData::new(dataset)?;

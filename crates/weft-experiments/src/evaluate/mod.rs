@@ -146,6 +146,26 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             }
         );
     }
+    // Publishing rebuilds the whole published report: an experiment not cached in OUT is
+    // taken from the published one (its committed output and renders), so republishing one
+    // experiment never drops the others.
+    let mut imported: Vec<&str> = Vec::new();
+    if let Some(dest) = &args.publish {
+        for name in EXPERIMENTS {
+            let cache = out.join("experiments").join(format!("{name}.json"));
+            let published = dest.join("experiments").join(format!("{name}.json"));
+            if cache.exists() || read_cached(&published, size)?.is_none() {
+                continue;
+            }
+            std::fs::copy(&published, &cache).with_context(|| format!("copying {}", published.display()))?;
+            let renders = dest.join("renders").join(name);
+            if renders.exists() && !out.join("renders").join(name).exists() {
+                copy_tree(&renders, &out.join("renders").join(name))?;
+            }
+            eprintln!("{name}: taken from the published {}", published.display());
+            imported.push(name);
+        }
+    }
     // The report covers every experiment cached in OUT at this size.
     let mut outputs = Vec::new();
     for name in EXPERIMENTS {
@@ -160,7 +180,7 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
         out.join("index.html").display()
     );
     if let Some(dest) = &args.publish {
-        publish(&out, dest, &ran, &outputs, args)?;
+        publish(&out, dest, &ran, &imported, &outputs, args)?;
         eprintln!("published to {}", dest.display());
     }
     Ok(())
@@ -172,22 +192,25 @@ fn publish(
     out: &Path,
     dest: &Path,
     ran: &[&str],
+    imported: &[&str],
     outputs: &[ExperimentOutput],
     args: &EvaluateOptions,
 ) -> crate::Result<()> {
     let reused: Vec<&str> = outputs
         .iter()
         .map(|o| o.experiment.as_str())
-        .filter(|e| !ran.contains(e))
+        .filter(|e| !ran.contains(e) && !imported.contains(e))
         .collect();
-    for sub in ["plots", "renders"] {
+    for sub in ["plots", "renders", "experiments"] {
         let _ = std::fs::remove_dir_all(dest.join(sub));
     }
     std::fs::create_dir_all(dest)?;
     for f in ["results.json", "tables.md", "index.html"] {
         std::fs::copy(out.join(f), dest.join(f)).with_context(|| format!("copying {f}"))?;
     }
-    for sub in ["plots", "renders"] {
+    // The experiments' outputs travel with the report, so any later publication can
+    // rebuild it whole (the large predictions stay behind).
+    for sub in ["plots", "renders", "experiments"] {
         // An evaluation without renders (or plots) has no such directory.
         if out.join(sub).exists() {
             copy_tree(&out.join(sub), &dest.join(sub))?;
@@ -222,7 +245,14 @@ fn publish(
         list(&reused),
         args.code_version,
         out.display()
-    ) + &provenance_per_experiment(outputs);
+    ) + &if imported.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "\nExperiments taken from the report published here before (its `experiments/` outputs, unchanged): {}.\n",
+            list(imported)
+        )
+    } + &provenance_per_experiment(outputs);
     Ok(weft_data::files::write_text(&dest.join("PROVENANCE.md"), &text)?)
 }
 

@@ -667,7 +667,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("nnwarp", ctx.size);
     let root = ctx.out.join("nnwarp");
     let data = root.join("data");
-    super::context::generate_dataset(ctx, weft_data::nnwarp::NAME, &data).context("nnwarp dataset")?;
+    let stopped = super::context::generate_dataset(ctx, weft_data::nnwarp::NAME, &data).context("nnwarp dataset")?;
+    out.failures.extend(stopped);
     let config = training_config(ctx.size);
     std::fs::create_dir_all(&root)?;
     let config_path = root.join("config.json");

@@ -68,10 +68,45 @@ fn png_inline(dir: &Path, rel: &str) -> crate::Result<String> {
     ))
 }
 
+/// What the page opens with.
+#[derive(Debug)]
+pub struct Summary<'a> {
+    pub claims: &'a [super::summary::Claim],
+    /// One speed-against-accuracy chart per family: (title, file stem).
+    pub families: &'a [(String, String)],
+}
+
+fn claims_html(claims: &[super::summary::Claim]) -> String {
+    use super::summary::Verdict;
+    let mut s = String::from(
+        "<table class=\"claims\">\n<tr><th>paper</th><th>central claim</th><th>the paper</th><th>ours</th>\
+         <th>verdict</th><th>decided by</th></tr>\n",
+    );
+    for c in claims {
+        let class = match c.verdict {
+            Verdict::Reproduced => "yes",
+            Verdict::NotReproduced => "no",
+            Verdict::NotMeasured => "na",
+        };
+        s.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"{class}\">{}</td><td><code>{}</code></td></tr>\n",
+            escape(c.paper),
+            escape(c.claim),
+            inline(&c.paper_figure),
+            inline(&c.ours),
+            c.verdict.as_str(),
+            escape(&c.command())
+        ));
+    }
+    s.push_str("</table>\n");
+    s
+}
+
 pub fn page(
     dir: &Path,
     size: Size,
     outputs: &[ExperimentOutput],
+    summary: &Summary<'_>,
     tables: &[Table],
     charts: &[Charts],
     wall: f64,
@@ -79,14 +114,51 @@ pub fn page(
     let mut body = String::new();
     body.push_str(&format!(
         "<h1>weft evaluation — {} size</h1>\n<p>Every figure on this page was measured by <code>cargo xtask evaluate \
-         --size {}</code> in one run ({wall:.0} s). Speed is always shown beside accuracy: time per frame as a ratio to \
-         the ground-truth solver timed in the same run, error against a tight reference. The same figures are in \
+         --size {}</code>, each experiment in one run of its own ({}), so the time ratios within an experiment compare \
+         one machine state; each experiment's command and code version are in <code>PROVENANCE.md</code> (report \
+         assembled in {wall:.0} s). Speed is always shown beside accuracy: time per frame as a ratio to the ground-truth \
+         solver timed in the same run, error against a tight reference. The same figures are in \
          <code>results.json</code> (tidy records), <code>tables.md</code>, <code>plots/</code> (PNG and SVG) and \
          <code>predictions/</code> (every method's positions beside the reference).</p>\n",
         size.as_str(),
-        size.as_str()
+        size.as_str(),
+        outputs
+            .iter()
+            .map(|o| format!("<code>{}</code> {:.0} s", escape(&o.experiment), o.wall_seconds))
+            .collect::<Vec<_>>()
+            .join(", ")
     ));
-    body.push_str("<h2>Tables</h2>\n");
+    // The summary a newcomer reads first, then a table of contents.
+    body.push_str(
+        "<h2 id=\"claims\">The papers' central claims</h2>\n<p class=\"cap\">Each claim is decided from this \
+                   report's records by the rule in <code>weft_experiments::report::summary</code>; the command on the \
+                   right reruns the experiment that decides it.</p>\n",
+    );
+    body.push_str(&claims_html(summary.claims));
+    body.push_str(
+        "<h2 id=\"contents\">Contents</h2>\n<ul>\n<li><a href=\"#claims\">Claims</a></li>\n\
+                   <li><a href=\"#families\">Speed against accuracy, by family</a></li>\n\
+                   <li><a href=\"#tables\">The papers' tables beside ours</a></li>\n",
+    );
+    for o in outputs {
+        body.push_str(&format!(
+            "<li><a href=\"#experiment-{0}\">Experiment <code>{0}</code></a></li>\n",
+            escape(&o.experiment)
+        ));
+    }
+    body.push_str("</ul>\n");
+    if !summary.families.is_empty() {
+        body.push_str(
+            "<h2 id=\"families\">Speed against accuracy, by family</h2>\n<p class=\"cap\">One point per \
+                       method: its error averaged over the family's scenes, its time per frame over the ground truth's \
+                       (geometric mean), every time from this run. Lower left is better; the line is the Pareto \
+                       front.</p>\n",
+        );
+        for (_, stem) in summary.families {
+            body.push_str(&svg_inline(dir, stem)?);
+        }
+    }
+    body.push_str("<h2 id=\"tables\">Tables</h2>\n");
     for t in tables {
         body.push_str(&table_html(t));
     }
@@ -98,7 +170,7 @@ pub fn page(
     body.push_str("</ul>\n");
     for (o, c) in outputs.iter().zip(charts) {
         body.push_str(&format!(
-            "<h2>Experiment <code>{}</code> ({:.0} s)</h2>\n",
+            "<h2 id=\"experiment-{0}\">Experiment <code>{0}</code> ({1:.0} s)</h2>\n",
             escape(&o.experiment),
             o.wall_seconds
         ));
@@ -157,7 +229,10 @@ pub fn page(
          .chart {{ display: inline-block; width: 49%; margin: 2px; }}\n\
          .chart svg {{ width: 100%; height: auto; }}\n\
          .renders {{ display: flex; flex-wrap: wrap; }}\nfigure {{ margin: 4px; }}\n\
-         figcaption {{ font-size: 12px; color: #555; }}\n</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
+         figcaption {{ font-size: 12px; color: #555; }}\n\
+         .claims td.yes {{ background: #d8f0d8; font-weight: bold; }}\n\
+         .claims td.no {{ background: #f6d6d6; font-weight: bold; }}\n\
+         .claims td.na {{ background: #eee; }}\n</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
         size.as_str()
     ))
 }

@@ -4,6 +4,7 @@
 
 pub mod html;
 pub mod plots;
+pub mod summary;
 
 use std::path::Path;
 
@@ -109,12 +110,43 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
         }
         charts.push(c);
     }
+    // The summary: the papers' claims and one plot per family of scenes.
+    let claims = summary::claims(&records);
+    let mut families = Vec::new();
+    for f in summary::FAMILIES {
+        let points: Vec<ParetoPoint> = f
+            .points(&records)
+            .into_iter()
+            .map(|p| ParetoPoint {
+                method: p.label,
+                time_ratio: p.time_ratio,
+                error: p.error,
+            })
+            .collect();
+        if points.is_empty() {
+            continue;
+        }
+        let stem = format!("plots/family-{}", f.name);
+        plots::pareto(&out.join(&stem), f.title, f.error_label, &points)?;
+        families.push((f.title.to_string(), stem));
+    }
     let tables = paper::tables(outputs);
     write_text(
         &out.join("tables.md"),
-        &tables_markdown(size, outputs, &tables, wall_seconds),
+        &tables_markdown(size, outputs, &claims, &tables, wall_seconds),
     )?;
-    let page = html::page(out, size, outputs, &tables, &charts, wall_seconds)?;
+    let page = html::page(
+        out,
+        size,
+        outputs,
+        &html::Summary {
+            claims: &claims,
+            families: &families,
+        },
+        &tables,
+        &charts,
+        wall_seconds,
+    )?;
     write_text(&out.join("index.html"), &page)?;
     Ok(())
 }
@@ -124,10 +156,17 @@ fn slug(s: &str) -> String {
     s.replace('/', "-")
 }
 
-fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Table], wall: f64) -> String {
+fn tables_markdown(
+    size: Size,
+    outputs: &[ExperimentOutput],
+    claims: &[summary::Claim],
+    tables: &[paper::Table],
+    wall: f64,
+) -> String {
     let mut s = format!(
-        "# weft evaluation ({} size)\n\nEvery figure below was measured by `cargo xtask evaluate --size {}` in one run \
-         (report assembled after {:.0} s; experiments: {}). Time ratios compare methods timed in the same run.\n\n",
+        "# weft evaluation ({} size)\n\nEvery figure below was measured by `cargo xtask evaluate --size {}`, each \
+         experiment in one run of its own (report assembled in {:.0} s; experiments: {}). Time ratios compare methods \
+         timed in the same run.\n\n",
         size.as_str(),
         size.as_str(),
         wall,
@@ -137,6 +176,21 @@ fn tables_markdown(size: Size, outputs: &[ExperimentOutput], tables: &[paper::Ta
             .collect::<Vec<_>>()
             .join(", ")
     );
+    s.push_str(
+        "## The papers' claims\n\n| paper | claim | paper | ours | verdict | decided by |\n|---|---|---|---|---|---|\n",
+    );
+    for c in claims {
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | **{}** | `{}` |\n",
+            c.paper,
+            c.claim,
+            c.paper_figure,
+            c.ours,
+            c.verdict.as_str(),
+            c.command()
+        ));
+    }
+    s.push('\n');
     for t in tables {
         s.push_str(&t.markdown());
     }
@@ -206,6 +260,18 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
         !html.contains("src=\"plots/") && !html.contains("src=\"renders/"),
         "index.html links files instead of embedding them"
     );
+    // The page a newcomer reads first: the claims, then every experiment the records hold.
+    ensure!(
+        html.contains("id=\"claims\"") && html.contains("id=\"contents\""),
+        "index.html does not open with the claims table and contents (rebuild it from the experiments' outputs)"
+    );
+    for e in distinct(records.iter().map(|r| r.experiment.as_str())) {
+        ensure!(
+            html.contains(&format!("id=\"experiment-{e}\"")),
+            "results.json holds experiment {e:?} but index.html has no section for it (rebuild the report from every \
+             experiment's output)"
+        );
+    }
     if published {
         let t = std::fs::read_to_string(dir.join("PROVENANCE.md")).context("reading PROVENANCE.md")?;
         ensure!(t.contains("cargo xtask"), "PROVENANCE.md names no command");
