@@ -1,0 +1,131 @@
+//! Training cost per step of the learned models on the candle autograd path, the path the
+//! one trainer runs today (issue "Training faster than PyTorch"):
+//! - one Alt-ConvLSTM sequence pass — 20 teacher-forced steps, full backpropagation, one
+//!   Adam step, batch 1 — on the 1410-vertex `limb` surface (the standard dataset's) and the
+//!   6890-vertex one (SMPL's vertex count), widths 32-64-128-64-32;
+//! - one embedding stage-1 step on the 4225-vertex sheet (`sheet-ms` at standard size): a
+//!   batch of 8 windows through the encoder, decoder, ACAP⁻¹ and `L_phys`, backward, Adam.
+//!
+//! The frames are synthetic (a skin swinging a few millimetres, the tissue lagging it): the
+//! cost does not depend on their values. The anchor a user compares against — the same
+//! Alt-ConvLSTM pass in PyTorch 2.15 on this CPU, 0.75 s — is in docs/BENCHMARKS.md.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use weft_nn::adam::{Adam, AdamSettings};
+use weft_nn::altconv::{AltConvNet, AltConvTraining, HIDDEN, SequenceTensors, Variant};
+use weft_nn::graph::NormalizedAdjacency;
+use weft_nn::params::Params;
+use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
+use weft_sim::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
+
+const STEPS: usize = 20;
+
+/// One training step of `model` on `batch`: loss, backward, Adam on every group.
+fn step(model: &mut dyn Trainable, adams: &mut [Adam], batch: &[usize]) {
+    let at = BatchAt {
+        epoch: 0,
+        batch: 0,
+        batches: 1,
+    };
+    let BatchLoss::Loss { loss, .. } = model.batch_loss(batch, at).unwrap() else {
+        panic!("the batch was skipped");
+    };
+    let grads = loss.backward().unwrap();
+    for (g, adam) in model.groups().iter().zip(adams.iter_mut()) {
+        adam.step(g.params, &grads).unwrap();
+    }
+}
+
+fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: usize) {
+    let body = SoftTissue::new(weft_mesh::limb::limb(&limb).unwrap(), SoftTissueParams::default()).unwrap();
+    let surface = body.surface().mesh.clone();
+    assert_eq!(surface.num_vertices(), vertices);
+    let adj = NormalizedAdjacency::new(&surface).unwrap();
+    let (x0, y0) = (body.skinned_surface(), body.simulated_surface());
+    let frame = |base: &[f64], t: usize, lag: f64| -> Vec<f64> {
+        let s = 3e-3 * ((t as f64 - lag) * 0.3).sin();
+        base.iter()
+            .enumerate()
+            .map(|(i, v)| v + if i % 3 == 1 { s } else { 0.0 })
+            .collect()
+    };
+    let seq = weft_data::LimbSequence {
+        index: 0,
+        split: "train".into(),
+        skinned: (0..=STEPS).map(|t| frame(&x0, t, 0.0)).collect(),
+        simulated: (0..=STEPS).map(|t| frame(&y0, t, 1.5)).collect(),
+    };
+    let data = vec![SequenceTensors::new(&seq, STEPS + 1, &weft_nn::Device::Cpu).unwrap()];
+    let mut params = Params::new(&weft_nn::Device::Cpu, 3);
+    let net = AltConvNet::new(&mut params, Variant::Alt, &HIDDEN).unwrap();
+    let settings = AdamSettings::default();
+    let mut adams = vec![Adam::new(&params, settings).unwrap()];
+    let mut model = AltConvTraining {
+        net: &net,
+        params: &params,
+        adj: &adj,
+        train: &data,
+        validation: &data,
+        steps: STEPS,
+        adam: settings,
+    };
+    let mut group = c.benchmark_group(format!("training-altconv-{vertices}"));
+    group.sample_size(10);
+    group.bench_function("sequence pass (candle autograd)", |b| {
+        b.iter(|| step(&mut model, &mut adams, &[0]))
+    });
+    group.finish();
+}
+
+fn altconv(c: &mut Criterion) {
+    altconv_pass(c, weft_mesh::limb::LimbParams::default(), 1410);
+    altconv_pass(c, weft_mesh::limb::LimbParams::smpl_resolution(), 6890);
+}
+
+fn embedding(c: &mut Criterion) {
+    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_sim::{ClothScene, ClothSimulation};
+    // Three simulated frames of the standard sheet: one training window.
+    let scene = ClothScene::builtin("sheet-ms", false).unwrap();
+    let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
+    let rest = sim.mesh().clone();
+    assert_eq!(rest.num_vertices(), 4225);
+    let grasp = sim.grasp_vertices().to_vec();
+    let (mut positions, mut controls, mut labels) = (sim.integrator().positions().to_vec(), Vec::new(), Vec::new());
+    for m in 0..3 {
+        let (q, label) = sim.controls_at(m);
+        controls.extend(q.iter().flat_map(|p| [p.x, p.y, p.z]));
+        labels.push(label.code());
+        if m < 2 {
+            positions.extend(sim.step().unwrap().positions);
+        }
+    }
+    let sequence =
+        weft_data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
+    let dataset = weft_data::ClothDataset {
+        dir: std::env::temp_dir(),
+        name: "sheet-ms".into(),
+        scene,
+        rest,
+        grasp,
+        sequences: vec![sequence],
+    };
+    let data = EmbedData::new(dataset).unwrap();
+    let config = EmbedTrainingConfig::default();
+    let model = EmbedModel::new(config.clone(), &data).unwrap();
+    let mut adams = vec![Adam::new(&model.autoencoder_params, config.adam).unwrap()];
+    let mut stage = EmbedStage {
+        model: &model,
+        data: &data,
+        stage: 1,
+    };
+    let mut group = c.benchmark_group("training-embed-4225");
+    group.sample_size(10);
+    group.bench_function("stage-1 step, 8 windows (candle autograd)", |b| {
+        b.iter(|| step(&mut stage, &mut adams, &[0; 8]))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, altconv, embedding);
+criterion_main!(benches);
