@@ -74,6 +74,20 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
     group.bench_function("sequence pass (candle autograd)", |b| {
         b.iter(|| step(&mut model, &mut adams, &[0]))
     });
+    // Where the pass goes: the forward pass and loss alone, then with the backward pass.
+    let at = BatchAt {
+        epoch: 0,
+        batch: 0,
+        batches: 1,
+    };
+    let loss = |model: &mut AltConvTraining<'_>| match model.batch_loss(&[0], at).unwrap() {
+        BatchLoss::Loss { loss, .. } => loss,
+        BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
+    };
+    group.bench_function("forward and loss", |b| b.iter(|| loss(&mut model)));
+    group.bench_function("forward, loss and backward", |b| {
+        b.iter(|| loss(&mut model).backward().unwrap())
+    });
     group.finish();
 }
 
