@@ -15,9 +15,10 @@ Mirrors, in weft:
 One sequence pass = forward over the 20 teacher-forced steps, the Eq. 12 loss,
 loss.backward(), one torch.optim.Adam step (lr 1e-3), zero_grad. Runs on 2 threads.
 
-Usage:
-    python3 benches/pytorch/altconv_pass.py /tmp/limb-surface/rest.obj
+Usage (pip install torch):
+    python3 benches/pytorch/altconv_pass.py --limb 8 40       # weft's 1410-vertex limb surface
     python3 benches/pytorch/altconv_pass.py --limb 14 116     # weft's 6890-vertex limb surface
+    python3 benches/pytorch/altconv_pass.py rest.obj          # any OBJ surface (e.g. `cargo xtask simulate limb --frames 1 --out d` writes d/rest.obj)
 
 `--limb ACROSS ALONG` rebuilds weft's limb boundary surface (a port of
 weft_mesh::limb::limb, generators::grid_tets and TetMesh::boundary_surface); `--limb 8 40`
