@@ -68,6 +68,8 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
         validation: &data,
         steps: STEPS,
         adam: settings,
+        recipe: weft_nn::altconv::Recipe::default(),
+        seed: 0,
     };
     let mut group = c.benchmark_group(format!("training-altconv-{vertices}"));
     group.sample_size(10);

@@ -51,6 +51,10 @@ Configuration file (--config, JSON; omitted fields keep their defaults, unknown 
   seed             0
   schedule         {\"decay\": {\"kind\": \"exponential\", \"per_epoch\": 0.995}, \"warmup_epochs\": 0,
                     \"clip_grad_norm\": null, \"early_stopping_patience\": null}
+  recipe           {\"sampling_max\": 0, \"sampling_epochs\": [0, 0], \"curriculum_start\": 0,
+                    \"curriculum_epochs\": 0}: scheduled sampling (feed the model's own previous
+                   prediction back with a probability rising to sampling_max over those epochs) and
+                   a window growing from curriculum_start steps to steps; off by default
 Validation: Eq. 12 teacher-forced on the dataset's validation sequences.";
 
 const DRAPE_CONFIG: &str = "\

@@ -43,6 +43,8 @@ fn fit(
         validation: seqs,
         steps: config.steps,
         adam: config.adam,
+        recipe: config.recipe,
+        seed: config.seed,
     };
     let state = Trainer::new("test", config.trainer())
         .run(&run_dir("fit"), &mut t, &mut Silent)
@@ -483,4 +485,109 @@ fn the_fitted_units_are_the_training_data_moments() {
         assert!(rms > 1e-4, "the synthetic tissue lags the skin");
     }
     assert!(Scaling::fit(&[], Variant::Alt, 5).is_err());
+}
+
+/// The recipe options: no sampling is the paper's teacher forcing, sampling every step is
+/// the roll-out, the curriculum trains the first steps only at first, and the draws repeat.
+#[test]
+fn scheduled_sampling_spans_teacher_forcing_to_roll_out_and_the_curriculum_grows_the_window() {
+    use weft_nn::altconv::{Recipe, mean_error};
+    use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
+    let mesh = sheet(4);
+    let adj = NormalizedAdjacency::new(&mesh).unwrap();
+    let s = lagging_sequence(&mesh, 9, 0.3, 0.5);
+    let seqs = std::slice::from_ref(&s);
+    let mut params = Params::new(&cpu(), 5);
+    let net = AltConvNet::new(&mut params, Variant::NpDy, &[4, 4]).unwrap();
+    let steps = 8;
+    let training = |recipe: Recipe| AltConvTraining {
+        net: &net,
+        params: &params,
+        adj: &adj,
+        train: seqs,
+        validation: seqs,
+        steps,
+        adam: AdamSettings::default(),
+        recipe,
+        seed: 11,
+    };
+    let loss = |recipe: Recipe, epoch: usize| -> f64 {
+        let at = BatchAt {
+            epoch,
+            batch: 0,
+            batches: 1,
+        };
+        match training(recipe).batch_loss(&[0], at).unwrap() {
+            BatchLoss::Loss { loss, .. } => f64::from(loss.to_scalar::<f32>().unwrap()),
+            BatchLoss::Skipped { .. } => panic!("skipped"),
+        }
+    };
+    let forced = mean_error(&net, &adj, seqs, steps, true).unwrap();
+    let rolled = mean_error(&net, &adj, seqs, steps, false).unwrap();
+    assert!(
+        (forced - rolled).abs() > 1e-6 * forced,
+        "the test needs the two to differ"
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs();
+    assert!(close(loss(Recipe::default(), 3), forced));
+    let always = Recipe {
+        sampling_max: 1.0,
+        ..Recipe::default()
+    };
+    assert!(close(loss(always, 3), rolled));
+    // About half the steps fed back: neither extreme, and the same draws again.
+    let half = Recipe {
+        sampling_max: 0.5,
+        ..Recipe::default()
+    };
+    // (Epoch 1's draws feed the model's own predictions back at steps 3, 4 and 7 of 8.)
+    let h = loss(half, 1);
+    assert_eq!(h.to_bits(), loss(half, 1).to_bits());
+    assert!(
+        !close(h, forced) && !close(h, rolled),
+        "{h} against {forced} and {rolled}"
+    );
+    // The curriculum: 3 of the 8 steps at epoch 0, all of them from epoch 5 on.
+    let curriculum = Recipe {
+        curriculum_start: 3,
+        curriculum_epochs: 5,
+        ..Recipe::default()
+    };
+    assert_eq!(curriculum.window(0, steps), 3);
+    assert_eq!(curriculum.window(5, steps), steps);
+    assert!(close(
+        loss(curriculum, 0),
+        mean_error(&net, &adj, seqs, 3, true).unwrap()
+    ));
+    assert!(close(loss(curriculum, 7), forced));
+    // The sampling probability rises linearly over its epochs.
+    let ramp = Recipe {
+        sampling_max: 0.4,
+        sampling_epochs: [2, 6],
+        ..Recipe::default()
+    };
+    assert_eq!(ramp.sampling_probability(1), 0.0);
+    assert!((ramp.sampling_probability(4) - 0.2).abs() < 1e-15);
+    assert_eq!(ramp.sampling_probability(9), 0.4);
+    // Out-of-range options are refused by name.
+    let mut config = AltConvTrainingConfig::new(Variant::Alt);
+    config.recipe.sampling_max = 1.5;
+    assert!(
+        config
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("recipe.sampling_max")
+    );
+    config.recipe = Recipe {
+        curriculum_start: 99,
+        ..Recipe::default()
+    };
+    assert!(
+        config
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("recipe.curriculum_start")
+    );
 }

@@ -424,6 +424,20 @@ impl AltConvNet {
         truth: Option<&Tensor>,
         steps: usize,
     ) -> Result<Vec<Tensor>> {
+        self.run_forced(adj, drive, truth, steps, &|_| true)
+    }
+
+    /// [`AltConvNet::run`] with teacher forcing at step `t > 1` only where `forced(t)`:
+    /// elsewhere the step starts from the model's own previous prediction, as a roll-out
+    /// does (scheduled sampling, [`Recipe`]).
+    pub fn run_forced(
+        &self,
+        adj: &NormalizedAdjacency,
+        drive: &Drive,
+        truth: Option<&Tensor>,
+        steps: usize,
+        forced: &dyn Fn(usize) -> bool,
+    ) -> Result<Vec<Tensor>> {
         let (b, frames, v, three) = drive.skinned.dims4()?;
         if three != 3 || v != adj.num_vertices() || drive.initial.dims() != [b, v, 3] {
             return Err(Error::Shape {
@@ -492,7 +506,7 @@ impl AltConvNet {
         for t in 1..=steps {
             let xt = x(t)?;
             let dx = (&xt - &x_prev)?;
-            if t > 1 {
+            if t > 1 && forced(t) {
                 if let Some(y_prev) = y_true(t - 1)? {
                     // Teacher forcing: the step starts from the true surface.
                     match self.variant {
@@ -552,6 +566,84 @@ pub fn mean_vertex_error(predictions: &[Tensor], truth: &Tensor) -> Result<Tenso
     Ok(d.mean_all()?)
 }
 
+/// Training recipe options beyond the paper's pure teacher forcing, all off by default
+/// (they change results). The roll-out drift of the velocity-integrating models comes from
+/// steps never trained on: a model trained only from true previous surfaces never sees its
+/// own errors fed back.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Recipe {
+    /// Scheduled sampling (Bengio et al. 2015): at each step `t > 1` the cell starts from
+    /// the model's own previous prediction instead of the truth with probability `p(e)`,
+    /// rising linearly over epochs `sampling_epochs[0]..sampling_epochs[1]` from 0 to
+    /// `sampling_max` (0: pure teacher forcing, the paper's). The draws come from
+    /// SplitMix64(seed, epoch, batch), so a resumed run draws the same.
+    pub sampling_max: f64,
+    pub sampling_epochs: [usize; 2],
+    /// Curriculum: the trained window grows linearly from `curriculum_start` steps at epoch
+    /// 0 to the configuration's `steps` at epoch `curriculum_epochs` (0: the full window from
+    /// the start). Validation always scores the full window.
+    pub curriculum_start: usize,
+    pub curriculum_epochs: usize,
+}
+
+impl Default for Recipe {
+    fn default() -> Self {
+        Self {
+            sampling_max: 0.0,
+            sampling_epochs: [0, 0],
+            curriculum_start: 0,
+            curriculum_epochs: 0,
+        }
+    }
+}
+
+impl Recipe {
+    /// The probability of feeding back the model's own prediction at epoch `epoch`.
+    pub fn sampling_probability(&self, epoch: usize) -> f64 {
+        let [a, b] = self.sampling_epochs;
+        if self.sampling_max <= 0.0 || epoch < a {
+            return 0.0;
+        }
+        if epoch >= b {
+            return self.sampling_max;
+        }
+        self.sampling_max * (epoch - a) as f64 / (b - a) as f64
+    }
+
+    /// The trained window at epoch `epoch` when the full window is `steps`.
+    pub fn window(&self, epoch: usize, steps: usize) -> usize {
+        if self.curriculum_epochs == 0 || self.curriculum_start == 0 || epoch >= self.curriculum_epochs {
+            return steps;
+        }
+        let start = self.curriculum_start.min(steps);
+        start + (steps - start) * epoch / self.curriculum_epochs
+    }
+
+    /// Checks every field (`recipe.` prefixes the names in errors).
+    pub fn validate(&self, steps: usize) -> Result<()> {
+        use crate::trainer::invalid;
+        if !(0.0..=1.0).contains(&self.sampling_max) {
+            return Err(invalid("recipe.sampling_max", self.sampling_max, "must be in [0, 1]"));
+        }
+        if self.sampling_epochs[0] > self.sampling_epochs[1] {
+            return Err(invalid(
+                "recipe.sampling_epochs",
+                self.sampling_epochs,
+                "must be [start, end] with start <= end",
+            ));
+        }
+        if self.curriculum_start > steps {
+            return Err(invalid(
+                "recipe.curriculum_start",
+                self.curriculum_start,
+                "must be at most steps",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
 /// fields; they keep the defaults of [`AltConvTrainingConfig::new`] for Alt-ConvLSTM.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -569,6 +661,8 @@ pub struct AltConvTrainingConfig {
     /// "weight decay of 0.995").
     pub schedule: crate::trainer::Schedule,
     pub seed: u64,
+    /// Scheduled sampling and a window curriculum (off by default).
+    pub recipe: Recipe,
 }
 
 impl Default for AltConvTrainingConfig {
@@ -594,6 +688,7 @@ impl AltConvTrainingConfig {
                 ..Default::default()
             },
             seed: 0,
+            recipe: Recipe::default(),
         }
     }
 
@@ -608,6 +703,7 @@ impl AltConvTrainingConfig {
         check_count("epochs", self.epochs, MAX_EPOCHS)?;
         check_count("batch", self.batch, MAX_BATCH)?;
         check_adam("adam", &self.adam)?;
+        self.recipe.validate(self.steps)?;
         self.schedule.validate("schedule")
     }
 
@@ -680,6 +776,9 @@ pub struct AltConvTraining<'a> {
     pub validation: &'a [SequenceTensors],
     pub steps: usize,
     pub adam: crate::adam::AdamSettings,
+    /// Scheduled sampling and the window curriculum, drawn from `seed`.
+    pub recipe: Recipe,
+    pub seed: u64,
 }
 
 impl crate::trainer::Trainable for AltConvTraining<'_> {
@@ -695,10 +794,21 @@ impl crate::trainer::Trainable for AltConvTraining<'_> {
         self.train.len()
     }
 
-    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+    fn batch_loss(&mut self, batch: &[usize], at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
         let items: Vec<&SequenceTensors> = batch.iter().map(|&k| &self.train[k]).collect();
         let b = SequenceTensors::batch(&items)?;
-        let predictions = self.net.run(self.adj, &b.drive, Some(&b.truth), self.steps)?;
+        let steps = self.recipe.window(at.epoch, self.steps);
+        let p = self.recipe.sampling_probability(at.epoch);
+        // One draw per step from SplitMix64(seed, epoch, batch): the same on a resumed run.
+        let forced: Vec<bool> = {
+            let mut rng = weft_sim::rng::SplitMix64::new(
+                self.seed ^ (at.epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ ((at.batch as u64) << 40),
+            );
+            (0..=steps).map(|_| rng.unit() >= p).collect()
+        };
+        let predictions = self
+            .net
+            .run_forced(self.adj, &b.drive, Some(&b.truth), steps, &|t| forced[t])?;
         let loss = mean_vertex_error(&predictions, &b.truth)?;
         Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] })
     }
@@ -930,6 +1040,8 @@ pub fn train_model(
         validation: &validation,
         steps: config.steps,
         adam: config.adam,
+        recipe: config.recipe,
+        seed: config.seed,
     };
     let trainer = crate::trainer::Trainer::new(format!("altconv/{}", config.variant.name()), config.trainer());
     let state = trainer.run(dir, &mut training, observer)?;
