@@ -48,6 +48,10 @@ fn main() {
             best = best.min(t.elapsed().as_secs_f64());
             last = Some(report);
         }
-        println!("{name}: best of 3 forward passes {:.3} s; {:?}", best, last.expect("ran"));
+        println!(
+            "{name}: best of 3 forward passes {:.3} s; {:?}",
+            best,
+            last.expect("ran")
+        );
     }
 }
