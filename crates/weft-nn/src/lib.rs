@@ -10,6 +10,8 @@
 //!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
 //!   frames stopped (Eq. 9–10), the elastic potential `P_s + P_b`, and Geng et al.'s
 //!   inextensibility and quasistatic projections through weft-proj's backward passes;
+//! - [`pca_simulator`]: the same latent MLP on a PCA subspace — the linear baseline for
+//!   reduced simulation beside the embedding;
 //! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
 //!   same potential minimised over every vertex;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
@@ -71,6 +73,7 @@ pub mod nnwarp;
 pub mod ops;
 pub mod params;
 pub mod pca;
+pub mod pca_simulator;
 pub mod rollout;
 pub mod trainer;
 

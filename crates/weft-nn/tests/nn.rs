@@ -791,3 +791,45 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
         .is_err()
     );
 }
+
+/// The latent MLP on a PCA subspace trains through the trainer (its validation loss falls
+/// below the untrained one's) and rolls out frames of the right size from two frames and
+/// the controls.
+#[test]
+fn the_pca_simulator_learns_the_codes_and_rolls_out() {
+    use weft_nn::embed_training::EmbedData;
+    use weft_nn::pca::PositionPca;
+    use weft_nn::pca_simulator::{PcaSimulatorConfig, train};
+    let data = EmbedData::new(quick_sheet_dataset(34)).unwrap();
+    let seq = &data.dataset.sequences[0];
+    let frames: Vec<Vec<f64>> = data.train_windows.iter().map(|f| seq.frame(f.frame).to_vec()).collect();
+    let pca = PositionPca::fit(&frames, 8).unwrap();
+    let dir = std::env::temp_dir().join(format!("weft-pca-sim-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let config = PcaSimulatorConfig {
+        hidden: vec![32],
+        epochs: 15,
+        batch: 4,
+        adam: weft_nn::adam::AdamSettings {
+            learning_rate: 3e-3,
+            ..Default::default()
+        },
+        ..PcaSimulatorConfig::default()
+    };
+    let sim = train(&dir, &data, pca, &config, &mut weft_nn::trainer::Silent).unwrap();
+    let state = weft_nn::trainer::TrainingState::read(&dir).unwrap();
+    assert!(
+        state.best_validation < 0.5 * state.initial_validation,
+        "{} → {}",
+        state.initial_validation,
+        state.best_validation
+    );
+    let controls: Vec<&[f64]> = (2..6).map(|m| seq.control(m)).collect();
+    let out = sim.rollout(seq.frame(0), seq.frame(1), &controls).unwrap();
+    assert_eq!(out.len(), 4);
+    assert!(
+        out.iter()
+            .all(|p| p.len() == seq.frame(0).len() && p.iter().all(|v| v.is_finite()))
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -17,6 +17,7 @@ use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameR
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
+use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
 use weft_nn::rollout::LatentRollout;
 
 use super::context::EvalContext;
@@ -324,6 +325,53 @@ fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<Scores>
     score_windows(data, &scored)
 }
 
+/// Table IV's test for the latent MLP on the PCA subspace: in each 5-frame test window, the
+/// first two frames' PCA codes start the MLP, which predicts the other three from their
+/// controls, decoded through the basis; scored like [`rollout_scores`].
+fn pca_rollout_scores(data: &EmbedData, sim: &PcaSimulator) -> crate::Result<Scores> {
+    let frames = &data.test_frames;
+    let mut scored = Vec::new();
+    for w in windows(frames) {
+        if w.len() < 5 {
+            continue;
+        }
+        let at = |k: usize| data.dataset.sequences[frames[k].sequence].frame(frames[k].frame);
+        let truth: Vec<Vec<f64>> = w[..5].iter().map(|&k| at(k).to_vec()).collect();
+        let controls: Vec<&[f64]> = w[2..5]
+            .iter()
+            .map(|&k| data.dataset.sequences[frames[k].sequence].control(frames[k].frame))
+            .collect();
+        let mut predicted = truth[..2].to_vec();
+        predicted.extend(sim.rollout(&truth[0], &truth[1], &controls)?);
+        scored.push(Window {
+            predicted,
+            truth,
+            scored_from: 2,
+        });
+    }
+    score_windows(data, &scored)
+}
+
+/// [`long_rollout`] for the latent MLP on the PCA subspace.
+fn pca_long_rollout(scene: &str, data: &EmbedData, sim: &PcaSimulator) -> crate::Result<Curve> {
+    let seq = &data.dataset.sequences[0];
+    let controls: Vec<&[f64]> = (2..seq.num_frames()).map(|m| seq.control(m)).collect();
+    let predicted = sim.rollout(seq.frame(0), seq.frame(1), &controls)?;
+    let map: Vec<usize> = (0..data.num_vertices()).collect();
+    let mut curve = Curve {
+        scene: scene.into(),
+        method: "pca-mlp".into(),
+        frames: Vec::new(),
+        error_mm: Vec::new(),
+    };
+    for (k, p) in predicted.iter().enumerate() {
+        let mut acc = RmsAccumulator::default();
+        curve.frames.push((k + 2) as f64);
+        curve.error_mm.push(acc.add(p, seq.frame(k + 2), &map));
+    }
+    Ok(curve)
+}
+
 /// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
 /// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
 /// ground truth shows how the error grows with the number of frames N.
@@ -620,6 +668,31 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             })
             .collect();
         let pca = PositionPca::fit(&train_frames, config.autoencoder.latent)?;
+        // The same latent MLP on the PCA codes (issue 31's baseline for simulation): trained
+        // like stage 2, on the same windows, selected on the same validation windows.
+        let pca_config = PcaSimulatorConfig {
+            hidden: config.latent_hidden.clone(),
+            adam: config.adam,
+            batch: config.batch,
+            epochs: config.epochs[1].max(1),
+            seed: config.seed,
+            schedule: config.schedule,
+        };
+        let pca_dir = models.join("pca-mlp");
+        let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
+            std::fs::remove_dir_all(&pca_dir)?;
+        }
+        std::fs::create_dir_all(&pca_dir)?;
+        weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
+        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("embed/{scene}/pca-mlp"))?;
+        let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
+            .with_context(|| format!("training embed/{scene}/pca-mlp"))?;
+        drop(progress);
+        table_4.push((scene.into(), "pca + MLP", pca_rollout_scores(&data, &pca_sim)?));
+        out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
         let t = Instant::now();
         let predicted: Vec<Vec<f64>> = data
             .test_frames
@@ -655,7 +728,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     }
     // The paper's orders: λ_ephys ascending then the baseline; baseline, 2nd, 3rd stage.
     table_2.sort_by_key(|(label, _)| TABLE_II.iter().position(|t| t.0 == label).unwrap_or(usize::MAX));
-    let model_order = ["baseline", "2nd stage", "3rd stage"];
+    let model_order = ["baseline", "2nd stage", "3rd stage", "pca + MLP"];
     table_4.sort_by_key(|(scene, model, _)| {
         (
             scenes().iter().position(|s| s == scene),
@@ -696,7 +769,8 @@ fn tan_table_4(rows: &[(String, &str, Scores)]) -> Table {
         title: "Tan et al. Table IV — the latent simulator given 2 frames, predicting 3, paper / ours".into(),
         caption: "In each 5-frame test window the first two frames are encoded and the latent MLP predicts the \
                   other three from their controls, decoded to positions. Baseline: the \"[46] + L_vert\" model \
-                  (λ_ephys = λ_mphys = 0); 2nd stage: `ours` before the stage-3 fine-tuning; 3rd stage: `ours`. \
+                  (λ_ephys = λ_mphys = 0); 2nd stage: `ours` before the stage-3 fine-tuning; 3rd stage: `ours`; \
+                  pca + MLP: the same latent MLP trained on the codes of a PCA of the same size (ours only). \
                   M_rms over the predicted frames (mm), M_STED over the whole window, M_phys of the predicted \
                   frames (N²). The paper prints SHEET+[11] (`sheet-ms`) and +holes only."
             .into(),
