@@ -107,8 +107,8 @@ pub fn run(args: DatasetArgs) -> anyhow::Result<()> {
                 // One failing dataset does not stop the others; every failure is reported.
                 let mut failed = Vec::new();
                 for d in dataset_names() {
-                    if let Err(e) = weft_data::generate(&g.spec(d)?, &root.join(d), &options) {
-                        eprintln!("{d}: {:#}", anyhow::Error::from(e));
+                    if let Err(e) = generate(&g.spec(d)?, &root.join(d), &options) {
+                        eprintln!("{d}: {e:#}");
                         failed.push(d);
                     }
                 }
@@ -122,11 +122,24 @@ pub fn run(args: DatasetArgs) -> anyhow::Result<()> {
                     .out
                     .clone()
                     .unwrap_or_else(|| PathBuf::from(format!("data/{name}-{}", g.size.as_str())));
-                weft_data::generate(&spec, &out, &options)?;
-                Ok(())
+                generate(&spec, &out, &options)
             }
         }
     }
+}
+
+/// Generates a dataset; sequences that stopped early (stored up to the failure) make the
+/// command fail after everything else is written.
+fn generate(spec: &DatasetSpec, out: &std::path::Path, options: &GenerateOptions) -> anyhow::Result<()> {
+    let stopped = weft_data::generate(spec, out, options)?.stopped_early();
+    if !stopped.is_empty() {
+        bail!(
+            "{} sequence(s) stopped early (their frames up to the failure are stored): {}",
+            stopped.len(),
+            stopped.join("; ")
+        );
+    }
+    Ok(())
 }
 
 fn list() -> anyhow::Result<()> {

@@ -34,7 +34,7 @@ pub enum Error {
     /// directory holding another dataset, shards that do not fit together.
     #[error("{0}")]
     Invalid(String),
-    /// Generation ran but not all of it succeeded (what did is stored).
+    /// Part of the data could not be generated (a drape chunk found no converged pose).
     #[error("{0}")]
     Incomplete(String),
     #[error(transparent)]

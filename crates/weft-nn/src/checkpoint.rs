@@ -123,3 +123,18 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
         reason: e.to_string(),
     })
 }
+
+/// Refuses to continue a model directory trained under another configuration:
+/// `continues` says whether the stored one (`path`) trains like the asked one but for its
+/// epochs — every `train_model` driver asks this before touching the directory.
+pub fn check_continues(path: &Path, continues: bool) -> Result<()> {
+    if continues {
+        return Ok(());
+    }
+    Err(Error::Checkpoint {
+        path: path.display().to_string(),
+        reason: "the model was trained under another configuration; continue it with the same one (only the \
+                 epochs may change)"
+            .into(),
+    })
+}

@@ -781,24 +781,13 @@ pub fn train_model(
     };
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     let config_path = dir.join("config.json");
-    if let Ok(text) = std::fs::read_to_string(&config_path) {
-        let stored: EmbedTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
-            path: config_path.display().to_string(),
-            reason: e.to_string(),
-        })?;
-        if !(EmbedTrainingConfig {
+    if config_path.exists() {
+        let stored: EmbedTrainingConfig = crate::checkpoint::read_json(&config_path)?;
+        let stored = EmbedTrainingConfig {
             epochs: config.epochs,
             ..stored
-        })
-        .trains_like(config)
-        {
-            return Err(Error::Checkpoint {
-                path: config_path.display().to_string(),
-                reason: "the model was trained under another configuration; continue it with the same one (only \
-                         the epochs may change)"
-                    .into(),
-            });
-        }
+        };
+        crate::checkpoint::check_continues(&config_path, stored.trains_like(config))?;
     }
     crate::checkpoint::write_json(&config_path, config)?;
     crate::checkpoint::write_json(&dir.join("normalization.json"), &data.normalization)?;

@@ -971,18 +971,11 @@ pub fn train_model(
     let standardization_path = dir.join("standardization.json");
     let standardization: Standardization = if crate::trainer::has_run(dir) {
         let stored: WarpTrainingConfig = crate::checkpoint::read_json(&config_path)?;
-        if (WarpTrainingConfig {
+        let stored = WarpTrainingConfig {
             epochs: config.epochs,
             ..stored
-        }) != config
-        {
-            return Err(Error::Checkpoint {
-                path: config_path.display().to_string(),
-                reason: "the model was trained under another configuration; continue it with the same one (only \
-                         the epochs may change)"
-                    .into(),
-            });
-        }
+        };
+        crate::checkpoint::check_continues(&config_path, stored == config)?;
         crate::checkpoint::read_json(&standardization_path)?
     } else {
         let s = Standardization::fit(&train_x, &train_y)?;

@@ -27,22 +27,6 @@ pub fn generate_dataset(ctx: &EvalContext, scene: &str, dir: &Path) -> crate::Re
     generate_dataset_frames(ctx, scene, dir, None)
 }
 
-/// The sequences of a complete dataset that stopped early, as failure lines.
-fn stopped_early(scene: &str, manifest: &weft_data::Manifest) -> Vec<String> {
-    manifest
-        .sequences
-        .iter()
-        .filter_map(|s| {
-            s.error.as_ref().map(|e| {
-                format!(
-                    "{scene} dataset: sequence {} stopped early ({} frames kept): {e}",
-                    s.index, s.frames
-                )
-            })
-        })
-        .collect()
-}
-
 /// [`generate_dataset`] with the size's frames per sequence overridden.
 pub fn generate_dataset_frames(
     ctx: &EvalContext,
@@ -68,13 +52,16 @@ pub fn generate_dataset_frames(
         code_version: ctx.code_version.clone(),
         ..Default::default()
     };
-    match weft_data::generate(&spec, dir, &options) {
-        // Sequences that stopped early are stored up to the failure: the experiment uses
-        // them and reports which.
-        Ok(m) => Ok(stopped_early(scene, &m)),
-        Err(weft_data::Error::Incomplete(_)) => Ok(stopped_early(scene, &weft_data::read_manifest(&manifest)?)),
-        Err(e) => Err(e.into()),
-    }
+    // Sequences that stopped early are stored up to the failure: the experiment uses them
+    // and reports which.
+    Ok(stopped_early(scene, &weft_data::generate(&spec, dir, &options)?))
+}
+
+fn stopped_early(scene: &str, m: &weft_data::Manifest) -> Vec<String> {
+    m.stopped_early()
+        .into_iter()
+        .map(|l| format!("{scene} dataset: {l}"))
+        .collect()
 }
 
 /// Ground-truth solver seconds per frame of a dataset (its `timing.json`).

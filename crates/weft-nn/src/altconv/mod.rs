@@ -1011,18 +1011,11 @@ pub fn train_model(
     let scaling_path = dir.join("scaling.json");
     let scaling: Scaling = if crate::trainer::has_run(dir) {
         let stored: AltConvTrainingConfig = crate::checkpoint::read_json(&config_path)?;
-        if (AltConvTrainingConfig {
+        let stored = AltConvTrainingConfig {
             epochs: config.epochs,
             ..stored
-        }) != *config
-        {
-            return Err(Error::Checkpoint {
-                path: config_path.display().to_string(),
-                reason: "the model was trained under another configuration; continue it with the same one (only \
-                         the epochs may change)"
-                    .into(),
-            });
-        }
+        };
+        crate::checkpoint::check_continues(&config_path, stored == *config)?;
         crate::checkpoint::read_json(&scaling_path)?
     } else {
         let s = Scaling::fit(&train, config.variant, config.steps)?;
