@@ -134,6 +134,17 @@ pub struct ExperimentOutput {
     pub command: String,
     #[serde(default)]
     pub code_version: String,
+    /// Seeds each learned method was trained with (an output cached before the field was
+    /// recorded trained one). A claim is decided only on [`MIN_SEEDS`] or more.
+    #[serde(default = "one_seed")]
+    pub seeds: usize,
+}
+
+/// The fewest seeds a claim is decided on (the brief: mean and spread of at least three).
+pub const MIN_SEEDS: usize = 3;
+
+fn one_seed() -> usize {
+    1
 }
 
 impl ExperimentOutput {
@@ -153,6 +164,7 @@ impl ExperimentOutput {
             wall_seconds: 0.0,
             command: String::new(),
             code_version: String::new(),
+            seeds: 1,
         }
     }
 

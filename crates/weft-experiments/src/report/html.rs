@@ -86,6 +86,7 @@ fn claims_html(claims: &[super::summary::Claim]) -> String {
         let class = match c.verdict {
             Verdict::Reproduced => "yes",
             Verdict::NotReproduced => "no",
+            Verdict::Undecided { .. } => "undecided",
             Verdict::NotMeasured => "na",
         };
         s.push_str(&format!(
@@ -131,8 +132,9 @@ pub fn page(
     // The summary a newcomer reads first, then a table of contents.
     body.push_str(
         "<h2 id=\"claims\">The papers' central claims</h2>\n<p class=\"cap\">Each claim is decided from this \
-                   report's records by the rule in <code>weft_experiments::report::summary</code>; the command on the \
-                   right reruns the experiment that decides it.</p>\n",
+                   report's records by the rule in <code>weft_experiments::report::summary</code>, and only where its \
+                   models were trained with at least three seeds — otherwise it is not decided, and the verdict says \
+                   which way one seed leans; the command on the right reruns the experiment that decides it.</p>\n",
     );
     body.push_str(&claims_html(summary.claims));
     body.push_str(
@@ -232,7 +234,8 @@ pub fn page(
          figcaption {{ font-size: 12px; color: #555; }}\n\
          .claims td.yes {{ background: #d8f0d8; font-weight: bold; }}\n\
          .claims td.no {{ background: #f6d6d6; font-weight: bold; }}\n\
-         .claims td.na {{ background: #eee; }}\n</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
+         .claims td.na {{ background: #eee; }}\n\
+         .claims td.undecided {{ background: #f6ecc8; }}\n</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
         size.as_str()
     ))
 }

@@ -111,7 +111,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
         charts.push(c);
     }
     // The summary: the papers' claims and one plot per family of scenes.
-    let claims = summary::claims(&records);
+    let claims = summary::claims(outputs);
     let mut families = Vec::new();
     for f in summary::FAMILIES {
         let points: Vec<ParetoPoint> = f

@@ -5,23 +5,52 @@
 //! Everything here is computed from `results.json`'s records alone, so the summary of a
 //! report is rebuilt whenever any experiment is republished.
 
-use crate::records::Record;
+use crate::records::{ExperimentOutput, MIN_SEEDS, Record};
 
 /// Whether the records reproduce a claim.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
     Reproduced,
     NotReproduced,
+    /// Measured with fewer than [`MIN_SEEDS`] seeds: the figures say which way it leans
+    /// (`true`: towards reproduced), the claim is not decided.
+    Undecided {
+        seeds: usize,
+        leans_reproduced: bool,
+    },
     /// The experiment that decides it is not in the report.
     NotMeasured,
 }
 
 impl Verdict {
-    pub fn as_str(self) -> &'static str {
+    pub fn as_str(self) -> String {
         match self {
-            Self::Reproduced => "reproduced",
-            Self::NotReproduced => "not reproduced",
-            Self::NotMeasured => "not measured",
+            Self::Reproduced => "reproduced".into(),
+            Self::NotReproduced => "not reproduced".into(),
+            Self::Undecided {
+                seeds,
+                leans_reproduced,
+            } => format!(
+                "not decided: {seeds} seed{} (needs {MIN_SEEDS}); leans {}",
+                if seeds == 1 { "" } else { "s" },
+                if leans_reproduced {
+                    "reproduced"
+                } else {
+                    "not reproduced"
+                }
+            ),
+            Self::NotMeasured => "not measured".into(),
+        }
+    }
+
+    /// The verdict on figures from `seeds` seeds.
+    fn with_seeds(self, seeds: usize) -> Self {
+        match self {
+            Self::Reproduced | Self::NotReproduced if seeds < MIN_SEEDS => Self::Undecided {
+                seeds,
+                leans_reproduced: self == Self::Reproduced,
+            },
+            other => other,
         }
     }
 }
@@ -255,14 +284,26 @@ fn drape_claim(records: &[Record]) -> Claim {
     claim
 }
 
-/// The four papers' central claims, decided from the records.
-pub fn claims(records: &[Record]) -> Vec<Claim> {
-    vec![
-        embed_claim(records),
-        altconv_claim(records),
-        nnwarp_claim(records),
-        drape_claim(records),
+/// The four papers' central claims, decided from the experiments' records — and only
+/// where the deciding experiment trained its models with at least [`MIN_SEEDS`] seeds.
+pub fn claims(outputs: &[ExperimentOutput]) -> Vec<Claim> {
+    let records: Vec<Record> = outputs.iter().flat_map(|o| o.records.iter().cloned()).collect();
+    [
+        embed_claim(&records),
+        altconv_claim(&records),
+        nnwarp_claim(&records),
+        drape_claim(&records),
     ]
+    .into_iter()
+    .map(|mut c| {
+        let seeds = outputs
+            .iter()
+            .find(|o| o.experiment == c.experiment)
+            .map_or(0, |o| o.seeds);
+        c.verdict = c.verdict.with_seeds(seeds);
+        c
+    })
+    .collect()
 }
 
 /// A family of scenes drawn on one speed-against-accuracy plot.
@@ -458,6 +499,41 @@ mod tests {
             c.ours
         );
         assert_eq!(altconv_claim(&[]).verdict, Verdict::NotMeasured);
+    }
+
+    #[test]
+    fn a_claim_on_fewer_than_three_seeds_is_not_decided() {
+        let mut out = ExperimentOutput::new("altconv", weft_data::Size::Quick);
+        out.records = vec![
+            rec(
+                "altconv",
+                "limb",
+                "alt-convlstm",
+                "error-mm-rollout10",
+                Some("test"),
+                1.0,
+            ),
+            rec(
+                "altconv",
+                "limb",
+                "convlstm-np-y",
+                "error-mm-rollout10",
+                Some("test"),
+                2.0,
+            ),
+            rec("altconv", "limb", "skinning", "error-mm-rollout10", Some("test"), 3.0),
+        ];
+        let verdict = |outputs: &[ExperimentOutput]| claims(outputs)[1].verdict;
+        assert_eq!(
+            verdict(std::slice::from_ref(&out)),
+            Verdict::Undecided {
+                seeds: 1,
+                leans_reproduced: true
+            }
+        );
+        out.seeds = 3;
+        assert_eq!(verdict(std::slice::from_ref(&out)), Verdict::Reproduced);
+        assert_eq!(claims(&[])[1].verdict, Verdict::NotMeasured);
     }
 
     #[test]
