@@ -12,7 +12,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_nn::adam::{Adam, AdamSettings};
-use weft_nn::altconv::{AltConvNet, AltConvTraining, HIDDEN, SequenceTensors, Variant};
+use weft_nn::altconv::{AltConvNet, AltConvTraining, HIDDEN, Kernels, SequenceTensors, TrainingPath, Variant};
 use weft_nn::graph::NormalizedAdjacency;
 use weft_nn::params::Params;
 use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
@@ -60,7 +60,7 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
     let net = AltConvNet::new(&mut params, Variant::Alt, &HIDDEN).unwrap();
     let settings = AdamSettings::default();
     let mut adams = vec![Adam::new(&params, settings).unwrap()];
-    let mut model = AltConvTraining {
+    let training = |path: TrainingPath| AltConvTraining {
         net: &net,
         params: &params,
         adj: &adj,
@@ -70,13 +70,10 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
         adam: settings,
         recipe: weft_nn::altconv::Recipe::default(),
         seed: 0,
+        path,
     };
     let mut group = c.benchmark_group(format!("training-altconv-{vertices}"));
     group.sample_size(10);
-    group.bench_function("sequence pass (candle autograd)", |b| {
-        b.iter(|| step(&mut model, &mut adams, &[0]))
-    });
-    // Where the pass goes: the forward pass and loss alone, then with the backward pass.
     let at = BatchAt {
         epoch: 0,
         batch: 0,
@@ -86,10 +83,20 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
         BatchLoss::Loss { loss, .. } => loss,
         BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
     };
-    group.bench_function("forward and loss", |b| b.iter(|| loss(&mut model)));
-    group.bench_function("forward, loss and backward", |b| {
-        b.iter(|| loss(&mut model).backward().unwrap())
-    });
+    for (name, path) in [
+        ("fused", TrainingPath::new(Kernels::Fused)),
+        ("candle autograd", TrainingPath::new(Kernels::Autograd)),
+    ] {
+        let mut model = training(path);
+        group.bench_function(format!("sequence pass ({name})"), |b| {
+            b.iter(|| step(&mut model, &mut adams, &[0]))
+        });
+        // Where the pass goes: the forward pass and loss alone, then with the backward pass.
+        group.bench_function(format!("forward and loss ({name})"), |b| b.iter(|| loss(&mut model)));
+        group.bench_function(format!("forward, loss and backward ({name})"), |b| {
+            b.iter(|| loss(&mut model).backward().unwrap())
+        });
+    }
     group.finish();
 }
 

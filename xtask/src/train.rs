@@ -109,6 +109,10 @@ pub struct Common {
     /// No progress bars and no epoch lines (they are in the model's train.log).
     #[arg(long)]
     pub quiet: bool,
+    /// Train through candle's autograd, the reference, instead of the fused kernels with
+    /// hand-written backward passes (same results to f32 round-off, several times slower).
+    #[arg(long)]
+    pub autograd: bool,
 }
 
 /// The layer a drape model is trained through.
@@ -410,6 +414,9 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         &mut config.adam.learning_rate,
         std::slice::from_mut(&mut config.epochs),
     );
+    if c.autograd {
+        config.kernels = weft_nn::altconv::Kernels::Autograd;
+    }
     config.validate()?;
     check_out(&args.out, c.resume)?;
     let dataset =

@@ -180,11 +180,8 @@ impl NormalizedAdjacency {
     /// `out = Â_n x` for row-major `[V, channels]` slices (every block of `V` rows of a
     /// longer `x` in turn), rows in parallel.
     pub fn multiply(&self, x: &[f32], channels: usize, out: &mut [f32]) {
-        let block = self.num_vertices() * channels;
         debug_assert_eq!(x.len(), out.len());
-        for (xb, ob) in x.chunks(block).zip(out.chunks_mut(block)) {
-            self.multiply_into(xb, channels, ob, channels, 0);
-        }
+        self.product(Columns::whole(x, channels), channels, out, channels, 0, false);
     }
 
     /// `Â_n x` for one row-major `[V, channels]` slice `x`, written into columns
@@ -192,7 +189,28 @@ impl NormalizedAdjacency {
     /// columns untouched), rows in parallel: how a runtime lays several products side by
     /// side as the operand of one matrix product.
     pub fn multiply_into(&self, x: &[f32], channels: usize, out: &mut [f32], stride: usize, offset: usize) {
-        debug_assert!(offset + channels <= stride && out.len() == self.num_vertices() * stride);
+        debug_assert!(out.len() == self.num_vertices() * stride);
+        self.product(Columns::whole(x, channels), channels, out, stride, offset, false);
+    }
+
+    /// The general product the kernels use: `Â_n` applied to columns
+    /// `x.offset..x.offset + channels` of the row-major `[R, x.stride]` slice `x.data`,
+    /// every block of `V` rows in turn (a batch of meshes), written into (or, with
+    /// `accumulate`, added onto) columns `offset..offset + channels` of the row-major
+    /// `[R, stride]` slice `out`; rows in parallel.
+    #[allow(clippy::too_many_arguments)]
+    pub fn product(
+        &self,
+        x: Columns<'_>,
+        channels: usize,
+        out: &mut [f32],
+        stride: usize,
+        offset: usize,
+        accumulate: bool,
+    ) {
+        let v = self.num_vertices();
+        debug_assert!(offset + channels <= stride && x.offset + channels <= x.stride);
+        debug_assert!(out.len().is_multiple_of(v * stride) && x.data.len() / x.stride == out.len() / stride);
         // Blocks of rows per task, each compiled for the CPU's widest vectors (the
         // channel loop is the vector loop).
         out.par_chunks_mut(stride * ROWS_PER_TASK)
@@ -206,23 +224,45 @@ impl NormalizedAdjacency {
                     out: rows,
                     stride,
                     offset,
+                    accumulate,
                 })
             });
     }
 }
 
-/// Rows per parallel task of [`NormalizedAdjacency::multiply_into`].
+/// Columns of a row-major buffer: `data` has rows of `stride` values, the columns start at
+/// `offset`.
+#[derive(Debug, Clone, Copy)]
+pub struct Columns<'a> {
+    pub data: &'a [f32],
+    pub stride: usize,
+    pub offset: usize,
+}
+
+impl<'a> Columns<'a> {
+    /// Every column of a row-major buffer of `channels` columns.
+    pub fn whole(data: &'a [f32], channels: usize) -> Self {
+        Self {
+            data,
+            stride: channels,
+            offset: 0,
+        }
+    }
+}
+
+/// Rows per parallel task of [`NormalizedAdjacency::product`].
 const ROWS_PER_TASK: usize = 256;
 
-/// Rows `first_row..` of `Â_n x` into `out` (see [`NormalizedAdjacency::multiply_into`]).
+/// Rows `first_row..` of `Â_n x` into `out` (see [`NormalizedAdjacency::product`]).
 struct RowProducts<'a> {
     adj: &'a NormalizedAdjacency,
     first_row: usize,
-    x: &'a [f32],
+    x: Columns<'a>,
     channels: usize,
     out: &'a mut [f32],
     stride: usize,
     offset: usize,
+    accumulate: bool,
 }
 
 impl pulp::WithSimd for RowProducts<'_> {
@@ -231,12 +271,20 @@ impl pulp::WithSimd for RowProducts<'_> {
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
         let ch = self.channels;
+        let v = self.adj.num_vertices();
+        let Columns { data, stride, offset } = self.x;
         for (r, row) in self.out.chunks_exact_mut(self.stride).enumerate() {
             let o = &mut row[self.offset..self.offset + ch];
-            o.fill(0.0);
-            let (cols, vals) = self.adj.row(self.first_row + r);
+            if !self.accumulate {
+                o.fill(0.0);
+            }
+            let global = self.first_row + r;
+            // The block of the batch this row belongs to.
+            let base = global - global % v;
+            let (cols, vals) = self.adj.row(global % v);
             for (&j, &a) in cols.iter().zip(vals) {
-                let xj = &self.x[j as usize * ch..(j as usize + 1) * ch];
+                let start = (base + j as usize) * stride + offset;
+                let xj = &data[start..start + ch];
                 for (oc, xc) in o.iter_mut().zip(xj) {
                     *oc += a * xc;
                 }

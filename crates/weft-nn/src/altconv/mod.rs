@@ -38,8 +38,10 @@
 //! Training and evaluation run in candle; [`AltConvRuntime`] rolls a trained model out
 //! without it, for speed.
 
+mod fused;
 mod runtime;
 
+pub use fused::FusedWorkspace;
 pub use runtime::AltConvRuntime;
 
 use candle_core::{DType, Device, Tensor};
@@ -558,8 +560,13 @@ impl AltConvNet {
 /// Eq. 12: the mean Euclidean distance between predicted and true surfaces over steps and
 /// vertices. `predictions[k]` is step `k + 1` of `truth` (`[B, T + 1, V, 3]`).
 pub fn mean_vertex_error(predictions: &[Tensor], truth: &Tensor) -> Result<Tensor> {
-    let steps = predictions.len();
-    let predicted = Tensor::stack(predictions, 1)?;
+    mean_vertex_error_stacked(&Tensor::stack(predictions, 1)?, truth)
+}
+
+/// [`mean_vertex_error`] of the predictions stacked as `[B, T, V, 3]` (what the fused
+/// op returns).
+pub fn mean_vertex_error_stacked(predicted: &Tensor, truth: &Tensor) -> Result<Tensor> {
+    let steps = predicted.dim(1)?;
     let target = truth.narrow(1, 1, steps)?;
     // A tiny floor under the square root keeps the gradient finite at a perfect vertex.
     let d = ((predicted - target)?.sqr()?.sum(3)? + 1e-14)?.sqrt()?;
@@ -644,6 +651,18 @@ impl Recipe {
     }
 }
 
+/// Which implementation trains a model: the same mathematics, different arithmetic
+/// order (the results agree to f32 round-off, tested).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Kernels {
+    /// The fused sequence op with its hand-written backward pass (`fused.rs`).
+    #[default]
+    Fused,
+    /// candle's autograd through [`AltConvNet::run_forced`]: the reference.
+    Autograd,
+}
+
 /// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
 /// fields; they keep the defaults of [`AltConvTrainingConfig::new`] for Alt-ConvLSTM.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -663,6 +682,9 @@ pub struct AltConvTrainingConfig {
     pub seed: u64,
     /// Scheduled sampling and a window curriculum (off by default).
     pub recipe: Recipe,
+    /// The fused kernels (default) or candle's autograd, the reference. Not part of what a
+    /// resumed run must match.
+    pub kernels: Kernels,
 }
 
 impl Default for AltConvTrainingConfig {
@@ -689,6 +711,7 @@ impl AltConvTrainingConfig {
             },
             seed: 0,
             recipe: Recipe::default(),
+            kernels: Kernels::default(),
         }
     }
 
@@ -779,6 +802,24 @@ pub struct AltConvTraining<'a> {
     /// Scheduled sampling and the window curriculum, drawn from `seed`.
     pub recipe: Recipe,
     pub seed: u64,
+    /// The fused kernels (with their reused buffers) or candle's autograd.
+    pub path: TrainingPath,
+}
+
+/// How [`AltConvTraining`] computes its loss and gradients.
+#[derive(Debug, Clone)]
+pub enum TrainingPath {
+    Fused(FusedWorkspace),
+    Autograd,
+}
+
+impl TrainingPath {
+    pub fn new(kernels: Kernels) -> Self {
+        match kernels {
+            Kernels::Fused => Self::Fused(FusedWorkspace::new()),
+            Kernels::Autograd => Self::Autograd,
+        }
+    }
 }
 
 impl crate::trainer::Trainable for AltConvTraining<'_> {
@@ -806,10 +847,20 @@ impl crate::trainer::Trainable for AltConvTraining<'_> {
             );
             (0..=steps).map(|_| rng.unit() >= p).collect()
         };
-        let predictions = self
-            .net
-            .run_forced(self.adj, &b.drive, Some(&b.truth), steps, &|t| forced[t])?;
-        let loss = mean_vertex_error(&predictions, &b.truth)?;
+        let loss = match &self.path {
+            TrainingPath::Fused(workspace) => {
+                let predicted = self
+                    .net
+                    .run_fused(self.adj, &b.drive, Some(&b.truth), steps, &forced, workspace)?;
+                mean_vertex_error_stacked(&predicted, &b.truth)?
+            }
+            TrainingPath::Autograd => {
+                let predictions = self
+                    .net
+                    .run_forced(self.adj, &b.drive, Some(&b.truth), steps, &|t| forced[t])?;
+                mean_vertex_error(&predictions, &b.truth)?
+            }
+        };
         Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] })
     }
 
@@ -821,7 +872,22 @@ impl crate::trainer::Trainable for AltConvTraining<'_> {
                 reason: "model selection needs at least one validation sequence",
             });
         }
-        mean_error(self.net, self.adj, self.validation, self.steps, true)
+        match &self.path {
+            TrainingPath::Fused(workspace) => {
+                let mut total = 0.0;
+                for s in self.validation {
+                    let forced = vec![true; self.steps + 1];
+                    let predicted =
+                        self.net
+                            .run_fused(self.adj, &s.drive, Some(&s.truth), self.steps, &forced, workspace)?;
+                    total += mean_vertex_error_stacked(&predicted, &s.truth)?
+                        .to_dtype(DType::F64)?
+                        .to_scalar::<f64>()?;
+                }
+                Ok(total / self.validation.len() as f64)
+            }
+            TrainingPath::Autograd => mean_error(self.net, self.adj, self.validation, self.steps, true),
+        }
     }
 }
 
@@ -1013,6 +1079,7 @@ pub fn train_model(
         let stored: AltConvTrainingConfig = crate::checkpoint::read_json(&config_path)?;
         let stored = AltConvTrainingConfig {
             epochs: config.epochs,
+            kernels: config.kernels,
             ..stored
         };
         crate::checkpoint::check_continues(&config_path, stored == *config)?;
@@ -1035,6 +1102,7 @@ pub fn train_model(
         adam: config.adam,
         recipe: config.recipe,
         seed: config.seed,
+        path: TrainingPath::new(config.kernels),
     };
     let trainer = crate::trainer::Trainer::new(format!("altconv/{}", config.variant.name()), config.trainer());
     let state = trainer.run(dir, &mut training, observer)?;
