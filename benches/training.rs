@@ -18,6 +18,10 @@ use weft_nn::params::Params;
 use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
 use weft_sim::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
 
+// The allocator `cargo xtask` trains with: the bench measures what a user's run costs.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 const STEPS: usize = 20;
 
 /// One training step of `model` on `batch`: loss, backward, Adam on every group.
@@ -134,19 +138,27 @@ fn embedding(c: &mut Criterion) {
         sequences: vec![sequence],
     };
     let data = EmbedData::new(dataset).unwrap();
-    let config = EmbedTrainingConfig::default();
-    let model = EmbedModel::new(config.clone(), &data).unwrap();
-    let mut adams = vec![Adam::new(&model.autoencoder_params, config.adam).unwrap()];
-    let mut stage = EmbedStage {
-        model: &model,
-        data: &data,
-        stage: 1,
-    };
     let mut group = c.benchmark_group("training-embed-4225");
     group.sample_size(10);
-    group.bench_function("stage-1 step, 8 windows (candle autograd)", |b| {
-        b.iter(|| step(&mut stage, &mut adams, &[0; 8]))
-    });
+    for (name, kernels) in [
+        ("fused", weft_nn::Kernels::Fused),
+        ("candle autograd", weft_nn::Kernels::Autograd),
+    ] {
+        let config = EmbedTrainingConfig {
+            kernels,
+            ..Default::default()
+        };
+        let model = EmbedModel::new(config.clone(), &data).unwrap();
+        let mut adams = vec![Adam::new(&model.autoencoder_params, config.adam).unwrap()];
+        let mut stage = EmbedStage {
+            model: &model,
+            data: &data,
+            stage: 1,
+        };
+        group.bench_function(format!("stage-1 step, 8 windows ({name})"), |b| {
+            b.iter(|| step(&mut stage, &mut adams, &[0; 8]))
+        });
+    }
     group.finish();
 }
 

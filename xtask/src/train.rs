@@ -367,6 +367,9 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
         config.weights.mphys = 0.0;
     }
     c.apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
+    if c.autograd {
+        config.kernels = weft_nn::Kernels::Autograd;
+    }
     config.validate()?;
     if let Some(&s) = args.stages.iter().find(|s| !(1..=3).contains(*s)) {
         bail!("stage {s} does not exist (stages are 1, 2 and 3)");

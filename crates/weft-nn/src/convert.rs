@@ -75,6 +75,19 @@ pub fn f32_to_f64(what: &'static str, values: &[f32]) -> Result<Vec<f64>> {
     Ok(values.iter().map(|&x| x as f64).collect())
 }
 
+/// `f` on the values of a contiguous f32 CPU tensor, borrowed from its storage (no copy);
+/// a tensor of another layout is copied first.
+pub(crate) fn with_f32_values<R>(t: &Tensor, f: impl FnOnce(&[f32]) -> R) -> candle_core::Result<R> {
+    {
+        let (storage, layout) = t.storage_and_layout();
+        if let (candle_core::Storage::Cpu(s), Some((a, b))) = (&*storage, layout.contiguous_offsets()) {
+            return Ok(f(&s.as_slice::<f32>()?[a..b]));
+        }
+    }
+    let copy: Vec<f32> = t.flatten_all()?.to_vec1()?;
+    Ok(f(&copy))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

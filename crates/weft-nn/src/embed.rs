@@ -15,7 +15,9 @@ use std::sync::Arc;
 
 use candle_core::Tensor;
 
+use crate::Kernels;
 use crate::error::{Error, Result};
+use crate::fused_autoencoder::{DecoderOp, EncoderOp, conv_parameters};
 use crate::graph::MeshGraph;
 use crate::layers::{Dense, GraphConv, leaky_relu};
 use crate::params::Params;
@@ -46,6 +48,9 @@ impl Default for AutoencoderConfig {
 pub struct MeshAutoencoder {
     config: AutoencoderConfig,
     num_vertices: usize,
+    graph: Arc<MeshGraph>,
+    /// The fused encoder and decoder ops, or candle's autograd through the layers.
+    kernels: Kernels,
     encoder_convs: Vec<GraphConv>,
     encoder_fc: Dense,
     decoder_fc: Dense,
@@ -88,6 +93,8 @@ impl MeshAutoencoder {
         Ok(Self {
             config,
             num_vertices: v,
+            graph,
+            kernels: Kernels::default(),
             encoder_convs,
             encoder_fc,
             decoder_fc,
@@ -99,6 +106,12 @@ impl MeshAutoencoder {
         &self.config
     }
 
+    /// The same network computed by `kernels` (the fused ops by default).
+    pub fn with_kernels(mut self, kernels: Kernels) -> Self {
+        self.kernels = kernels;
+        self
+    }
+
     /// `E`: `[B, V, 9]` normalised features → `[B, latent]`.
     pub fn encode(&self, features: &Tensor) -> Result<Tensor> {
         let (b, v, c) = features.dims3()?;
@@ -108,6 +121,12 @@ impl MeshAutoencoder {
                 expected: format!("[B, {}, {FEATURE_CHANNELS}]", self.num_vertices),
                 got: format!("{:?}", features.dims()),
             });
+        }
+        if self.kernels == Kernels::Fused {
+            let mut parts = conv_parameters(&self.encoder_convs)?;
+            parts.push(self.encoder_fc.bias.flatten_all()?);
+            let op = EncoderOp::new(self.graph.clone(), self.config.latent);
+            return Ok(Tensor::cat(&parts, 0)?.apply_op3(&self.encoder_fc.weight, &features.contiguous()?, op)?);
         }
         let mut h = features.clone();
         for conv in &self.encoder_convs {
@@ -123,7 +142,7 @@ impl MeshAutoencoder {
 
     /// [`MeshAutoencoder::decode`] with the wall time of each layer: the fully connected
     /// one first, then each graph convolution (candle's CPU ops run eagerly, so each time
-    /// is the layer's own).
+    /// is the layer's own). The fused decoder is one op: one time, the whole decoder's.
     pub fn decode_timed(&self, z: &Tensor) -> Result<(Tensor, Vec<std::time::Duration>)> {
         let (b, latent) = z.dims2()?;
         if latent != self.config.latent {
@@ -132,6 +151,14 @@ impl MeshAutoencoder {
                 expected: format!("[B, {}]", self.config.latent),
                 got: format!("{:?}", z.dims()),
             });
+        }
+        if self.kernels == Kernels::Fused {
+            let t = std::time::Instant::now();
+            let mut parts = vec![self.decoder_fc.bias.flatten_all()?];
+            parts.extend(conv_parameters(&self.decoder_convs)?);
+            let op = DecoderOp::new(self.graph.clone(), self.config.latent);
+            let y = Tensor::cat(&parts, 0)?.apply_op3(&self.decoder_fc.weight, &z.contiguous()?, op)?;
+            return Ok((y, vec![t.elapsed()]));
         }
         let mut times = Vec::with_capacity(1 + self.decoder_convs.len());
         let t = std::time::Instant::now();

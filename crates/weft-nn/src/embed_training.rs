@@ -80,6 +80,10 @@ pub struct EmbedTrainingConfig {
     /// default, as Tan et al.).
     #[serde(default)]
     pub schedule: crate::trainer::Schedule,
+    /// The fused autoencoder ops (default) or candle's autograd, the reference. Not part
+    /// of what a resumed run must match.
+    #[serde(default)]
+    pub kernels: crate::Kernels,
 }
 
 /// The factor that multiplies `L_phys` (J) in `L_ephys` and `L_mphys` (m²/J).
@@ -116,6 +120,10 @@ impl EmbedTrainingConfig {
     /// configuration, with [`EmbedTrainingConfig::phys_scale`] ignored when both physics
     /// weights are zero (the `no-pb` baseline never evaluates `L_phys`).
     pub fn trains_like(&self, other: &Self) -> bool {
+        let other = &Self {
+            kernels: self.kernels,
+            ..other.clone()
+        };
         let physics = |c: &Self| c.weights.ephys != 0.0 || c.weights.mphys != 0.0;
         if physics(self) || physics(other) {
             self == other
@@ -196,6 +204,7 @@ impl Default for EmbedTrainingConfig {
             phys_scale: PhysScale::default(),
             ephys_warmup: 0,
             schedule: crate::trainer::Schedule::default(),
+            kernels: crate::Kernels::default(),
         }
     }
 }
@@ -440,7 +449,8 @@ impl EmbedModel {
         let device = &Device::Cpu;
         let graph = Arc::new(MeshGraph::new(&data.dataset.rest, device)?);
         let mut autoencoder_params = Params::new(device, config.seed);
-        let autoencoder = MeshAutoencoder::new(&mut autoencoder_params, graph, config.autoencoder)?;
+        let autoencoder =
+            MeshAutoencoder::new(&mut autoencoder_params, graph, config.autoencoder)?.with_kernels(config.kernels);
         let mut simulator_params = Params::new(device, config.seed ^ 0x5151_5151);
         let simulator = LatentSimulator::new(
             &mut simulator_params,

@@ -31,6 +31,12 @@ pub struct MeshGraph {
     dst: Tensor,
     /// `1/|N¹(i)|` as a `[1, V, 1]` f32 tensor (0 for an isolated vertex).
     inv_degree: Tensor,
+    /// The same graph in compressed rows for the fused kernels: row `i`'s neighbours
+    /// are `neighbors[offsets[i]..offsets[i + 1]]` (an edge given twice counts twice, as
+    /// in the tensors), and `1/|N¹(i)|`.
+    offsets: Arc<Vec<usize>>,
+    neighbors: Arc<Vec<u32>>,
+    inv_degree_values: Arc<Vec<f32>>,
 }
 
 impl MeshGraph {
@@ -56,13 +62,35 @@ impl MeshGraph {
             .iter()
             .map(|&d| if d > 0 { 1.0 / d as f32 } else { 0.0 })
             .collect();
+        let mut rows: Vec<Vec<u32>> = vec![Vec::new(); num_vertices];
+        for (&s, &d) in src.iter().zip(&dst) {
+            rows[d as usize].push(s);
+        }
+        let mut offsets = Vec::with_capacity(num_vertices + 1);
+        offsets.push(0);
+        for r in &rows {
+            offsets.push(offsets.last().copied().unwrap_or(0) + r.len());
+        }
+        let neighbors: Vec<u32> = rows.into_iter().flatten().collect();
         let e = src.len();
         Ok(Self {
             num_vertices,
             src: Tensor::from_vec(src, e, device)?,
             dst: Tensor::from_vec(dst, e, device)?,
-            inv_degree: Tensor::from_vec(inv, (1, num_vertices, 1), device)?,
+            inv_degree: Tensor::from_vec(inv.clone(), (1, num_vertices, 1), device)?,
+            offsets: Arc::new(offsets),
+            neighbors: Arc::new(neighbors),
+            inv_degree_values: Arc::new(inv),
         })
+    }
+
+    /// Vertex `i`'s neighbours (with multiplicity) and `1/|N¹(i)|`.
+    #[inline]
+    pub fn neighbors(&self, i: usize) -> (&[u32], f32) {
+        (
+            &self.neighbors[self.offsets[i]..self.offsets[i + 1]],
+            self.inv_degree_values[i],
+        )
     }
 
     pub fn num_vertices(&self) -> usize {

@@ -22,9 +22,9 @@ pub fn leaky_relu(x: &Tensor) -> Result<Tensor> {
 #[derive(Debug, Clone)]
 pub struct GraphConv {
     graph: Arc<MeshGraph>,
-    self_weight: Tensor,
-    neighbor_weight: Tensor,
-    bias: Tensor,
+    pub(crate) self_weight: Tensor,
+    pub(crate) neighbor_weight: Tensor,
+    pub(crate) bias: Tensor,
 }
 
 impl GraphConv {
@@ -49,8 +49,8 @@ impl GraphConv {
 /// `x W + b` on the last dimension.
 #[derive(Debug, Clone)]
 pub struct Dense {
-    weight: Tensor,
-    bias: Tensor,
+    pub(crate) weight: Tensor,
+    pub(crate) bias: Tensor,
 }
 
 impl Dense {

@@ -833,3 +833,70 @@ fn the_pca_simulator_learns_the_codes_and_rolls_out() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `‖a − b‖ / ‖b‖` of two gradients.
+fn relative_gap(a: &Tensor, b: &Tensor) -> f32 {
+    let norm = |t: &Tensor| t.sqr().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap().sqrt();
+    norm(&(a - b).unwrap()) / norm(b)
+}
+
+#[test]
+fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
+    // A sheet whose boundary vertices have fewer neighbours, a batch of three, random
+    // weights with non-zero biases (so every leaky ReLU sees both signs), and a loss that
+    // weighs every output differently: the encoder's and decoder's outputs and the
+    // gradients of every parameter and of both inputs agree with candle's autograd.
+    let mesh = weft_mesh::generators::sheet(6, 1.0).unwrap();
+    let v = mesh.num_vertices();
+    let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
+    let mut params = Params::new(&cpu(), 8);
+    let config = AutoencoderConfig {
+        conv_layers: 2,
+        latent: 7,
+    };
+    let fused = MeshAutoencoder::new(&mut params, graph, config).unwrap();
+    let mut rng = TestRng::new(3);
+    for (name, var) in params.vars() {
+        if name.ends_with(".b") {
+            let n = var.as_tensor().elem_count();
+            let b: Vec<f32> = (0..n).map(|_| rng.uniform(-0.3, 0.3) as f32).collect();
+            var.set(&Tensor::from_vec(b, var.as_tensor().shape(), &cpu()).unwrap())
+                .unwrap();
+        }
+    }
+    let reference = fused.clone().with_kernels(weft_nn::Kernels::Autograd);
+    let random = |rng: &mut TestRng, shape: &[usize]| {
+        let n: usize = shape.iter().product();
+        let x: Vec<f32> = (0..n).map(|_| rng.uniform(-0.9, 0.9) as f32).collect();
+        Var::from_tensor(&Tensor::from_vec(x, shape, &cpu()).unwrap()).unwrap()
+    };
+    let x = random(&mut rng, &[3, v, 9]);
+    let z_in = random(&mut rng, &[3, 7]);
+    let weights_z = random(&mut rng, &[3, 7]);
+    let weights_y = random(&mut rng, &[3, v, 9]);
+    let run = |ae: &MeshAutoencoder| {
+        let z = ae.encode(x.as_tensor()).unwrap();
+        let y = ae.decode(z_in.as_tensor()).unwrap();
+        let loss = ((&z * weights_z.as_tensor()).unwrap().sum_all().unwrap()
+            + (&y * weights_y.as_tensor()).unwrap().sqr().unwrap().sum_all().unwrap())
+        .unwrap();
+        (z, y, loss.backward().unwrap())
+    };
+    let (z_f, y_f, g_f) = run(&fused);
+    let (z_r, y_r, g_r) = run(&reference);
+    assert!(relative_gap(&z_f, &z_r) < 1e-5, "codes differ");
+    assert!(relative_gap(&y_f, &y_r) < 1e-5, "decoded features differ");
+    let mut checked = 0;
+    for (name, var) in params
+        .vars()
+        .iter()
+        .map(|(n, v)| (n.as_str(), v))
+        .chain([("x", &x), ("z", &z_in)])
+    {
+        let (f, r) = (g_f.get(var.as_tensor()).unwrap(), g_r.get(var.as_tensor()).unwrap());
+        let gap = relative_gap(f, r);
+        assert!(gap < 1e-4, "{name}: gradients differ by {gap:.2e} relative");
+        checked += 1;
+    }
+    assert_eq!(checked, params.vars().len() + 2);
+}

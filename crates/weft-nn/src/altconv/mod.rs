@@ -41,6 +41,7 @@
 mod fused;
 mod runtime;
 
+pub use crate::Kernels;
 pub use fused::FusedWorkspace;
 pub use runtime::AltConvRuntime;
 
@@ -649,18 +650,6 @@ impl Recipe {
         }
         Ok(())
     }
-}
-
-/// Which implementation trains a model: the same mathematics, different arithmetic
-/// order (the results agree to f32 round-off, tested).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Kernels {
-    /// The fused sequence op with its hand-written backward pass (`fused.rs`).
-    #[default]
-    Fused,
-    /// candle's autograd through [`AltConvNet::run_forced`]: the reference.
-    Autograd,
 }
 
 /// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
