@@ -214,8 +214,20 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         let model_dir = root.join("models").join(variant.name());
         discard_if_stale(&model_dir, &config)?;
         let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("altconv/{}", variant.name()))?;
-        weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
+        let trained = weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
             .with_context(|| format!("training altconv/{}", variant.name()))?;
+        // Wall time per training sequence pass (forward, backward, Adam), from the run's
+        // own record: the fused kernels unless the configuration asks for autograd.
+        let passes = trained.state.epochs_done.max(1) * dataset.split("train").count().max(1);
+        out.record(
+            SCENE,
+            variant.name(),
+            "training-seconds-per-example",
+            trained.state.train_seconds() / passes as f64,
+            "s",
+            Timing::default(),
+        );
+        set_split(&mut out, "train");
     }
     let longest_common = dataset.sequences.iter().map(|s| s.skinned.len() - 1).min().unwrap_or(0);
     let horizon = longest_common.min(*WINDOWS.last().unwrap_or(&50));
