@@ -401,15 +401,24 @@ pub struct LimbSequence {
 #[derive(Debug, Clone)]
 pub struct LimbDataset {
     pub dir: PathBuf,
+    /// The dataset's name: `limb` or `limb-jiggle`.
+    pub name: String,
     /// The body's surface at rest (`rest.obj`); all frames are in its vertex order.
     pub rest: TriMesh,
     pub sequences: Vec<LimbSequence>,
 }
 
 impl LimbDataset {
-    /// Reads every sequence of the `limb` dataset in `dir`.
+    /// Reads every sequence of a soft-tissue dataset (`limb` or `limb-jiggle`) in `dir`.
     pub fn load(dir: &Path) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir, Some("limb"))?;
+        let (manifest_path, manifest) = read_manifest(dir, None)?;
+        let name = manifest["dataset"].as_str().unwrap_or_default().to_string();
+        if !weft_sim::scenes::load::SOFT_TISSUE_SCENES.contains(&name.as_str()) {
+            return Err(data_error(
+                &manifest_path,
+                format!("holds dataset {name:?}, not a soft-tissue one (limb, limb-jiggle)"),
+            ));
+        }
         let rest_path = dir.join("rest.obj");
         let rest = weft_mesh::io::read_obj(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
         let v = rest.num_vertices();
@@ -438,6 +447,7 @@ impl LimbDataset {
         }
         Ok(Self {
             dir: dir.to_path_buf(),
+            name,
             rest,
             sequences,
         })

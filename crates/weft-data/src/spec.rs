@@ -32,7 +32,8 @@ pub fn dataset_names() -> Vec<&'static str> {
     weft_sim::BUILTIN_SCENES
         .iter()
         .copied()
-        .chain([weft_sim::scenes::load::SOFT_TISSUE_SCENE, NNWARP, DRAPE])
+        .chain(weft_sim::scenes::load::SOFT_TISSUE_SCENES)
+        .chain([NNWARP, DRAPE])
         .collect()
 }
 
@@ -204,10 +205,10 @@ impl DatasetSpec {
         let scene = weft_sim::scenes::load::builtin(name, quick)?.context("built-in scene missing")?;
         let ball = name.starts_with("ball");
         let (sequences, frames, split) = match (name, size) {
-            ("limb", Size::Quick) => (4, 8, Split::Sequences),
-            ("limb", Size::Standard) => (20, 60, Split::Sequences),
+            ("limb" | "limb-jiggle", Size::Quick) => (4, 8, Split::Sequences),
+            ("limb" | "limb-jiggle", Size::Standard) => (20, 60, Split::Sequences),
             // Dynamic FAUST's 129 sequences, at about 2 s each.
-            ("limb", Size::Paper) => (129, 120, Split::Sequences),
+            ("limb" | "limb-jiggle", Size::Paper) => (129, 120, Split::Sequences),
             (_, Size::Quick) => (3, 34, Split::Frames12Of17),
             (_, Size::Standard) => (4, 170, Split::Frames12Of17),
             // Tan et al. §VI: four sequences of 2400 (sheets) or 500 (balls) frames.

@@ -276,6 +276,37 @@ fn tet_run(
 }
 
 /// A stretched (or collapsed, `stretch < 0`) noisy prediction of a flat sheet.
+/// `frames` frames of the `limb-jiggle` tissue on the quick limb with the fat layer's
+/// modulus `fat` (Pa) and the motion scaled by `amplitude`.
+fn tissue_run(fat: f64, amplitude: f64, frames: usize, tol_factor: f64) -> crate::Result<Run> {
+    use weft_sim::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
+    let params = SoftTissueParams {
+        young: fat,
+        motion_amplitude: amplitude,
+        ..SoftTissueParams::jiggle()
+    };
+    let t = Instant::now();
+    let mut body = SoftTissue::new(weft_mesh::limb::limb(&weft_mesh::limb::LimbParams::quick())?, params)?;
+    body.newton_settings_mut().tolerance *= tol_factor;
+    let tolerance = body.newton_settings_mut().tolerance;
+    let (mut its, mut res, mut steps, mut clamped) = (0.0, 0.0f64, 0usize, false);
+    for _ in 0..frames {
+        for r in body.step_frame()?.steps {
+            its += r.newton.iterations as f64;
+            res = res.max(r.newton.residual);
+            steps += 1;
+            clamped |= r.newton.regularizations > 0 || r.fallback.is_some() || r.newton.residual_floor > tolerance;
+        }
+    }
+    Ok(Run {
+        positions: body.positions().to_vec(),
+        iterations: its / steps.max(1) as f64,
+        residual: res,
+        seconds: t.elapsed().as_secs_f64(),
+        clamped,
+    })
+}
+
 fn prediction(rest: &weft_mesh::TriMesh, stretch: f64) -> Vec<f64> {
     let mut state: u64 = 0x5EED;
     let h = 1.0 / ((rest.num_vertices() as f64).sqrt() - 1.0);
@@ -375,6 +406,29 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
                     }
                 }
             }
+        }
+    }
+    // Soft tissue (the `limb-jiggle` scene on the quick limb): fat modulus × motion amplitude,
+    // through jumps and the first abrupt stop.
+    let (fats, amplitudes) = if quick {
+        (vec![1e3, 1.5e3], vec![1.0, 2.0])
+    } else {
+        (vec![5e2, 1e3, 1.5e3, 3e3], vec![0.5, 1.0, 1.5, 2.0])
+    };
+    for &fat in &fats {
+        for &amplitude in &amplitudes {
+            jobs.push(Box::new(move || {
+                cell(
+                    "soft-tissue-jiggle",
+                    format!("fat-{}-amplitude-{}", tag(fat), tag(amplitude)),
+                    (
+                        "quick limb, dynamic motion".into(),
+                        format!("fat E = {}", tag(fat)),
+                        format!("amplitude × {}", tag(amplitude)),
+                    ),
+                    |f| tissue_run(fat, amplitude, if quick { 12 } else { 30 }, f),
+                )
+            }));
         }
     }
     // Projection layers: stretch 0–200 % (−1: collapsed to a point) × ε or μ.

@@ -853,3 +853,92 @@ fn quasistatic_continued_from_an_equilibrium_reaches_the_same_equilibrium() {
             .is_err()
     );
 }
+
+#[test]
+fn a_dynamic_motion_stops_dead_and_resumes_without_a_jump() {
+    use weft_sim::scenes::soft_tissue::{STOP_RAMP, SkeletalMotion};
+    let m = SkeletalMotion::dynamic(3, 1.0);
+    assert!(m.holds.len() > 50, "stops are drawn over the whole horizon");
+    for w in m.holds.windows(2) {
+        let ([a, b], [c, _]) = (w[0], w[1]);
+        assert!(b - a >= 0.3 - 1e-12 && b - a <= 0.6 + 1e-12 && c - b >= 0.4 - 1e-12 && c - b <= 0.9 + 1e-12);
+    }
+    // The motion's clock: continuous and non-decreasing, frozen inside a stop, running
+    // at the wall clock's rate between stops, and behind by each stop's length less one
+    // ramp after it.
+    let [a, b] = m.holds[0];
+    let dt = 1e-4;
+    let mut last = m.motion_time(0.0);
+    let mut t = dt;
+    while t < m.holds[2][1] {
+        let now = m.motion_time(t);
+        assert!(
+            now >= last - 1e-12 && now - last <= dt + 1e-9,
+            "clock jumps at {t}: {last} → {now}"
+        );
+        last = now;
+        t += dt;
+    }
+    assert!((m.motion_time(a + STOP_RAMP + 0.01) - m.motion_time(b - STOP_RAMP - 0.01)).abs() < 1e-12);
+    assert!((m.motion_time(0.5 * a) - 0.5 * a).abs() < 1e-12);
+    let after = b + 0.5 * (m.holds[1][0] - b);
+    assert!((m.motion_time(after) - (after - (b - a - STOP_RAMP))).abs() < 1e-9);
+    // So the pose holds still in a stop, and the bounce (three sinusoids whose amplitudes
+    // sum to 5 cm) reaches a few centimetres over 20 s, never more than 5, at 2–4 Hz.
+    let (p, q) = (m.pose(a + 0.1), m.pose(b - 0.1));
+    assert_eq!((p.bounce, p.elbow_flexion), (q.bounce, q.elbow_flexion));
+    let peak = (0..20_000)
+        .map(|k| m.pose(k as f64 * 1e-3).bounce.abs())
+        .fold(0.0, f64::max);
+    assert!(peak > 0.025 && peak <= 0.05 + 1e-12, "bounce peak {peak} m");
+    assert!(m.bounce.terms.iter().all(|(_, f, _)| (2.0..4.0).contains(f)));
+}
+
+#[test]
+fn a_stiff_core_holds_the_tissue_closer_to_the_skin_and_bad_layers_are_typed_errors() {
+    use weft_mesh::limb::LimbParams;
+    use weft_sim::scenes::soft_tissue::{CoreLayer, SoftTissueParams, simulate_soft_tissue};
+    let soft = SoftTissueParams {
+        young: 4e3,
+        ..SoftTissueParams::default()
+    };
+    let layered = SoftTissueParams {
+        core: Some(CoreLayer {
+            young: 3e4,
+            fraction: 0.6,
+        }),
+        ..soft
+    };
+    // The settled sag under gravity: the stiff core carries the soft layer.
+    let sag = |p: &SoftTissueParams| {
+        let s = simulate_soft_tissue(&LimbParams::quick(), p, 0).unwrap();
+        s.skinned[0]
+            .iter()
+            .zip(&s.simulated[0])
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    let (all_soft, with_core) = (sag(&soft), sag(&layered));
+    assert!(
+        with_core < 0.9 * all_soft && with_core > 0.0,
+        "sag {with_core} m with the core, {all_soft} m without"
+    );
+    for fraction in [0.0, 1.0, f64::NAN] {
+        let bad = SoftTissueParams {
+            core: Some(CoreLayer { young: 3e4, fraction }),
+            ..soft
+        };
+        assert!(matches!(
+            simulate_soft_tissue(&LimbParams::quick(), &bad, 0),
+            Err(Error::InvalidParameter { .. })
+        ));
+    }
+    let bad = SoftTissueParams {
+        core: Some(CoreLayer {
+            young: -1.0,
+            fraction: 0.5,
+        }),
+        ..soft
+    };
+    assert!(simulate_soft_tissue(&LimbParams::quick(), &bad, 0).is_err());
+}

@@ -162,6 +162,11 @@ fn window(steps: &[Vec<f64>], n: usize) -> (f64, f64) {
     mean_sd(steps[..n].iter().flatten().copied())
 }
 
+/// The largest per-vertex error over the first `n` steps (mm).
+fn peak(steps: &[Vec<f64>], n: usize) -> f64 {
+    steps[..n].iter().flatten().copied().fold(0.0, f64::max)
+}
+
 /// Scores `net` (or skinning, when `None`) on `sequences` over `horizon` steps.
 fn score(
     net: Option<&AltConvNet>,
@@ -277,6 +282,15 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                 }
                 set_split(&mut out, split);
             }
+            out.record(
+                SCENE,
+                method,
+                &format!("error-mm-max-rollout{horizon}"),
+                peak(&e.rollout, horizon),
+                "mm",
+                timing,
+            );
+            set_split(&mut out, split);
             let steps: Vec<f64> = (1..=horizon).map(|t| t as f64).collect();
             mean_series.push(Series {
                 label: method.clone(),
@@ -476,7 +490,7 @@ pub fn score_model(
             ground_truth_seconds_per_frame: gt,
         };
         out.record(
-            SCENE,
+            &dataset.name,
             method,
             "error-mm-step1",
             window(&e.single, horizon).0,
@@ -486,7 +500,7 @@ pub fn score_model(
         set_split(&mut out, split);
         for w in WINDOWS.into_iter().filter(|&w| w <= horizon) {
             out.record(
-                SCENE,
+                &dataset.name,
                 method,
                 &format!("error-mm-rollout{w}"),
                 window(&e.rollout, w).0,
@@ -495,6 +509,15 @@ pub fn score_model(
             );
             set_split(&mut out, split);
         }
+        out.record(
+            &dataset.name,
+            method,
+            &format!("error-mm-max-rollout{horizon}"),
+            peak(&e.rollout, horizon),
+            "mm",
+            timing,
+        );
+        set_split(&mut out, split);
         write_predictions(ctx, method, &dataset, split, horizon, &e.surfaces)?;
     }
     Ok(out)

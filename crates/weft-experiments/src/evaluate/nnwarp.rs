@@ -230,8 +230,8 @@ impl<'a> Bench<'a> {
         self.unit_force.iter().map(|f| f * a).collect()
     }
 
-    fn nnwarp(&self, root: &Path, m: WarpMaterial, field: FieldDirection) -> crate::Result<NnWarp> {
-        let (_, mlp) = load_model(&root.join("models").join(m.key()))?;
+    fn nnwarp(&self, model_dir: &Path, field: FieldDirection) -> crate::Result<NnWarp> {
+        let (_, mlp) = load_model(model_dir)?;
         let context = WarpContext::with_gradients(
             &self.shape.mesh,
             self.gradients.clone(),
@@ -248,7 +248,9 @@ impl<'a> Bench<'a> {
     /// runtime (§4) and modal warping (Choi & Ko) both see the load in each node's rest
     /// frame, and only then is the registration target `f_int(u) = 𝓡 K ũ` the equilibrium
     /// under `f` (docs/NNWARP.md). `linear` is the plain solve.
-    fn score(&mut self, nnwarp: &NnWarp, reference: &mut Reference, level: f64) -> crate::Result<Scored> {
+    /// `nnwarps` are one material's networks, one per seed: NNWarp's error is their mean,
+    /// each kept in `Scored::nnwarp_seeds`.
+    fn score(&mut self, nnwarps: &[NnWarp], reference: &mut Reference, level: f64) -> crate::Result<Scored> {
         let load = self.load(level);
         let truth = reference.advance(level, &load, &self.rest)?;
         let t = Instant::now();
@@ -261,10 +263,15 @@ impl<'a> Bench<'a> {
         let uw = self.linear.displacements().to_vec();
         let mut errors = [0.0; 4];
         let mut seconds = [0.0; 4];
+        let mut nnwarp_seeds = Vec::with_capacity(nnwarps.len());
+        for other in nnwarps.iter().skip(1) {
+            nnwarp_seeds.push(rel_error(&other.warp(&uw)?, &truth));
+        }
+        let first = nnwarps.first().context("no NNWarp network to score")?;
         for (k, name) in METHODS.iter().enumerate() {
             let t = Instant::now();
             let predicted = match *name {
-                "nnwarp" => nnwarp.warp(&uw)?,
+                "nnwarp" => first.warp(&uw)?,
                 "modal-warping" => modal_warp(&self.gradients, &uw)?,
                 "rotation-strain-warping" => self.rsw.warp(&uw)?,
                 _ => u.clone(),
@@ -277,20 +284,26 @@ impl<'a> Bench<'a> {
             seconds[k] = solve + t.elapsed().as_secs_f64();
             errors[k] = rel_error(&predicted, &truth);
         }
+        nnwarp_seeds.insert(0, errors[0]);
+        errors[0] = nnwarp_seeds.iter().sum::<f64>() / nnwarp_seeds.len() as f64;
         Ok(Scored {
             errors,
             seconds,
             solves: report.solves,
+            nnwarp_seeds,
         })
     }
 }
 
 /// One load's scores, in [`METHODS`] order.
 struct Scored {
+    /// NNWarp's is the mean over its seeds.
     errors: [f64; 4],
     seconds: [f64; 4],
     /// Linear solves the warped fixed point took.
     solves: usize,
+    /// NNWarp's error per seed.
+    nnwarp_seeds: Vec<f64>,
 }
 
 /// A material's static nonlinear equilibrium, continued from load to load, each one
@@ -415,6 +428,7 @@ fn push_point(series: &mut [Series], x: f64, scored: &Scored) {
 /// (which ends where the linear answer moves a node by 2), Neo-Hookean.
 fn load_extrapolation(
     root: &Path,
+    model: &Path,
     shape: &Shape,
     direction: Vector3<f64>,
     field: FieldDirection,
@@ -422,7 +436,7 @@ fn load_extrapolation(
     size: Size,
 ) -> crate::Result<LinePlot> {
     let mut bench = Bench::new(shape, direction, lame)?;
-    let nnwarp = bench.nnwarp(root, WarpMaterial::NeoHookean, field)?;
+    let nnwarp = [bench.nnwarp(model, field)?];
     let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(FIELD_ANGLES.0))?;
     let levels: Vec<f64> = if size == Size::Quick {
         vec![0.5, 1.5, 2.5]
@@ -454,7 +468,13 @@ fn load_extrapolation(
 /// NNWarp Fig. 19: `rel-error` as the field's azimuth α leaves the trained quarter
 /// hemisphere (α ∈ [0, π/2]; β fixed), at the middle load, Neo-Hookean. Each direction is
 /// a fresh body: its contextual features and its reference depend on the field.
-fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, size: Size) -> crate::Result<LinePlot> {
+fn direction_extrapolation(
+    root: &Path,
+    model: &Path,
+    shape: &Shape,
+    lame: LameParameters,
+    size: Size,
+) -> crate::Result<LinePlot> {
     let alphas: Vec<f64> = if size == Size::Quick {
         vec![0.4, 1.2, 2.4]
     } else {
@@ -464,7 +484,7 @@ fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, siz
     for alpha in alphas {
         let direction = Vector3::from(weft_sim::energies::hemisphere_direction(alpha, FIELD_ANGLES.1));
         let mut bench = Bench::new(shape, direction, lame)?;
-        let nnwarp = bench.nnwarp(root, WarpMaterial::NeoHookean, FieldDirection::Directional(direction))?;
+        let nnwarp = [bench.nnwarp(model, FieldDirection::Directional(direction))?];
         let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(alpha))?;
         let Ok(scored) = bench.score(&nnwarp, &mut reference, 1.0) else {
             continue;
@@ -488,7 +508,7 @@ fn direction_extrapolation(root: &Path, shape: &Shape, lame: LameParameters, siz
 /// NNWarp Fig. 15: the beam's tip node over time under a suddenly applied field, full
 /// Neo-Hookean implicit Euler against NNWarp's runtime and linear FEM at time step `dt`.
 /// Returns the plot and a note with each method's mean `rel-error` over the frames.
-fn trajectory(root: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> crate::Result<(LinePlot, String)> {
+fn trajectory(model: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> crate::Result<(LinePlot, String)> {
     use weft_sim::scenes::volume::{ForceField, VolumeSolve};
     let quick = size == Size::Quick;
     let mut scene = weft_sim::VolumeScene::builtin("beam-neo-hookean-field", quick)?;
@@ -517,7 +537,7 @@ fn trajectory(root: &Path, direction: Vector3<f64>, dt: f64, size: Size) -> crat
     let mut linear_scene = scene.clone();
     linear_scene.material = Material::Linear;
     let mut linear = weft_sim::VolumeSimulation::new(linear_scene, None)?;
-    let (_, mlp) = load_model(&root.join("models").join(WarpMaterial::NeoHookean.key()))?;
+    let (_, mlp) = load_model(model)?;
     let mut runtime = NnWarpSimulation::new(&full, mlp)?;
     // The tip node nearest the tip face's centre.
     let mesh = full.mesh();
@@ -663,6 +683,155 @@ fn timing_row(
     ])
 }
 
+/// Training sequences of the data-size study (NNWarp trains on 520): sizes at or beyond
+/// the dataset's training count are dropped and that count itself is always the last.
+const DATA_SIZES: [usize; 4] = [64, 128, 256, 520];
+
+/// Seeds per material: one at quick size (CI), three otherwise (the claims need three).
+fn seeds(size: Size) -> Vec<u64> {
+    match size {
+        Size::Quick => vec![0],
+        _ => vec![0, 1, 2],
+    }
+}
+
+/// One material's networks: every (training sequences, seed) run's best validation score,
+/// the seeds' final models (the largest size) and the one of them the validation split
+/// selects.
+struct Study {
+    material: WarpMaterial,
+    /// `(training sequences, seed, best validation MSE, best epoch)`.
+    runs: Vec<(usize, u64, f64, usize)>,
+    finals: Vec<std::path::PathBuf>,
+    selected: std::path::PathBuf,
+}
+
+/// `full` with only its first `k` training sequences (validation and test kept whole).
+fn first_training_sequences(full: &weft_data::WarpDataset, k: usize) -> weft_data::WarpDataset {
+    let mut taken = 0;
+    let sequences = full
+        .sequences
+        .iter()
+        .filter(|s| {
+            if s.split != "train" {
+                return true;
+            }
+            taken += 1;
+            taken <= k
+        })
+        .cloned()
+        .collect();
+    weft_data::WarpDataset {
+        sequences,
+        ..full.clone()
+    }
+}
+
+/// Trains material `m` on growing prefixes of the training sequences, each with every
+/// seed, into `models/<material>/n<k>-seed<s>/` (resumed); selection reads the validation
+/// split only.
+fn data_size_study(
+    ctx: &EvalContext,
+    root: &Path,
+    data: &Path,
+    m: WarpMaterial,
+    config: &WarpTrainingConfig,
+    seeds: &[u64],
+) -> crate::Result<Study> {
+    let full = weft_data::WarpDataset::load(data, m.key())?;
+    let available = full.sequences.iter().filter(|s| s.split == "train").count();
+    let mut sizes: Vec<usize> = DATA_SIZES.iter().copied().filter(|&k| k < available).collect();
+    sizes.push(available);
+    let mut runs = Vec::new();
+    let mut finals = Vec::new();
+    for &k in &sizes {
+        let subset = first_training_sequences(&full, k);
+        for &seed in seeds {
+            let dir = root.join("models").join(m.key()).join(format!("n{k}-seed{seed}"));
+            let config = WarpTrainingConfig { seed, ..config.clone() };
+            let label = format!("nnwarp/{}/n{k}-seed{seed}", m.key());
+            let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+            let (state, _, _) = weft_nn::nnwarp::train_model(&dir, &subset, &config, &mut progress)
+                .with_context(|| format!("training {label}"))?;
+            runs.push((k, seed, state.best_validation, state.best_epoch));
+            if k == available {
+                finals.push(dir);
+            }
+        }
+    }
+    let best = runs
+        .iter()
+        .filter(|r| r.0 == available)
+        .enumerate()
+        .min_by(|a, b| a.1.2.total_cmp(&b.1.2))
+        .map(|(i, _)| i)
+        .context("no trained model")?;
+    Ok(Study {
+        material: m,
+        runs,
+        selected: finals[best].clone(),
+        finals,
+    })
+}
+
+/// The data-size study's learning curve (validation only) and table.
+fn study_report(out: &mut ExperimentOutput, studies: &[Study], seeds: &[u64]) {
+    let mut rows = Vec::new();
+    let mut series = Vec::new();
+    for study in studies {
+        let mut sizes: Vec<usize> = study.runs.iter().map(|r| r.0).collect();
+        sizes.dedup();
+        let mut x = Vec::new();
+        let mut y = Vec::new();
+        for &k in &sizes {
+            let at: Vec<&(usize, u64, f64, usize)> = study.runs.iter().filter(|r| r.0 == k).collect();
+            let (mean, sd) = crate::records::mean_sd(at.iter().map(|r| r.2));
+            x.push(k as f64);
+            y.push(mean);
+            rows.push(vec![
+                study.material.key().to_string(),
+                k.to_string(),
+                format!("{mean:.4e} ± {sd:.1e}"),
+                at.iter().map(|r| format!("{}", r.3)).collect::<Vec<_>>().join(", "),
+            ]);
+        }
+        series.push(Series {
+            label: study.material.key().to_string(),
+            x,
+            y,
+        });
+        let selected = study
+            .selected
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+        out.notes.push(format!(
+            "nnwarp/{}: selected on validation for the figures: `{selected}`",
+            study.material.key()
+        ));
+    }
+    out.tables.push(crate::paper::Table {
+        title: "NNWarp — validation loss against training data (data-size study)".into(),
+        caption: format!(
+            "Best validation MSE (standardised correction, mean ± sd over {} seed(s)) of each material's network \
+             trained on the first k training sequences of the `nnwarp` dataset, and the epoch each seed kept. The \
+             validation split only: the test shapes are scored once, with the largest k.",
+            seeds.len()
+        ),
+        header: ["material", "training sequences", "validation MSE", "kept epochs"]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    });
+    out.lines.push(LinePlot {
+        name: "data-size".into(),
+        title: "NNWarp: validation loss against training sequences".into(),
+        x_label: "training sequences".into(),
+        y_label: "validation MSE (mean over seeds)".into(),
+        log_y: true,
+        series,
+    });
+}
+
 pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("nnwarp", ctx.size);
     let root = ctx.out.join("nnwarp");
@@ -674,21 +843,33 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let config_path = root.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
     let materials = [WarpMaterial::CoRotational, WarpMaterial::Stvk, WarpMaterial::NeoHookean];
+    let seeds = seeds(ctx.size);
+    out.seeds = seeds.len();
+    let mut studies = Vec::new();
     for m in materials {
-        let dataset = weft_data::WarpDataset::load(&data, m.key())?;
-        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("nnwarp/{}", m.key()))?;
-        weft_nn::nnwarp::train_model(&root.join("models").join(m.key()), &dataset, &config, &mut progress)
-            .with_context(|| format!("training nnwarp/{}", m.key()))?;
+        let study = data_size_study(ctx, &root, &data, m, &config, &seeds)?;
+        studies.push(study);
     }
+    study_report(&mut out, &studies, &seeds);
+    let selected = |m: WarpMaterial| -> crate::Result<&Path> {
+        studies
+            .iter()
+            .find(|s| s.material == m)
+            .map(|s| s.selected.as_path())
+            .context("a material without a trained model")
+    };
     let direction = Vector3::from(weft_sim::energies::hemisphere_direction(FIELD_ANGLES.0, FIELD_ANGLES.1));
     let field = FieldDirection::Directional(direction);
     out.notes.push(format!(
-        "nnwarp: networks of {:?} epochs, batch {}, on the `nnwarp` dataset ({} size); evaluation field along \
+        "nnwarp: networks of {:?} epochs, batch {}, on the `nnwarp` dataset ({} size), {} seeds per material (NNWarp's \
+         rel-error is their mean, `rel-error-sd` their spread; the other figures use each material's seed with the \
+         best validation score); evaluation field along \
          ({:.3}, {:.3}, {:.3}), loads whose linear answer moves a node by {:?} in unit-sphere units, E = {YOUNG} Pa, \
          ν = {POISSON}; reference: static nonlinear equilibrium by load stepping",
         config.epochs,
         config.batch,
         ctx.size.as_str(),
+        seeds.len(),
         direction.x,
         direction.y,
         direction.z,
@@ -705,12 +886,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         LimbResolution::Benchmark
     })?;
     for shape in shapes.iter().filter(|s| s.name == "beam").chain([&timed_limb]) {
-        timing_rows.push(timing_row(
-            &mut out,
-            shape,
-            &root.join("models").join("neo-hookean"),
-            lame,
-        )?);
+        timing_rows.push(timing_row(&mut out, shape, selected(WarpMaterial::NeoHookean)?, lame)?);
     }
     out.tables.push(crate::paper::Table {
         title: "NNWarp (Luo et al.) Table 1 — time performance, ours (paper beside)".into(),
@@ -746,9 +922,18 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             let scene = format!("{}/{}", shape.name, m.key());
             bar.set_message(scene.clone());
             bar.inc(1);
-            let nnwarp = bench.nnwarp(&root, m, field)?;
+            let finals = &studies
+                .iter()
+                .find(|s| s.material == m)
+                .context("a material without a trained model")?
+                .finals;
+            let nnwarp = finals
+                .iter()
+                .map(|dir| bench.nnwarp(dir, field))
+                .collect::<crate::Result<Vec<_>>>()?;
             let mut reference = Reference::new(&root, &bench, m, lame, &field_tag(FIELD_ANGLES.0))?;
             let mut tallies = [Tally::default(); 4];
+            let mut seed_errors = vec![0.0; nnwarp.len()];
             let mut per_level = Vec::new();
             let mut solves = Vec::new();
             for level in LEVELS {
@@ -765,6 +950,9 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                 for (t, (e, sec)) in tallies.iter_mut().zip(scored.errors.iter().zip(&scored.seconds)) {
                     t.error += e;
                     t.seconds += sec;
+                }
+                for (sum, e) in seed_errors.iter_mut().zip(&scored.nnwarp_seeds) {
+                    *sum += e;
                 }
                 solves.push(scored.solves);
                 per_level.push((level, scored.errors));
@@ -785,6 +973,19 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                 if let Some(r) = out.records.last_mut() {
                     r.split = Some(shape.split.into());
                 }
+            }
+            // NNWarp's spread over its seeds (each seed's error averaged over the loads).
+            let per_seed: Vec<f64> = seed_errors.iter().map(|e| e / levels).collect();
+            out.record(
+                &scene,
+                "nnwarp",
+                "rel-error-sd",
+                crate::records::mean_sd(per_seed.iter().copied()).1,
+                "1",
+                Timing::default(),
+            );
+            if let Some(r) = out.records.last_mut() {
+                r.split = Some(shape.split.into());
             }
             out.notes.push(format!(
                 "nnwarp/{scene}: {} nodes, {} tets, {} anchored; warped linear solves per load {:?}; rel-error per \
@@ -808,7 +1009,15 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     for shape in &beams {
         bar.set_message(format!("{}: error against load", shape.name));
         bar.inc(1);
-        match load_extrapolation(&root, shape, direction, field, lame, ctx.size) {
+        match load_extrapolation(
+            &root,
+            selected(WarpMaterial::NeoHookean)?,
+            shape,
+            direction,
+            field,
+            lame,
+            ctx.size,
+        ) {
             Ok(plot) => out.lines.push(plot),
             Err(e) => out
                 .failures
@@ -818,7 +1027,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     if let Some(beam) = beams.first() {
         bar.set_message("beam: error against direction");
         bar.inc(1);
-        match direction_extrapolation(&root, beam, lame, ctx.size) {
+        match direction_extrapolation(&root, selected(WarpMaterial::NeoHookean)?, beam, lame, ctx.size) {
             Ok(plot) => out.lines.push(plot),
             Err(e) => out
                 .failures
@@ -828,7 +1037,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     for dt in TRAJECTORY_STEPS {
         bar.set_message(format!("trajectory at Δt = {dt} s"));
         bar.inc(1);
-        match trajectory(&root, direction, dt, ctx.size) {
+        match trajectory(selected(WarpMaterial::NeoHookean)?, direction, dt, ctx.size) {
             Ok((plot, note)) => {
                 out.lines.push(plot);
                 out.notes.push(note);

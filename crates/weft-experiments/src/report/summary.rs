@@ -189,38 +189,69 @@ fn altconv_claim(records: &[Record]) -> Claim {
     claim
 }
 
-/// NNWarp: the learned correction is more accurate than modal warping and rotation-strain
-/// warping on the same pre-factorised linear solve.
+/// NNWarp: on unseen shapes the learned correction is far more accurate than modal warping
+/// and rotation-strain warping on the same linear solve — decided as the issue states it:
+/// for some material, at least two unseen shapes where NNWarp's error (mean over seeds plus
+/// its spread) is at most 0.3× both warps'.
 fn nnwarp_claim(records: &[Record]) -> Claim {
-    let mean = |method: &str| {
-        let v: Vec<f64> = records
+    const RATIO: f64 = 0.3;
+    let value = |scene: &str, method: &str, metric: &str| {
+        records
             .iter()
-            .filter(|r| r.experiment == "nnwarp" && r.method == method && r.metric == "rel-error")
+            .find(|r| r.experiment == "nnwarp" && r.scene == scene && r.method == method && r.metric == metric)
             .map(|r| r.value)
-            .collect();
-        (!v.is_empty()).then(|| (v.iter().sum::<f64>() / v.len() as f64, v.len()))
     };
     let mut claim = Claim {
         paper: "NNWarp (Luo et al. 2018), node-wise warping of linear FEM",
         experiment: "nnwarp",
-        claim: "The learned correction is more accurate than modal warping and rotation-strain warping on the same \
-                linear solve",
-        paper_figure: "below both on every body (§6)".into(),
+        claim: "On unseen shapes the learned correction's error is at most 0.3× modal warping's and rotation-strain \
+                warping's on the same linear solve (at least two shapes, one material)",
+        paper_figure: "well below both on every body (§6)".into(),
         ours: "—".into(),
         verdict: Verdict::NotMeasured,
     };
-    if let (Some((n, k)), Some((m, _)), Some((r, _))) =
-        (mean("nnwarp"), mean("modal-warping"), mean("rotation-strain-warping"))
-    {
-        claim.ours = format!(
-            "mean rel-error {n:.4} against {m:.4} (modal) and {r:.4} (rotation-strain), {k} body/material cells"
-        );
-        claim.verdict = if n < m && n < r {
-            Verdict::Reproduced
-        } else {
-            Verdict::NotReproduced
+    let mut scenes: Vec<&str> = records
+        .iter()
+        .filter(|r| r.experiment == "nnwarp" && r.metric == "rel-error" && r.split.as_deref() == Some("unseen-shape"))
+        .map(|r| r.scene.as_str())
+        .collect();
+    scenes.sort_unstable();
+    scenes.dedup();
+    // Per material: the unseen shapes that pass, and NNWarp's ratio to the better warp.
+    let mut per_material: std::collections::BTreeMap<&str, (usize, usize, Vec<f64>)> = Default::default();
+    for scene in scenes {
+        let material = scene.rsplit('/').next().unwrap_or(scene);
+        let (Some(n), Some(m), Some(r)) = (
+            value(scene, "nnwarp", "rel-error"),
+            value(scene, "modal-warping", "rel-error"),
+            value(scene, "rotation-strain-warping", "rel-error"),
+        ) else {
+            continue;
         };
+        let sd = value(scene, "nnwarp", "rel-error-sd").unwrap_or(0.0);
+        let entry = per_material.entry(material).or_default();
+        entry.1 += 1;
+        if n + sd <= RATIO * m.min(r) {
+            entry.0 += 1;
+        }
+        entry.2.push(n / m.min(r));
     }
+    if per_material.is_empty() {
+        return claim;
+    }
+    claim.ours = per_material
+        .iter()
+        .map(|(material, (pass, total, ratios))| {
+            let mean = ratios.iter().sum::<f64>() / ratios.len().max(1) as f64;
+            format!("{material}: {pass} of {total} unseen shapes ≤ 0.3× (NNWarp / better warp {mean:.2} on average)")
+        })
+        .collect::<Vec<_>>()
+        .join("; ");
+    claim.verdict = if per_material.values().any(|(pass, _, _)| *pass >= 2) {
+        Verdict::Reproduced
+    } else {
+        Verdict::NotReproduced
+    };
     claim
 }
 
@@ -438,6 +469,49 @@ mod tests {
             seconds_per_frame: Some(0.01),
             ground_truth_seconds_per_frame: Some(1.0),
         }
+    }
+
+    #[test]
+    fn the_nnwarp_claim_needs_two_unseen_shapes_at_a_third_of_both_warps_beyond_the_spread() {
+        let cell = |shape: &str, n: f64, sd: f64, mw: f64, rsw: f64| {
+            let scene = format!("{shape}/neo-hookean");
+            vec![
+                rec("nnwarp", &scene, "nnwarp", "rel-error", Some("unseen-shape"), n),
+                rec("nnwarp", &scene, "nnwarp", "rel-error-sd", Some("unseen-shape"), sd),
+                rec("nnwarp", &scene, "modal-warping", "rel-error", Some("unseen-shape"), mw),
+                rec(
+                    "nnwarp",
+                    &scene,
+                    "rotation-strain-warping",
+                    "rel-error",
+                    Some("unseen-shape"),
+                    rsw,
+                ),
+            ]
+        };
+        // One shape at a fifth of both warps, one at half: not reproduced.
+        let mut r = [
+            cell("t-beam", 0.01, 0.001, 0.05, 0.06),
+            cell("bent-beam", 0.02, 0.001, 0.04, 0.05),
+        ]
+        .concat();
+        assert_eq!(nnwarp_claim(&r).verdict, Verdict::NotReproduced);
+        // A second shape under 0.3× of the better warp: reproduced.
+        r.extend(cell("tapered-beam", 0.01, 0.002, 0.04, 0.1));
+        assert_eq!(nnwarp_claim(&r).verdict, Verdict::Reproduced);
+        // The same mean with a spread that reaches past 0.3×: not reproduced.
+        let r = [
+            cell("t-beam", 0.01, 0.001, 0.05, 0.06),
+            cell("tapered-beam", 0.01, 0.005, 0.04, 0.1),
+        ]
+        .concat();
+        assert_eq!(nnwarp_claim(&r).verdict, Verdict::NotReproduced);
+        // The training shape does not count.
+        let mut r = cell("t-beam", 0.01, 0.0, 0.05, 0.06);
+        for x in &mut r {
+            x.split = Some("train-shape".into());
+        }
+        assert_eq!(nnwarp_claim(&r).verdict, Verdict::NotMeasured);
     }
 
     #[test]

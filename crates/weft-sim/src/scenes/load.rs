@@ -11,6 +11,11 @@ use crate::scenes::volume::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene}
 
 /// Name of the built-in soft-tissue scene.
 pub const SOFT_TISSUE_SCENE: &str = "limb";
+/// The soft-tissue scene whose tissue moves: a soft fat layer over a stiffer core, jumps,
+/// shakes and abrupt stops ([`crate::scenes::soft_tissue::SoftTissueParams::jiggle`]).
+pub const JIGGLE_SCENE: &str = "limb-jiggle";
+/// Both soft-tissue scenes.
+pub const SOFT_TISSUE_SCENES: [&str; 2] = [SOFT_TISSUE_SCENE, JIGGLE_SCENE];
 
 /// A scene of any kind.
 #[derive(Debug, Clone, PartialEq)]
@@ -81,7 +86,7 @@ pub fn builtin_names() -> impl Iterator<Item = &'static str> {
         .iter()
         .chain(BUILTIN_VOLUME_SCENES.iter())
         .copied()
-        .chain(std::iter::once(SOFT_TISSUE_SCENE))
+        .chain(SOFT_TISSUE_SCENES)
 }
 
 /// A built-in scene by name (`quick`: its small variant for tests), or else a scene TOML
@@ -111,8 +116,8 @@ pub fn builtin(name: &str, quick: bool) -> Result<Option<AnyScene>> {
         Some(AnyScene::Cloth(ClothScene::builtin(name, quick)?))
     } else if BUILTIN_VOLUME_SCENES.contains(&name) {
         Some(AnyScene::Volume(VolumeScene::builtin(name, quick)?))
-    } else if name == SOFT_TISSUE_SCENE {
-        Some(AnyScene::SoftTissue(SoftTissueScene::builtin(quick)))
+    } else if SOFT_TISSUE_SCENES.contains(&name) {
+        Some(AnyScene::SoftTissue(SoftTissueScene::builtin_named(name, quick)))
     } else {
         None
     })

@@ -26,7 +26,8 @@ use crate::rng::SplitMix64;
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SoftTissueParams {
-    /// Young's modulus of the tissue (Pa); soft tissue is of order 10⁴.
+    /// Young's modulus of the tissue (Pa); soft tissue is of order 10⁴. With a `core`,
+    /// the modulus of the tissue outside it (the fat layer).
     pub young: f64,
     pub poisson: f64,
     /// Tissue density (kg/m³).
@@ -41,7 +42,50 @@ pub struct SoftTissueParams {
     pub seed: u64,
     /// Scales every joint angle and the bounce of the motion (1 = the documented ranges).
     pub motion_amplitude: f64,
+    /// A stiffer inner layer (muscle) around the bones; `None`: one material throughout.
+    /// (Left out of a scene file when absent, as `motion` when smooth, so the `limb`
+    /// scene's file, and the checksums of its datasets, are what they were before the
+    /// fields existed.)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub core: Option<CoreLayer>,
+    /// How the skeleton moves.
+    #[serde(skip_serializing_if = "MotionStyle::is_smooth")]
+    pub motion: MotionStyle,
 }
+
+impl MotionStyle {
+    fn is_smooth(&self) -> bool {
+        *self == Self::Smooth
+    }
+}
+
+/// The tissue's inner layer: elements whose rest centroid lies within `fraction` of the
+/// local body radius from the limb's axis have Young's modulus `young` (Pa); the rest have
+/// [`SoftTissueParams::young`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoreLayer {
+    pub young: f64,
+    pub fraction: f64,
+}
+
+/// The character of the skeletal motion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MotionStyle {
+    /// Smooth joint motions (0.2–1 Hz) and a walking bounce (±2 cm, 1.2–2 Hz).
+    #[default]
+    Smooth,
+    /// Jumps and shakes with abrupt stops, the accelerations of Dynamic FAUST's sequences:
+    /// joint motions at 0.5–2 Hz, a vertical bounce within ±5 cm at 2–4 Hz (three terms
+    /// whose amplitudes sum to 5 cm; peak accelerations near 2 g), and the whole skeleton
+    /// stopping dead every 0.4–0.9 s for 0.3–0.6 s
+    /// (decelerating over [`STOP_RAMP`]), while the tissue swings on.
+    Dynamic,
+}
+
+/// How long the skeleton of a [`MotionStyle::Dynamic`] motion takes to stop or restart (s).
+pub const STOP_RAMP: f64 = 0.06;
 
 impl Default for SoftTissueParams {
     fn default() -> Self {
@@ -54,6 +98,27 @@ impl Default for SoftTissueParams {
             gravity: [0.0, 0.0, -9.81],
             seed: 0,
             motion_amplitude: 1.0,
+            core: None,
+            motion: MotionStyle::Smooth,
+        }
+    }
+}
+
+impl SoftTissueParams {
+    /// The `limb-jiggle` scene's tissue: a 30 kPa muscle core inside 60 % of the radius
+    /// under a 4 kPa fat layer, six implicit-Euler substeps per frame (so the method's own
+    /// damping leaves the swing of the fat layer visible for about a second), and the
+    /// dynamic motion (docs/ALTCONV.md, *The `limb-jiggle` data*).
+    pub fn jiggle() -> Self {
+        Self {
+            young: 1.5e3,
+            substeps: 6,
+            core: Some(CoreLayer {
+                young: 3e4,
+                fraction: 0.45,
+            }),
+            motion: MotionStyle::Dynamic,
+            ..Self::default()
         }
     }
 }
@@ -165,6 +230,8 @@ pub struct SkeletalMotion {
     pub shoulder_abduction: Sinusoids,
     pub elbow_flexion: Sinusoids,
     pub bounce: Sinusoids,
+    /// `[start, end]` (s) of each stop of a dynamic motion, ascending; empty for a smooth one.
+    pub holds: Vec<[f64; 2]>,
 }
 
 impl SkeletalMotion {
@@ -175,11 +242,70 @@ impl SkeletalMotion {
             shoulder_abduction: Sinusoids::random(&mut rng, 0.0, SHOULDER_RANGE * amplitude, 0.2, 1.0),
             elbow_flexion: Sinusoids::random(&mut rng, ELBOW_MID * amplitude, ELBOW_HALF_RANGE * amplitude, 0.2, 1.0),
             bounce: Sinusoids::random(&mut rng, 0.0, 0.02 * amplitude, 1.2, 2.0),
+            holds: Vec::new(),
         }
+    }
+
+    /// A motion of `style` from `seed`.
+    pub fn of_style(style: MotionStyle, seed: u64, amplitude: f64) -> Self {
+        match style {
+            MotionStyle::Smooth => Self::random(seed, amplitude),
+            MotionStyle::Dynamic => Self::dynamic(seed, amplitude),
+        }
+    }
+
+    /// [`MotionStyle::Dynamic`]: faster joints, a larger and faster bounce, and stops over
+    /// the first [`DYNAMIC_HORIZON`] seconds.
+    pub fn dynamic(seed: u64, amplitude: f64) -> Self {
+        let mut rng = SplitMix64::new(seed ^ SEED_SALT ^ 0xD1A_0000);
+        let shoulder_flexion = Sinusoids::random(&mut rng, 0.0, SHOULDER_RANGE * amplitude, 0.5, 2.0);
+        let shoulder_abduction = Sinusoids::random(&mut rng, 0.0, SHOULDER_RANGE * amplitude, 0.5, 2.0);
+        let elbow_flexion = Sinusoids::random(&mut rng, ELBOW_MID * amplitude, ELBOW_HALF_RANGE * amplitude, 0.5, 2.0);
+        let bounce = Sinusoids::random(&mut rng, 0.0, 0.05 * amplitude, 2.0, 4.0);
+        let mut holds = Vec::new();
+        let mut t = 0.0;
+        while t < DYNAMIC_HORIZON {
+            t += rng.uniform(0.4, 0.9);
+            let h = rng.uniform(0.3, 0.6);
+            holds.push([t, t + h]);
+            t += h;
+        }
+        Self {
+            shoulder_flexion,
+            shoulder_abduction,
+            elbow_flexion,
+            bounce,
+            holds,
+        }
+    }
+
+    /// The motion's own clock at time `t`: `t` less the time spent stopped, each stop
+    /// entered and left over [`STOP_RAMP`] with the clock's rate going linearly 1 → 0 → 1
+    /// (so positions stay continuous and velocities ramp).
+    pub fn motion_time(&self, t: f64) -> f64 {
+        let w = STOP_RAMP;
+        let mut lost = 0.0;
+        for &[a, b] in &self.holds {
+            if t <= a {
+                break;
+            }
+            let w = w.min(0.5 * (b - a));
+            lost += if t >= b {
+                b - a - w
+            } else if t <= a + w {
+                (t - a).powi(2) / (2.0 * w)
+            } else if t <= b - w {
+                0.5 * w + (t - a - w)
+            } else {
+                0.5 * w + (b - a - 2.0 * w) + (t - b + w) - (t - b + w).powi(2) / (2.0 * w)
+            };
+        }
+        t - lost
     }
 
     /// The pose at time `t` (s).
     pub fn pose(&self, t: f64) -> ArmPose {
+        let t = self.motion_time(t);
         ArmPose {
             shoulder_flexion: self.shoulder_flexion.at(t),
             shoulder_abduction: self.shoulder_abduction.at(t),
@@ -193,6 +319,9 @@ impl SkeletalMotion {
         self.pose(t).bone_transforms(elbow)
     }
 }
+
+/// How far ahead a dynamic motion's stops are drawn (s); after it the motion runs on.
+pub const DYNAMIC_HORIZON: f64 = 120.0;
 
 /// Mixed into the user's seed so that seed 0 is not SplitMix64's all-zero state.
 const SEED_SALT: u64 = 0x5EED_0F71_55E0_0001;
@@ -254,19 +383,47 @@ impl SoftTissue {
         let surface = mesh.boundary_surface()?;
         let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), params.density);
         let elastic = TetElasticity::new(mesh, Material::NeoHookean, lame)?;
+        // With a core layer, the elements split into two energies by their rest centroid's
+        // distance from the axis (the limb lies along +x at rest).
+        let layered: Option<[TetElasticity; 2]> = match params.core {
+            None => None,
+            Some(core) => {
+                check_positive("core Young's modulus", core.young)?;
+                if !(core.fraction > 0.0 && core.fraction < 1.0) {
+                    return Err(Error::InvalidParameter {
+                        name: "core fraction of the radius",
+                        value: core.fraction,
+                        reason: "must be in (0, 1)",
+                    });
+                }
+                let p = limb.params;
+                let (inner, outer): (Vec<[usize; 4]>, Vec<[usize; 4]>) = mesh.tets().iter().partition(|t| {
+                    let c = t.iter().map(|&v| mesh.positions()[v]).sum::<Vector3<f64>>() / 4.0;
+                    (c.y * c.y + c.z * c.z).sqrt() < core.fraction * p.radius_at(c.x)
+                });
+                let core_lame = LameParameters::from_young_poisson(core.young, params.poisson)?;
+                Some([
+                    TetElasticity::from_rest(mesh.positions(), &inner, Material::NeoHookean, core_lame)?,
+                    TetElasticity::from_rest(mesh.positions(), &outer, Material::NeoHookean, lame)?,
+                ])
+            }
+        };
         let gravity = ConstantForce::gravity(&masses, params.gravity)?;
         let bone_nodes = limb.all_bone_nodes();
         let fixed = crate::anchors::fixed_dofs(nv, &bone_nodes)?;
         let p = limb.params;
         let forearm_weight: Vec<f64> = mesh.positions().iter().map(|x| forearm_weight(&p, x)).collect();
-        let motion = SkeletalMotion::random(params.seed, params.motion_amplitude);
+        let motion = SkeletalMotion::of_style(params.motion, params.seed, params.motion_amplitude);
         let rest = mesh.flat_positions();
         let mut this_x = vec![0.0; 3 * nv];
         let transforms = motion.bone_transforms(0.0, &p.joint_position());
         skin(mesh.positions(), &forearm_weight, &transforms, &mut this_x);
         // Static settle at t = 0.
         {
-            let terms: [&dyn Energy; 2] = [&elastic, &gravity];
+            let terms: Vec<&dyn Energy> = match &layered {
+                None => vec![&elastic, &gravity],
+                Some([a, b]) => vec![a, b, &gravity],
+            };
             let mut solver = NewtonSolver::new(3 * nv, &terms, fixed.clone())?;
             let weight = masses.iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
             let settings = NewtonSettings {
@@ -279,7 +436,10 @@ impl SoftTissue {
             masses,
             params.frame_dt / params.substeps as f64,
             this_x,
-            vec![Box::new(elastic), Box::new(gravity)],
+            match layered {
+                None => vec![Box::new(elastic), Box::new(gravity)],
+                Some([a, b]) => vec![Box::new(a), Box::new(b), Box::new(gravity)],
+            },
             fixed,
         )?;
         Ok(Self {
@@ -307,6 +467,12 @@ impl SoftTissue {
     pub fn params(&self) -> &SoftTissueParams {
         &self.params
     }
+    /// The implicit-Euler integrator's Newton settings (the stability map tightens the
+    /// tolerance to measure how far a converged frame is from a tighter one).
+    pub fn newton_settings_mut(&mut self) -> &mut crate::newton::NewtonSettings {
+        &mut self.integrator.settings
+    }
+
     /// Frames advanced so far.
     pub fn frame(&self) -> usize {
         self.frame

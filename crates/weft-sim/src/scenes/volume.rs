@@ -548,6 +548,17 @@ impl SoftTissueScene {
     pub fn to_toml(&self) -> Result<String> {
         toml::to_string_pretty(self).map_err(|e| Error::Scene(format!("cannot serialise scene: {e}")))
     }
+    /// The built-in soft-tissue scene `name` (`limb` or `limb-jiggle`; anything else is
+    /// `limb`).
+    pub fn builtin_named(name: &str, quick: bool) -> Self {
+        let mut scene = Self::builtin(quick);
+        if name == crate::scenes::load::JIGGLE_SCENE {
+            scene.name = name.into();
+            scene.params = SoftTissueParams::jiggle();
+        }
+        scene
+    }
+
     /// The runnable simulation.
     pub fn build(&self) -> Result<SoftTissue> {
         SoftTissue::new(weft_mesh::limb::limb(&self.resolution.params())?, self.params)
