@@ -28,7 +28,18 @@ use crate::records::{ExperimentOutput, LinePlot, Series, Timing};
 use crate::render::{View, error_colors, error_png};
 use weft_data::Size;
 
-const SCENE: &str = "limb";
+/// The soft-tissue datasets the experiment runs on: `limb`, whose tissue barely leaves the
+/// skinned surface, and `limb-jiggle`, whose secondary motion is the thing to learn
+/// (docs/ALTCONV.md).
+const SCENES: [&str; 2] = ["limb", "limb-jiggle"];
+
+/// Seeds per model: one at quick size (CI), three otherwise.
+fn seeds(size: Size) -> Vec<u64> {
+    match size {
+        Size::Quick => vec![0],
+        _ => vec![0, 1, 2],
+    }
+}
 const SKINNING: &str = "skinning";
 /// Roll-out windows of the tables (steps).
 const WINDOWS: [usize; 5] = [10, 20, 30, 40, 50];
@@ -202,37 +213,72 @@ fn score(
 
 pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("altconv", ctx.size);
+    let seeds = seeds(ctx.size);
+    out.seeds = seeds.len();
+    for scene in SCENES {
+        run_scene(ctx, &mut out, scene, &seeds).with_context(|| format!("altconv on {scene}"))?;
+    }
+    Ok(out)
+}
+
+/// Every model with every seed on the dataset `scene`, scored beside skinning: each record
+/// is the mean over the seeds, its `-sd` twin their spread; the seed with the best
+/// validation score draws the plots, predictions and renders.
+fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: &[u64]) -> crate::Result<()> {
     let root = ctx.out.join("altconv");
-    let data = root.join("data");
+    // `limb` keeps the directory it had before there were two datasets.
+    let base = if scene == "limb" {
+        root.clone()
+    } else {
+        root.join(scene)
+    };
+    let data = base.join("data");
     let frames = (ctx.size == Size::Quick).then_some(QUICK_FRAMES);
-    let stopped = super::context::generate_dataset_frames(ctx, SCENE, &data, frames).context("limb dataset")?;
+    let stopped = super::context::generate_dataset_frames(ctx, scene, &data, frames).context("soft-tissue dataset")?;
     out.failures.extend(stopped);
     let gt = super::context::ground_truth_seconds(&data)?;
     let dataset = LimbDataset::load(&data)?;
     let adj = NormalizedAdjacency::new(&dataset.rest)?;
     let device = weft_nn::Device::Cpu;
+    // Per variant, its models (one per seed) with the best validation score first.
+    let mut trained_models: Vec<(Variant, Vec<(f64, std::path::PathBuf)>)> = Vec::new();
     for variant in Variant::ALL {
-        let config = training_config(ctx.size, variant);
-        let config_path = root.join("configs").join(format!("{}.json", variant.name()));
+        let config_path = base.join("configs").join(format!("{}.json", variant.name()));
         std::fs::create_dir_all(config_path.parent().context("config directory")?)?;
-        std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
-        let model_dir = root.join("models").join(variant.name());
-        discard_if_stale(&model_dir, &config)?;
-        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("altconv/{}", variant.name()))?;
-        let trained = weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
-            .with_context(|| format!("training altconv/{}", variant.name()))?;
-        // Wall time per training sequence pass (forward, backward, Adam), from the run's
-        // own record: the fused kernels unless the configuration asks for autograd.
-        let passes = trained.state.epochs_done.max(1) * dataset.split("train").count().max(1);
+        std::fs::write(
+            &config_path,
+            serde_json::to_string_pretty(&training_config(ctx.size, variant))?,
+        )?;
+        let mut models = Vec::new();
+        let mut seconds = Vec::new();
+        for &seed in seeds {
+            let config = AltConvTrainingConfig {
+                seed,
+                ..training_config(ctx.size, variant)
+            };
+            let model_dir = base.join("models").join(variant.name()).join(format!("seed-{seed}"));
+            discard_if_stale(&model_dir, &config)?;
+            let label = format!("altconv/{scene}/{}/seed-{seed}", variant.name());
+            let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+            let trained = weft_nn::altconv::train_model(&model_dir, &dataset, &config, &mut progress)
+                .with_context(|| format!("training {label}"))?;
+            // Wall time per training sequence pass (forward, backward, Adam), from the
+            // run's own record: the fused kernels unless the configuration asks for autograd.
+            let passes = trained.state.epochs_done.max(1) * dataset.split("train").count().max(1);
+            seconds.push(trained.state.train_seconds() / passes as f64);
+            models.push((trained.state.best_validation, model_dir));
+        }
         out.record(
-            SCENE,
+            scene,
             variant.name(),
             "training-seconds-per-example",
-            trained.state.train_seconds() / passes as f64,
+            mean_sd(seconds.iter().copied()).0,
             "s",
             Timing::default(),
         );
-        set_split(&mut out, "train");
+        set_split(out, "train");
+        models.sort_by(|a, b| a.0.total_cmp(&b.0));
+        trained_models.push((variant, models));
     }
     let longest_common = dataset.sequences.iter().map(|s| s.skinned.len() - 1).min().unwrap_or(0);
     let horizon = longest_common.min(*WINDOWS.last().unwrap_or(&50));
@@ -240,18 +286,24 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let windows: Vec<usize> = WINDOWS.iter().copied().filter(|&w| w <= horizon).collect();
     let train_steps = training_config(ctx.size, Variant::Alt).steps;
     out.notes.push(format!(
-        "altconv: {} surface vertices (the limb's boundary, metres, scored in mm); models trained with teacher \
+        "altconv/{scene}: {} seed(s) per model (each figure their mean, its `-sd` record their spread; plots, \
+         predictions and renders from the seed with the best validation score); {} surface vertices (the limb's boundary, metres, scored in mm); models trained with teacher \
          forcing on the first {train_steps} steps of each `train` sequence ({} epochs); `known` = the training \
          sequences, `test` = unseen ones; single-step and roll-out errors over steps 1–{horizon}; roll-out time per \
          frame of AltConvRuntime on this machine against the Neo-Hookean ground truth's time per stored frame from the \
          dataset's timing.json",
+        seeds.len(),
         dataset.rest.num_vertices(),
         training_config(ctx.size, Variant::Alt).epochs,
     ));
-    let mut methods: Vec<(String, Option<AltConvNet>)> = vec![(SKINNING.into(), None)];
-    for variant in Variant::ALL {
-        let (_, _, net) = weft_nn::altconv::load_model(&root.join("models").join(variant.name()), &device)?;
-        methods.push((variant.name().into(), Some(net)));
+    // Skinning has no seeds: one run, no spread.
+    let mut methods: Vec<(String, Vec<AltConvNet>)> = vec![(SKINNING.into(), Vec::new())];
+    for (variant, models) in &trained_models {
+        let nets = models
+            .iter()
+            .map(|(_, dir)| Ok(weft_nn::altconv::load_model(dir, &device)?.2))
+            .collect::<crate::Result<Vec<_>>>()?;
+        methods.push((variant.name().into(), nets));
     }
     let mut tables_rows: HashMap<&str, Vec<Vec<String>>> = HashMap::new();
     let mut heat: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
@@ -262,35 +314,50 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         let sequences: Vec<&LimbSequence> = dataset.split(source).collect();
         if sequences.is_empty() {
             out.failures
-                .push(format!("altconv/{split}: the dataset has no {source} sequence"));
+                .push(format!("altconv/{scene}/{split}: the dataset has no {source} sequence"));
             continue;
         }
-        for (method, net) in &methods {
-            let e = score(net.as_ref(), &adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?;
+        for (method, nets) in &methods {
+            let runs: Vec<Errors> = if nets.is_empty() {
+                vec![score(None, &adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?]
+            } else {
+                nets.iter()
+                    .map(|n| score(Some(n), &adj, &sequences, horizon).with_context(|| format!("scoring {method}")))
+                    .collect::<crate::Result<Vec<_>>>()?
+            };
+            let e = &runs[0];
             let timing = Timing::new(e.seconds_per_frame, gt);
-            let (m, _) = window(&e.single, horizon);
-            out.record(SCENE, method, "error-mm-step1", m, "mm", timing);
-            if let Some((p, _)) = paper_value(split, method, true, 50) {
-                out.paper(p);
-            }
-            set_split(&mut out, split);
-            for &w in &windows {
-                let (m, _) = window(&e.rollout, w);
-                out.record(SCENE, method, &format!("error-mm-rollout{w}"), m, "mm", timing);
-                if let Some((p, _)) = paper_value(split, method, false, w) {
+            // A figure over the seeds: the mean, and the spread as the `-sd` record.
+            let record = |out: &mut ExperimentOutput, metric: String, of: &dyn Fn(&Errors) -> f64, paper| {
+                let (m, sd) = mean_sd(runs.iter().map(of));
+                out.record(scene, method, &metric, m, "mm", timing);
+                if let Some(p) = paper {
                     out.paper(p);
                 }
-                set_split(&mut out, split);
-            }
-            out.record(
-                SCENE,
-                method,
-                &format!("error-mm-max-rollout{horizon}"),
-                peak(&e.rollout, horizon),
-                "mm",
-                timing,
+                set_split(out, split);
+                out.record(scene, method, &format!("{metric}-sd"), sd, "mm", Timing::default());
+                set_split(out, split);
+            };
+            record(
+                out,
+                "error-mm-step1".into(),
+                &|e: &Errors| window(&e.single, horizon).0,
+                paper_value(split, method, true, 50).map(|p| p.0),
             );
-            set_split(&mut out, split);
+            for &w in &windows {
+                record(
+                    out,
+                    format!("error-mm-rollout{w}"),
+                    &|e: &Errors| window(&e.rollout, w).0,
+                    paper_value(split, method, false, w).map(|p| p.0),
+                );
+            }
+            record(
+                out,
+                format!("error-mm-max-rollout{horizon}"),
+                &|e: &Errors| peak(&e.rollout, horizon),
+                None,
+            );
             let steps: Vec<f64> = (1..=horizon).map(|t| t as f64).collect();
             mean_series.push(Series {
                 label: method.clone(),
@@ -304,13 +371,15 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             });
             let rows = tables_rows.entry(split).or_default();
             for single_step in [true, false] {
-                let steps = if single_step { &e.single } else { &e.rollout };
                 let mut row = vec![
                     if single_step { "single-step" } else { "roll-out" }.to_string(),
                     format!("`{method}`"),
                 ];
                 for &w in &windows {
-                    let (m, sd) = window(steps, w);
+                    let (m, sd) = mean_sd(runs.iter().map(|e| {
+                        let steps = if single_step { &e.single } else { &e.rollout };
+                        window(steps, w).0
+                    }));
                     let paper = paper_value(split, method, single_step, w)
                         .map_or("—".to_string(), |(p, s)| format!("{p:.2}±{s:.2}"));
                     row.push(format!("{paper} / {m:.2}±{sd:.2}"));
@@ -319,16 +388,20 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             }
             if split == "test" {
                 write_predictions(ctx, method, &dataset, source, horizon, &e.surfaces)?;
-                if let Some((errs, x)) = e.last {
+                if let Some((errs, x)) = e.last.clone() {
                     heat.push((method.clone(), x, errs));
                 }
             }
         }
         for (stat, series) in [("mean", mean_series), ("p99", p99_series)] {
             out.lines.push(LinePlot {
-                name: format!("rollout-{stat}-{split}"),
+                name: if scene == "limb" {
+                    format!("rollout-{stat}-{split}")
+                } else {
+                    format!("{scene}-rollout-{stat}-{split}")
+                },
                 title: format!(
-                    "altconv / limb ({split}): roll-out error at each step, {} over vertices and sequences",
+                    "altconv / {scene} ({split}): roll-out error at each step, {} over vertices and sequences",
                     if stat == "mean" { "mean" } else { "99th percentile" }
                 ),
                 x_label: format!("roll-out step (trained: 1–{train_steps})"),
@@ -342,29 +415,30 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         (
             "known",
             "Alt-ConvLSTM Table 1 — future prediction error on known motions, paper / ours",
-            "Per-vertex error mean±sd (mm), `limb` training sequences. Each cell: the paper's figure (Dynamic FAUST, \
-             6890 vertices) / ours; column N = the mean over steps 1–N. The paper's table starts at 20 steps.",
+            "training sequences. Each cell: the paper's figure, mean±sd over vertices (Dynamic FAUST, 6890 \
+             vertices) / ours, the mean error over steps 1–N and its sd over the seeds (skinning has none); column N = \
+             steps 1–N. The paper's table starts at 20 steps.",
         ),
         (
             "test",
             "Alt-ConvLSTM Table 2 — generalisation error on unseen motions, paper / ours",
-            "Per-vertex error mean±sd (mm), `limb` test sequences. Each cell: the paper's figure / ours; column N = \
-             the mean over steps 1–N. The paper does not evaluate the ΔY baselines here.",
+            "test sequences. Each cell: the paper's figure, mean±sd over vertices / ours, the mean error over steps \
+             1–N and its sd over the seeds; column N = steps 1–N. The paper does not evaluate the ΔY baselines here.",
         ),
     ] {
         if let Some(rows) = tables_rows.remove(split) {
             let mut header = vec!["type".to_string(), "model".to_string()];
             header.extend(windows.iter().map(|w| format!("{w} steps")));
             out.tables.push(Table {
-                title: title.into(),
-                caption: caption.into(),
+                title: format!("{title} (`{scene}`)"),
+                caption: format!("Per-vertex error (mm), `{scene}` {caption}"),
                 header,
                 rows,
             });
         }
     }
-    render_heat_maps(ctx, &mut out, &dataset, &heat, horizon)?;
-    Ok(out)
+    render_heat_maps(ctx, out, &dataset, &heat, horizon)?;
+    Ok(())
 }
 
 /// Writes `predictions/altconv/limb/<method>.safetensors`: the roll-outs of the `source`
@@ -377,7 +451,7 @@ fn write_predictions(
     horizon: usize,
     surfaces: &[Vec<f64>],
 ) -> crate::Result<()> {
-    let dir = ctx.out.join("predictions").join("altconv").join(SCENE);
+    let dir = ctx.out.join("predictions").join("altconv").join(&dataset.name);
     std::fs::create_dir_all(&dir)?;
     let sequences: Vec<_> = dataset.split(source).collect();
     let truth: Vec<f64> = sequences
@@ -427,7 +501,8 @@ fn render_heat_maps(
         .map(|(_, _, e)| e.iter().copied().fold(0.0f64, f64::max))
         .unwrap_or(0.0)
         .max(1e-6);
-    let dir = Path::new("renders").join("altconv").join(SCENE);
+    let scene = dataset.name.as_str();
+    let dir = Path::new("renders").join("altconv").join(scene);
     std::fs::create_dir_all(ctx.out.join(&dir))?;
     for (method, x, errs) in heat {
         let png = dir.join(format!("{method}.png"));
@@ -437,7 +512,7 @@ fn render_heat_maps(
             dataset.rest.faces(),
             errs,
             scale,
-            &format!("{SCENE} — {method}, roll-out step {horizon} (test)"),
+            &format!("{scene} — {method}, roll-out step {horizon} (test)"),
             View::BEAM,
         )?;
         out.renders.push(png.display().to_string());

@@ -142,24 +142,40 @@ fn longest_rollout(records: &[Record]) -> Option<(usize, String)> {
         .max()
 }
 
-/// Alt-ConvLSTM: on unseen motions, its roll-out error is below the best vanilla graph
-/// ConvLSTM's (about half in the paper) and far below skinning.
+/// Alt-ConvLSTM: on unseen motions, its roll-out error is at most half the best vanilla
+/// graph ConvLSTM's and below skinning (Table 2: 7.92 against 17.34 and 19.51 mm) — decided
+/// on `limb-jiggle`, the data with secondary motion, where it was run (else on `limb`), and
+/// only where the margins exceed the seeds' spread (`-sd` records).
 fn altconv_claim(records: &[Record]) -> Claim {
+    let scene = if records
+        .iter()
+        .any(|r| r.experiment == "altconv" && r.scene == "limb-jiggle")
+    {
+        "limb-jiggle"
+    } else {
+        "limb"
+    };
     let test = |method: &str, metric: &str| {
         records.iter().find(|r| {
-            r.experiment == "altconv" && r.method == method && r.metric == metric && r.split.as_deref() == Some("test")
+            r.experiment == "altconv"
+                && r.scene == scene
+                && r.method == method
+                && r.metric == metric
+                && r.split.as_deref() == Some("test")
         })
     };
+    let sd = |method: &str, metric: &str| test(method, &format!("{metric}-sd")).map_or(0.0, |r| r.value);
     let mut claim = Claim {
         paper: "Alt-ConvLSTM (seed 001), soft-tissue dynamics",
         experiment: "altconv",
-        claim: "On unseen motions, Alt-ConvLSTM's roll-out error is below the best vanilla graph ConvLSTM's (about \
-                half) and below skinning",
+        claim: "On unseen motions, Alt-ConvLSTM's roll-out error is at most half the best vanilla graph ConvLSTM's and \
+                below skinning",
         paper_figure: "7.92 mm against 17.34 mm (best vanilla) and 19.51 mm (skinning), 50 steps (Table 2)".into(),
         ours: "—".into(),
         verdict: Verdict::NotMeasured,
     };
-    let Some((steps, metric)) = longest_rollout(records) else {
+    let scene_records: Vec<Record> = records.iter().filter(|r| r.scene == scene).cloned().collect();
+    let Some((steps, metric)) = longest_rollout(&scene_records) else {
         return claim;
     };
     let (Some(alt), Some(skin)) = (test("alt-convlstm", &metric), test("skinning", &metric)) else {
@@ -169,6 +185,7 @@ fn altconv_claim(records: &[Record]) -> Claim {
         .iter()
         .filter(|r| {
             r.experiment == "altconv"
+                && r.scene == scene
                 && r.method.starts_with("convlstm-")
                 && r.metric == metric
                 && r.split.as_deref() == Some("test")
@@ -177,11 +194,13 @@ fn altconv_claim(records: &[Record]) -> Claim {
     let Some(vanilla) = vanilla else {
         return claim;
     };
+    let (alt_sd, vanilla_sd) = (sd("alt-convlstm", &metric), sd(&vanilla.method, &metric));
     claim.ours = format!(
-        "{:.2} mm against {:.2} mm (best vanilla, `{}`) and {:.2} mm (skinning), {steps} steps",
+        "`{scene}`: {:.2} ± {alt_sd:.2} mm against {:.2} ± {vanilla_sd:.2} mm (best vanilla, `{}`) and {:.2} mm \
+         (skinning), {steps} steps",
         alt.value, vanilla.value, vanilla.method, skin.value
     );
-    claim.verdict = if alt.value < vanilla.value && alt.value < skin.value {
+    claim.verdict = if alt.value + alt_sd <= 0.5 * (vanilla.value - vanilla_sd) && alt.value + alt_sd < skin.value {
         Verdict::Reproduced
     } else {
         Verdict::NotReproduced
@@ -512,6 +531,38 @@ mod tests {
             x.split = Some("train-shape".into());
         }
         assert_eq!(nnwarp_claim(&r).verdict, Verdict::NotMeasured);
+    }
+
+    #[test]
+    fn the_alt_convlstm_claim_is_decided_on_the_jiggling_limb_beyond_the_seed_spread() {
+        let cell = |scene: &str, method: &str, v: f64, sd: f64| {
+            vec![
+                rec("altconv", scene, method, "error-mm-rollout50", Some("test"), v),
+                rec("altconv", scene, method, "error-mm-rollout50-sd", Some("test"), sd),
+            ]
+        };
+        // On `limb` Alt-ConvLSTM wins; on `limb-jiggle` it is not at half the best vanilla
+        // model: the claim follows `limb-jiggle`.
+        let mut r = [
+            cell("limb", "alt-convlstm", 1.0, 0.0),
+            cell("limb", "convlstm-np-y", 3.0, 0.0),
+            cell("limb", "skinning", 4.0, 0.0),
+            cell("limb-jiggle", "alt-convlstm", 5.0, 0.5),
+            cell("limb-jiggle", "convlstm-np-y", 9.0, 0.5),
+            cell("limb-jiggle", "skinning", 10.0, 0.0),
+        ]
+        .concat();
+        let c = altconv_claim(&r);
+        assert_eq!(c.verdict, Verdict::NotReproduced);
+        assert!(c.ours.contains("limb-jiggle"), "{}", c.ours);
+        // At half the best vanilla model beyond both spreads: reproduced.
+        r.retain(|x| !(x.scene == "limb-jiggle" && x.method == "alt-convlstm"));
+        r.extend(cell("limb-jiggle", "alt-convlstm", 3.5, 0.5));
+        assert_eq!(altconv_claim(&r).verdict, Verdict::Reproduced);
+        // The same means with a spread that closes the margin: not reproduced.
+        r.retain(|x| !(x.scene == "limb-jiggle" && x.method == "alt-convlstm"));
+        r.extend(cell("limb-jiggle", "alt-convlstm", 3.5, 1.5));
+        assert_eq!(altconv_claim(&r).verdict, Verdict::NotReproduced);
     }
 
     #[test]
