@@ -245,4 +245,7 @@ fn the_jiggling_limb_dataset_resumes_and_merges_byte_identically() {
     merge.args(["dataset", "merge", "--out"]).arg(&merged).arg(&a).arg(&b);
     run_ok(merge);
     same(&merged);
+    // The shards' timings are joined: the evaluation reads the ground truth's cost there.
+    let timing = manifest(&merged, "timing.json");
+    assert_eq!(timing["sequences"].as_object().unwrap().len(), 4);
 }

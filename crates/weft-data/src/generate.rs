@@ -468,6 +468,22 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Manifest> {
         merged.sequences_total
     );
     verify(out, &merged)?;
+    // The shards' timings joined (the evaluation reads the ground truth's cost from
+    // them); a shard without one leaves its sequences out of timing.json.
+    let mut timing = Timing::default();
+    for (d, m) in &shards {
+        if let Some(s) = &m.shard {
+            let path = d.join(format!("timing-shard-{}-of-{}.json", s.index, s.count));
+            if let Ok(bytes) = std::fs::read(&path) {
+                let t: Timing = serde_json::from_slice(&bytes)
+                    .with_context(|| format!("{} is not a timing file", path.display()))?;
+                timing.sequences.extend(t.sequences);
+            }
+        }
+    }
+    if !timing.sequences.is_empty() {
+        write_json(&out.join("timing.json"), &timing)?;
+    }
     write_json(&out.join("manifest.json"), &merged)?;
     eprintln!(
         "merged {} shard(s): {} sequences of {}, every checksum verified → {}",
