@@ -165,7 +165,7 @@ fn embedding(c: &mut Criterion) {
 /// One NNWarp Adam step (a batch of 1024 node pairs, the default) with the Neo-Hookean
 /// network, on candle's autograd: the standard dataset's epoch is about a thousand of them,
 /// the paper size's about thirteen thousand. (A fused op for this 7-16-16-3 network was
-/// measured at 1.2× this step and not kept: the step is not the network's arithmetic.)
+/// only marginally faster and not kept: the step is not the network's arithmetic.)
 fn nnwarp(c: &mut Criterion) {
     use weft_nn::nnwarp::{INPUTS, Standardization, WarpMlp, WarpTraining, hidden_layers, pair_tensors};
     let mut rng = weft_sim::rng::SplitMix64::new(5);

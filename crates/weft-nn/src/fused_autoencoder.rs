@@ -18,8 +18,7 @@
 //!
 //! The matrix products run on one thread: with a batch of a few frames they are
 //! memory-bound, and the parallel GEMM's worker threads, which keep spinning after a
-//! product, slowed the row passes that follow on a 2-core machine about threefold
-//! (docs/BENCHMARKS.md).
+//! product, slowed the row passes that follow on a 2-core machine.
 //!
 //! The backward pass of the neighbour mean is its transpose: with `g_i = ∂L/∂mean_i`,
 //! `∂L/∂x_j = Σ_{i : j ∈ N¹(i)} g_i / |N¹(i)| = Σ_{i ∈ N¹(j)} g_i / |N¹(i)|` (the 1-ring

@@ -972,9 +972,7 @@ fn backward(
             }
             // Eq. 10's skip: the accumulation's gradient reaches the skipped cell's state.
             if let Some(from) = p.skip_from {
-                let (lower, upper) = dc.split_at_mut(l);
-                let _ = upper;
-                add_scaled(&mut lower[from], &dy[l], 1.0);
+                add_scaled(&mut dc[from], &dy[l], 1.0);
             }
             // Lines 1–4, and the carry of ∂L/∂C to the previous step.
             {
