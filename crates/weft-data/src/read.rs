@@ -384,6 +384,37 @@ impl WarpDataset {
             sequences,
         })
     }
+
+    /// The number of training sequences.
+    pub fn training_count(&self) -> usize {
+        self.sequences.iter().filter(|s| s.split == "train").count()
+    }
+
+    /// This dataset with only its first `k` training sequences (in index order); the
+    /// validation and test splits are kept whole. Data-size studies train on these
+    /// prefixes: each is a subset of the next larger one and depends on nothing but `k`,
+    /// so a curve over growing `k` measures what more data buys and nothing else.
+    /// `k` beyond the training count keeps all of them.
+    pub fn with_training_prefix(&self, k: usize) -> Self {
+        let mut order: Vec<&WarpSequence> = self.sequences.iter().collect();
+        order.sort_by_key(|s| s.index);
+        let mut taken = 0;
+        let sequences = order
+            .into_iter()
+            .filter(|s| {
+                if s.split != "train" {
+                    return true;
+                }
+                taken += 1;
+                taken <= k
+            })
+            .cloned()
+            .collect();
+        Self {
+            sequences,
+            ..self.clone()
+        }
+    }
 }
 
 /// One sequence of the `limb` soft-tissue dataset (design §6): per frame the skinned
@@ -528,5 +559,80 @@ impl DrapeDataset {
     /// The examples of one split.
     pub fn split<'a>(&'a self, name: &'a str) -> impl Iterator<Item = &'a DrapeExample> + 'a {
         self.examples.iter().filter(move |e| e.split == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sequence(index: usize, split: &str) -> WarpSequence {
+        WarpSequence {
+            index,
+            split: split.into(),
+            field: weft_sim::warp::FieldDirection::Directional(nalgebra::Vector3::y()),
+            poisson: 0.3,
+            linear: vec![vec![index as f64]],
+            nonlinear: vec![vec![-(index as f64)]],
+        }
+    }
+
+    fn dataset(order: &[usize]) -> WarpDataset {
+        let splits = [
+            "train",
+            "train",
+            "validation",
+            "train",
+            "test",
+            "train",
+            "train",
+            "validation",
+        ];
+        let body = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+            cells: [1, 1, 1],
+            size: [1.0, 1.0, 1.0],
+        })
+        .unwrap();
+        WarpDataset {
+            dir: PathBuf::from("mem"),
+            body,
+            anchors: vec![0],
+            material: "stvk".into(),
+            sequences: order.iter().map(|&i| sequence(i, splits[i])).collect(),
+        }
+    }
+
+    fn indices(d: &WarpDataset, split: &str) -> Vec<usize> {
+        let mut v: Vec<usize> = d
+            .sequences
+            .iter()
+            .filter(|s| s.split == split)
+            .map(|s| s.index)
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    #[test]
+    fn training_prefixes_are_nested_deterministic_and_keep_the_other_splits() {
+        let full = dataset(&[0, 1, 2, 3, 4, 5, 6, 7]);
+        // The order sequences were read in (shards, merges) does not change a prefix.
+        let shuffled = dataset(&[5, 2, 7, 0, 3, 6, 1, 4]);
+        assert_eq!(full.training_count(), 5);
+        let mut previous: Vec<usize> = Vec::new();
+        for k in 0..=6 {
+            let a = full.with_training_prefix(k);
+            let b = shuffled.with_training_prefix(k);
+            let train = indices(&a, "train");
+            assert_eq!(train, indices(&b, "train"), "k = {k}");
+            assert_eq!(train.len(), k.min(5));
+            assert!(previous.iter().all(|i| train.contains(i)), "k = {k}: not nested");
+            assert_eq!(train, [0, 1, 3, 5, 6][..k.min(5)]);
+            assert_eq!(indices(&a, "validation"), [2, 7]);
+            assert_eq!(indices(&a, "test"), [4]);
+            // The frames travel with their sequence.
+            assert!(a.sequences.iter().all(|s| s.linear[0][0] == s.index as f64));
+            previous = train;
+        }
     }
 }

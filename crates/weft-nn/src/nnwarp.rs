@@ -540,7 +540,7 @@ pub struct NnWarpFrame {
     pub warp_seconds: f64,
 }
 
-/// NNWarp's runtime on a volumetric scene (§4, §6): linear elasticity with a constant,
+/// NNWarp's runtime on a volumetric scene (§6): linear elasticity with a constant,
 /// pre-factorised system, then the node-wise correction of every frame.
 ///
 /// A dynamic scene (implicit Euler, Newmark or dynamic linear) runs as backward Euler
@@ -838,6 +838,58 @@ pub fn mean_loss(mlp: &WarpMlp, x: &Tensor, y: &Tensor) -> Result<f64> {
             .to_scalar::<f64>()?;
     }
     Ok(sum / (n * OUTPUTS) as f64)
+}
+
+/// Root-mean-square error (unit-sphere units, over nodes and the three components) of
+/// the runtime's correction [`NodeMlp::forward`] against the aligned targets of
+/// [`WarpContext::pairs`]. Unlike the trainer's validation score (standardised units,
+/// fitted on each run's own training pairs), it compares networks trained on different
+/// data: the data-size study's curves use it.
+pub fn correction_rms(mlp: &NodeMlp, inputs: &[[f64; INPUTS]], targets: &[[f64; OUTPUTS]]) -> Result<f64> {
+    if inputs.len() != targets.len() || inputs.is_empty() {
+        return Err(Error::Shape {
+            what: "correction targets",
+            expected: format!("{} pairs, at least one", inputs.len()),
+            got: format!("{}", targets.len()),
+        });
+    }
+    let chunk = 16384;
+    let squares: f64 = inputs
+        .par_chunks(chunk)
+        .zip(targets.par_chunks(chunk))
+        .map(|(x, y)| {
+            let n = x.len();
+            // Column-major standardised inputs, and the same rows at rest (kinematic
+            // inputs zero): the runtime's correction is net(x) − net(x₀).
+            let mut now = vec![0.0f32; n * INPUTS];
+            let mut rest = vec![0.0f32; n * INPUTS];
+            let zero = mlp.standardization.input(&[0.0; INPUTS]);
+            for (k, row) in x.iter().enumerate() {
+                let s = mlp.standardization.input(row);
+                for d in 0..INPUTS {
+                    now[d * n + k] = s[d] as f32;
+                    rest[d * n + k] = if d < KINEMATIC { zero[d] } else { s[d] } as f32;
+                }
+            }
+            let (a, a0) = (mlp.net_batch(&now, n), mlp.net_batch(&rest, n));
+            let mut sum = 0.0;
+            for (k, t) in y.iter().enumerate() {
+                for d in 0..OUTPUTS {
+                    let c = f64::from(a[d * n + k] - a0[d * n + k]) * mlp.standardization.output_std[d];
+                    sum += (c - t[d]).powi(2);
+                }
+            }
+            sum
+        })
+        .sum();
+    let rms = (squares / (inputs.len() * OUTPUTS) as f64).sqrt();
+    if !rms.is_finite() {
+        return Err(Error::NonFinite {
+            what: "correction error",
+            index: 0,
+        });
+    }
+    Ok(rms)
 }
 
 /// NNWarp's MLP trained through [`crate::trainer::Trainer`] on standardised pairs: the

@@ -900,3 +900,117 @@ fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
     }
     assert_eq!(checked, params.vars().len() + 2);
 }
+
+/// A synthetic `nnwarp` dataset on the small clamped beam where more training data must
+/// help: the registered shape is the linear one shrunk by `1 − 3|u|²` (a correction that
+/// grows with the cube of the displacement), training sequence 0 holds only small loads
+/// and sequences 1–4 and the validation ones span loads six times larger. A network that
+/// has seen sequence 0 alone never saw the large-load correction it is scored on.
+fn warp_dataset_where_more_data_helps() -> weft_data::WarpDataset {
+    use weft_sim::warp::FieldDirection;
+    let (beam, anchors) = clamped_small_beam();
+    let directions = [
+        Vector3::new(0.0, -1.0, 0.0),
+        Vector3::new(0.0, 0.0, 1.0),
+        Vector3::new(0.0, 1.0, 1.0).normalize(),
+        Vector3::new(0.0, 1.0, -1.0).normalize(),
+        Vector3::new(0.0, -1.0, 0.5).normalize(),
+        Vector3::new(0.0, 0.5, -1.0).normalize(),
+        Vector3::new(0.0, -1.0, -1.0).normalize(),
+    ];
+    let splits = ["train", "train", "train", "train", "train", "validation", "validation"];
+    let sequences = directions
+        .iter()
+        .zip(splits)
+        .enumerate()
+        .map(|(index, (dir, split))| {
+            let peak = if index == 0 { 0.05 } else { 0.3 };
+            let mut linear = Vec::new();
+            let mut nonlinear = Vec::new();
+            for f in 0..=6 {
+                let a = peak * f as f64 / 6.0;
+                let lin: Vec<f64> = beam
+                    .positions()
+                    .iter()
+                    .flat_map(|p| (dir * (a * p.x * p.x)).as_slice().to_vec())
+                    .collect();
+                let non: Vec<f64> = lin
+                    .chunks_exact(3)
+                    .flat_map(|u| {
+                        let shrink = 1.0 - 3.0 * (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+                        u.iter().map(move |v| v * shrink)
+                    })
+                    .collect();
+                linear.push(lin);
+                nonlinear.push(non);
+            }
+            weft_data::WarpSequence {
+                index,
+                split: split.into(),
+                field: FieldDirection::Directional(*dir),
+                poisson: 0.3,
+                linear,
+                nonlinear,
+            }
+        })
+        .collect();
+    weft_data::WarpDataset {
+        dir: std::env::temp_dir(),
+        body: beam,
+        anchors,
+        material: "neo-hookean".into(),
+        sequences,
+    }
+}
+
+#[test]
+fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_the_loads() {
+    use weft_nn::nnwarp::{WarpTrainingConfig, collect_pairs, correction_rms, load_model, train_model};
+    let full = warp_dataset_where_more_data_helps();
+    let (vx, vy) = collect_pairs(&full, "validation").unwrap();
+    let mut rms = Vec::new();
+    let mut last = None;
+    for k in [1, 5] {
+        let dir = std::env::temp_dir().join(format!("weft-nnwarp-size-{k}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = WarpTrainingConfig {
+            hidden: vec![16, 16],
+            batch: 32,
+            epochs: 150,
+            adam: AdamSettings {
+                learning_rate: 3e-3,
+                ..AdamSettings::default()
+            },
+            ..WarpTrainingConfig::default()
+        };
+        let subset = full.with_training_prefix(k);
+        assert_eq!(subset.training_count(), k);
+        let (state, pairs, _) = train_model(&dir, &subset, &config, &mut weft_nn::trainer::Silent).unwrap();
+        assert_eq!(pairs, k * 6 * 36, "six loaded frames of 36 free nodes per sequence");
+        assert!(
+            state.best_epoch > 0,
+            "k = {k}: training never beat the starting weights"
+        );
+        let (_, mlp) = load_model(&dir).unwrap();
+        rms.push(correction_rms(&mlp, &vx, &vy).unwrap());
+        last = Some(mlp);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+    // The correction's own size on the validation pairs: predicting zero scores this.
+    let scale = (vy.iter().flatten().map(|v| v * v).sum::<f64>() / (3 * vy.len()) as f64).sqrt();
+    assert!(
+        rms[1] < 0.5 * rms[0],
+        "five sequences {:.3e} vs one {:.3e}",
+        rms[1],
+        rms[0]
+    );
+    assert!(
+        rms[1] < 0.3 * scale,
+        "five sequences {:.3e} against the correction's {scale:.3e}",
+        rms[1]
+    );
+    assert!(matches!(
+        correction_rms(&last.unwrap(), &vx[1..], &vy),
+        Err(Error::Shape { .. })
+    ));
+}

@@ -197,7 +197,7 @@ pub fn modal_warp(gradients: &NodalGradients, linear: &[f64]) -> Result<Vec<f64>
 
 /// Each node's load seen in its rest frame, `R_iᵀ f_i` with `R_i = exp([w_i]×)` the local
 /// rotation of displacements `u`: stiffness warping's treatment of external forces
-/// (Müller et al. 2002), which NNWarp's runtime adopts (§4). Eq. 7 trains the network on
+/// (Müller et al. 2002), which NNWarp's runtime adopts (§6). Eq. 7 trains the network on
 /// shapes with `f_int(u) = 𝓡 K ũ`; when the linear solve is `K ũ = 𝓡ᵀ f`, that target
 /// is `f_int(u) = f`, the nonlinear equilibrium under the actual load.
 pub fn loads_in_rest_frames(gradients: &NodalGradients, u: &[f64], forces: &[f64]) -> Result<Vec<f64>> {

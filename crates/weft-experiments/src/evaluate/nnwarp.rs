@@ -695,36 +695,25 @@ fn seeds(size: Size) -> Vec<u64> {
     }
 }
 
+/// One network of the data-size study.
+struct StudyRun {
+    sequences: usize,
+    seed: u64,
+    /// The kept weights' correction error on the validation pairs
+    /// ([`weft_nn::nnwarp::correction_rms`], unit-sphere units).
+    validation_rms: f64,
+    /// The epoch whose weights were kept.
+    best_epoch: usize,
+}
+
 /// One material's networks: every (training sequences, seed) run's best validation score,
 /// the seeds' final models (the largest size) and the one of them the validation split
 /// selects.
 struct Study {
     material: WarpMaterial,
-    /// `(training sequences, seed, best validation MSE, best epoch)`.
-    runs: Vec<(usize, u64, f64, usize)>,
+    runs: Vec<StudyRun>,
     finals: Vec<std::path::PathBuf>,
     selected: std::path::PathBuf,
-}
-
-/// `full` with only its first `k` training sequences (validation and test kept whole).
-fn first_training_sequences(full: &weft_data::WarpDataset, k: usize) -> weft_data::WarpDataset {
-    let mut taken = 0;
-    let sequences = full
-        .sequences
-        .iter()
-        .filter(|s| {
-            if s.split != "train" {
-                return true;
-            }
-            taken += 1;
-            taken <= k
-        })
-        .cloned()
-        .collect();
-    weft_data::WarpDataset {
-        sequences,
-        ..full.clone()
-    }
 }
 
 /// Trains material `m` on growing prefixes of the training sequences, each with every
@@ -739,13 +728,14 @@ fn data_size_study(
     seeds: &[u64],
 ) -> crate::Result<Study> {
     let full = weft_data::WarpDataset::load(data, m.key())?;
-    let available = full.sequences.iter().filter(|s| s.split == "train").count();
+    let available = full.training_count();
+    let (val_x, val_y) = weft_nn::nnwarp::collect_pairs(&full, "validation")?;
     let mut sizes: Vec<usize> = DATA_SIZES.iter().copied().filter(|&k| k < available).collect();
     sizes.push(available);
     let mut runs = Vec::new();
     let mut finals = Vec::new();
     for &k in &sizes {
-        let subset = first_training_sequences(&full, k);
+        let subset = full.with_training_prefix(k);
         for &seed in seeds {
             let dir = root.join("models").join(m.key()).join(format!("n{k}-seed{seed}"));
             let config = WarpTrainingConfig { seed, ..config.clone() };
@@ -753,7 +743,13 @@ fn data_size_study(
             let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
             let (state, _, _) = weft_nn::nnwarp::train_model(&dir, &subset, &config, &mut progress)
                 .with_context(|| format!("training {label}"))?;
-            runs.push((k, seed, state.best_validation, state.best_epoch));
+            let (_, mlp) = weft_nn::nnwarp::load_model(&dir)?;
+            runs.push(StudyRun {
+                sequences: k,
+                seed,
+                validation_rms: weft_nn::nnwarp::correction_rms(&mlp, &val_x, &val_y)?,
+                best_epoch: state.best_epoch,
+            });
             if k == available {
                 finals.push(dir);
             }
@@ -761,9 +757,9 @@ fn data_size_study(
     }
     let best = runs
         .iter()
-        .filter(|r| r.0 == available)
+        .filter(|r| r.sequences == available)
         .enumerate()
-        .min_by(|a, b| a.1.2.total_cmp(&b.1.2))
+        .min_by(|a, b| a.1.validation_rms.total_cmp(&b.1.validation_rms))
         .map(|(i, _)| i)
         .context("no trained model")?;
     Ok(Study {
@@ -779,20 +775,23 @@ fn study_report(out: &mut ExperimentOutput, studies: &[Study], seeds: &[u64]) {
     let mut rows = Vec::new();
     let mut series = Vec::new();
     for study in studies {
-        let mut sizes: Vec<usize> = study.runs.iter().map(|r| r.0).collect();
+        let mut sizes: Vec<usize> = study.runs.iter().map(|r| r.sequences).collect();
         sizes.dedup();
         let mut x = Vec::new();
         let mut y = Vec::new();
         for &k in &sizes {
-            let at: Vec<&(usize, u64, f64, usize)> = study.runs.iter().filter(|r| r.0 == k).collect();
-            let (mean, sd) = crate::records::mean_sd(at.iter().map(|r| r.2));
+            let at: Vec<&StudyRun> = study.runs.iter().filter(|r| r.sequences == k).collect();
+            let (mean, sd) = crate::records::mean_sd(at.iter().map(|r| r.validation_rms));
             x.push(k as f64);
             y.push(mean);
             rows.push(vec![
                 study.material.key().to_string(),
                 k.to_string(),
                 format!("{mean:.4e} ± {sd:.1e}"),
-                at.iter().map(|r| format!("{}", r.3)).collect::<Vec<_>>().join(", "),
+                at.iter()
+                    .map(|r| format!("{} (seed {})", r.best_epoch, r.seed))
+                    .collect::<Vec<_>>()
+                    .join(", "),
             ]);
         }
         series.push(Series {
@@ -810,23 +809,24 @@ fn study_report(out: &mut ExperimentOutput, studies: &[Study], seeds: &[u64]) {
         ));
     }
     out.tables.push(crate::paper::Table {
-        title: "NNWarp — validation loss against training data (data-size study)".into(),
+        title: "NNWarp — validation error against training data (data-size study)".into(),
         caption: format!(
-            "Best validation MSE (standardised correction, mean ± sd over {} seed(s)) of each material's network \
-             trained on the first k training sequences of the `nnwarp` dataset, and the epoch each seed kept. The \
-             validation split only: the test shapes are scored once, with the largest k.",
+            "Root-mean-square error of the runtime correction on every validation pair (unit-sphere units, mean ± sd \
+             over {} seed(s); one scale for every run, unlike the trainer's standardised score) of each \
+             material's network trained on the first k training sequences of the `nnwarp` dataset, and the epoch \
+             each seed kept. The validation split only: the test shapes are scored once, with the largest k.",
             seeds.len()
         ),
-        header: ["material", "training sequences", "validation MSE", "kept epochs"]
+        header: ["material", "training sequences", "validation RMS", "kept epochs"]
             .map(String::from)
             .to_vec(),
         rows,
     });
     out.lines.push(LinePlot {
         name: "data-size".into(),
-        title: "NNWarp: validation loss against training sequences".into(),
+        title: "NNWarp: validation error against training sequences".into(),
         x_label: "training sequences".into(),
-        y_label: "validation MSE (mean over seeds)".into(),
+        y_label: "validation correction RMS (unit-sphere units, mean over seeds)".into(),
         log_y: true,
         series,
     });
