@@ -48,8 +48,8 @@ pub use generate::{
     FileEntry, GenerateOptions, Manifest, SequenceEntry, Shard, Timing, generate, merge, read_manifest, verify,
 };
 pub use read::{
-    ClothDataset, ClothSequence, DrapeDataset, DrapeExample, LimbDataset, LimbSequence, WarpDataset, WarpSequence,
-    is_train_frame, is_validation_frame,
+    ClothDataset, ClothSequence, DrapeDataset, DrapeExample, LimbDataset, LimbSequence, RawArray, RawDataset,
+    RawSequence, RawValues, WarpDataset, WarpSequence, is_train_frame, is_validation_frame,
 };
 pub use record::{FrameStats, Recorder, Recording};
 pub use spec::{DatasetSpec, Size, Split, StoredSequence, dataset_names, sequence_seed};

@@ -296,6 +296,109 @@ impl ClothDataset {
     }
 }
 
+/// The values of one stored array, in its file's element type.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RawValues {
+    F64(Vec<f64>),
+    F32(Vec<f32>),
+    I64(Vec<i64>),
+    U8(Vec<u8>),
+}
+
+/// One array of a sequence file: its name, shape and values (row-major).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawArray {
+    pub name: String,
+    pub shape: Vec<usize>,
+    pub values: RawValues,
+}
+
+/// One sequence file of any dataset, as stored.
+#[derive(Debug, Clone)]
+pub struct RawSequence {
+    pub index: usize,
+    /// `train`, `validation` or `test`.
+    pub split: String,
+    /// The file's string metadata (JSON values as text).
+    pub metadata: std::collections::HashMap<String, String>,
+    /// Its arrays in name order.
+    pub arrays: Vec<RawArray>,
+}
+
+/// Any weft dataset read without interpreting its arrays: what a reader in another
+/// language needs (the Python package's `weft.datasets.load`). Every file is checked
+/// against the manifest's SHA-256 first, as the typed readers do.
+#[derive(Debug, Clone)]
+pub struct RawDataset {
+    pub dir: PathBuf,
+    /// The manifest's `dataset`.
+    pub name: String,
+    /// `manifest.json` as written.
+    pub manifest: serde_json::Value,
+    pub sequences: Vec<RawSequence>,
+}
+
+impl RawDataset {
+    /// Reads every sequence of the dataset in `dir` (checksums verified).
+    pub fn load(dir: &Path) -> Result<Self> {
+        let (manifest_path, manifest) = read_manifest(dir, None)?;
+        let mut sequences = Vec::new();
+        for_each_listed(dir, &manifest_path, &manifest, |file| {
+            let mut arrays = Vec::new();
+            let mut tensors = file.tensors.tensors();
+            tensors.sort_by(|a, b| a.0.cmp(&b.0));
+            for (name, view) in tensors {
+                let bytes = view.data();
+                let values = match view.dtype() {
+                    safetensors::Dtype::F64 => RawValues::F64(
+                        bytes
+                            .chunks_exact(8)
+                            .map(|b| f64::from_le_bytes(b.try_into().unwrap_or_default()))
+                            .collect(),
+                    ),
+                    safetensors::Dtype::F32 => RawValues::F32(
+                        bytes
+                            .chunks_exact(4)
+                            .map(|b| f32::from_le_bytes(b.try_into().unwrap_or_default()))
+                            .collect(),
+                    ),
+                    safetensors::Dtype::I64 => RawValues::I64(
+                        bytes
+                            .chunks_exact(8)
+                            .map(|b| i64::from_le_bytes(b.try_into().unwrap_or_default()))
+                            .collect(),
+                    ),
+                    safetensors::Dtype::U8 => RawValues::U8(bytes.to_vec()),
+                    other => {
+                        return Err(data_error(
+                            &file.path,
+                            format!("array {name} has element type {other:?}, which weft does not write"),
+                        ));
+                    }
+                };
+                arrays.push(RawArray {
+                    name,
+                    shape: view.shape().to_vec(),
+                    values,
+                });
+            }
+            sequences.push(RawSequence {
+                index: file.index,
+                split: file.split.to_string(),
+                metadata: file.metadata.clone(),
+                arrays,
+            });
+            Ok(())
+        })?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            name: manifest["dataset"].as_str().unwrap_or_default().to_string(),
+            manifest,
+            sequences,
+        })
+    }
+}
+
 /// One sequence of the `nnwarp` dataset: the field that drove it, its Poisson ratio, and
 /// per frame the linear and one material's registered displacements (unit-sphere units).
 #[derive(Debug, Clone)]
