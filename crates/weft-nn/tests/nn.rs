@@ -1014,3 +1014,22 @@ fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_t
         Err(Error::Shape { .. })
     ));
 }
+
+#[test]
+fn the_published_nnwarp_models_load_and_correct_nothing_at_rest() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/results/models/nnwarp");
+    for material in ["co-rotational", "stvk", "neo-hookean"] {
+        let (config, mlp) = weft_nn::nnwarp::load_model(&root.join(material)).unwrap();
+        assert_eq!(config.material, material);
+        assert_eq!(config.hidden, weft_nn::nnwarp::hidden_layers(material));
+        // Kinematic inputs zero (a node that does not move): no correction; moved: some.
+        let still = [0.0, 0.0, 0.0, 0.5, 0.4, 1.0, 0.3];
+        assert!(mlp.forward(&still).iter().all(|c| c.abs() < 1e-12), "{material}");
+        let moved = [0.8, 0.1, 0.2, 0.5, 0.4, 1.0, 0.3];
+        let c = mlp.forward(&moved);
+        assert!(
+            c.iter().all(|v| v.is_finite()) && c.iter().any(|v| v.abs() > 1e-6),
+            "{material}: {c:?}"
+        );
+    }
+}
