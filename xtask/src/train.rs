@@ -176,8 +176,8 @@ pub struct AltconvArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// The model: alt (Alt-ConvLSTM), convlstm-cp-dy, convlstm-np-dy, convlstm-cp-y or
-    /// convlstm-np-y. After training, the roll-out error on the test sequences (up to 50
-    /// steps) beside skinning alone is printed and written to `scores.json`.
+    /// convlstm-np-y. After training, the roll-out error on the validation sequences (up
+    /// to 50 steps) beside skinning alone is printed and written to `scores.json`.
     #[arg(long, default_value = "alt")]
     pub model: String,
     /// Where the model is written.

@@ -417,6 +417,16 @@ fn train_altconv_resumes_bit_for_bit_and_refuses_absurd_widths() {
     // The epoch lines are in the run's log.
     let log = std::fs::read_to_string(straight.join("train.log")).unwrap();
     assert_eq!(log.lines().filter(|l| l.contains("validation")).count(), 5);
+    // The run's own scoring reads the validation split, never the test split.
+    let scores: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(straight.join("scores.json")).unwrap()).unwrap();
+    assert!(scores.get("test_rollout_mm").is_none());
+    for m in ["skinning", "alt-convlstm"] {
+        assert!(
+            scores["validation_rollout_mm"][m].as_f64().is_some_and(f64::is_finite),
+            "{scores}"
+        );
+    }
     // A width of four billion is a typo: refused by name, nothing allocated or written.
     std::fs::write(&config, r#"{"hidden": [8, 4000000000], "steps": 4}"#).unwrap();
     let bad = root.join("bad");
