@@ -111,32 +111,11 @@ fn altconv(c: &mut Criterion) {
 
 fn embedding(c: &mut Criterion) {
     use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
-    use weft_sim::{ClothScene, ClothSimulation};
+    use weft_sim::ClothScene;
     // Three simulated frames of the standard sheet: one training window.
     let scene = ClothScene::builtin("sheet-ms", false).unwrap();
-    let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
-    let rest = sim.mesh().clone();
-    assert_eq!(rest.num_vertices(), 4225);
-    let grasp = sim.grasp_vertices().to_vec();
-    let (mut positions, mut controls, mut labels) = (sim.integrator().positions().to_vec(), Vec::new(), Vec::new());
-    for m in 0..3 {
-        let (q, label) = sim.controls_at(m);
-        controls.extend(q.iter().flat_map(|p| [p.x, p.y, p.z]));
-        labels.push(label.code());
-        if m < 2 {
-            positions.extend(sim.step().unwrap().positions);
-        }
-    }
-    let sequence =
-        weft_data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
-    let dataset = weft_data::ClothDataset {
-        dir: std::env::temp_dir(),
-        name: "sheet-ms".into(),
-        scene,
-        rest,
-        grasp,
-        sequences: vec![sequence],
-    };
+    let dataset = weft_data::ClothDataset::simulate("sheet-ms", scene, 3).unwrap();
+    assert_eq!(dataset.rest.num_vertices(), 4225);
     let data = EmbedData::new(dataset).unwrap();
     let mut group = c.benchmark_group("training-embed-4225");
     group.sample_size(10);

@@ -52,10 +52,12 @@ Configuration file (--config, JSON; omitted fields keep their defaults, unknown 
   schedule         {\"decay\": {\"kind\": \"exponential\", \"per_epoch\": 0.995}, \"warmup_epochs\": 0,
                     \"clip_grad_norm\": null, \"early_stopping_patience\": null}
   recipe           {\"sampling_max\": 0, \"sampling_epochs\": [0, 0], \"curriculum_start\": 0,
-                    \"curriculum_epochs\": 0}: scheduled sampling (feed the model's own previous
-                   prediction back with a probability rising to sampling_max over those epochs) and
-                   a window growing from curriculum_start steps to steps; off by default
-Validation: Eq. 12 teacher-forced on the dataset's validation sequences.";
+                    \"curriculum_epochs\": 0, \"validation_rollout\": false}: scheduled sampling
+                   (feed the model's own previous prediction back with a probability rising to
+                   sampling_max over those epochs), a window growing from curriculum_start steps
+                   to steps, and validation scored as a roll-out; off by default
+Validation: Eq. 12 on the dataset's validation sequences over `steps` steps, teacher-forced
+(or rolled out with recipe.validation_rollout); the best epoch's weights are kept.";
 
 const DRAPE_CONFIG: &str = "\
 Configuration file (--config, JSON; omitted fields keep the standard evaluation's values,

@@ -375,6 +375,49 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// `cargo xtask train altconv` on the quick `limb-jiggle` dataset: a short teacher-forced
+/// run of the position model lowers its training loss, validation is scored as a roll-out
+/// (`recipe.validation_rollout`, stored with the model) and the kept epoch is the best one
+/// by that score.
+#[test]
+fn train_altconv_on_the_jiggling_limb_lowers_the_loss() {
+    let root = scratch("altconv-jiggle");
+    let data = root.join("data");
+    let out = xtask(
+        &["dataset", "limb-jiggle", "--size", "quick", "--quiet"],
+        &[("--out", &data)],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let config = root.join("config.json");
+    std::fs::write(
+        &config,
+        r#"{"hidden": [8, 8], "steps": 6, "batch": 1, "epochs": 6, "recipe": {"validation_rollout": true}}"#,
+    )
+    .unwrap();
+    let model = root.join("model");
+    let o = xtask(
+        &[
+            "train",
+            "altconv",
+            "--model",
+            "convlstm-np-y",
+            "--quiet",
+            "--lr",
+            "0.01",
+        ],
+        &[("--data", &data), ("--config", &config), ("--out", &model)],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let h = history(&model);
+    assert_eq!(h.len(), 6);
+    assert!(h[5].0 < h[0].0, "training loss {:?}", h);
+    assert_selected_on_validation(&model);
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("config.json")).unwrap()).unwrap();
+    assert_eq!(stored["recipe"]["validation_rollout"], true);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 /// `cargo xtask train altconv` on the quick `limb` dataset: a run split by `--resume`
 /// ends bit for bit where an uninterrupted one does, the kept epoch is the best on
 /// validation, and widths beyond any machine are refused by field before any allocation.

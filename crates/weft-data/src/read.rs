@@ -199,6 +199,63 @@ pub struct ClothDataset {
     pub sequences: Vec<ClothSequence>,
 }
 
+impl ClothDataset {
+    /// One sequence of `frames` frames of `scene` (its initial state and `frames − 1`
+    /// steps) simulated in memory, with each frame's controls and motion label: a dataset
+    /// for tests, benchmarks and quick experiments that needs no directory (`dir` is the
+    /// temporary directory). Stops at the first step whose solve fails, with its error.
+    pub fn simulate(name: &str, scene: ClothScene, frames: usize) -> Result<Self> {
+        if frames == 0 {
+            return Err(Error::Shape {
+                what: "simulated cloth sequence",
+                expected: "at least one frame".into(),
+                got: "0".into(),
+            });
+        }
+        let mut sim = weft_sim::ClothSimulation::new(scene.clone(), None)?;
+        let rest = sim.mesh().clone();
+        let grasp = sim.grasp_vertices().to_vec();
+        let mut positions = sim.integrator().positions().to_vec();
+        let (mut controls, mut labels) = (Vec::new(), Vec::new());
+        for m in 0..frames {
+            let (q, label) = sim.controls_at(m);
+            controls.extend(q.iter().flat_map(|p| [p.x, p.y, p.z]));
+            labels.push(label.code());
+            if m + 1 < frames {
+                positions.extend(sim.step()?.positions);
+            }
+        }
+        let sequence = ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len())?;
+        Ok(Self {
+            dir: std::env::temp_dir(),
+            name: name.into(),
+            scene,
+            rest,
+            grasp,
+            sequences: vec![sequence],
+        })
+    }
+
+    /// `frame` (`3V` values, metres) with its grasped vertices moved to the control
+    /// positions `q` (`3G` values in the order of [`ClothDataset::grasp`]): the
+    /// configuration at which a method's frame is judged against the controls it was given.
+    pub fn with_grasp_at(&self, frame: &[f64], q: &[f64]) -> Result<Vec<f64>> {
+        let v = self.rest.num_vertices();
+        if frame.len() != 3 * v || q.len() != 3 * self.grasp.len() {
+            return Err(Error::Shape {
+                what: "frame and grasp controls",
+                expected: format!("{} positions and {} controls", 3 * v, 3 * self.grasp.len()),
+                got: format!("{} and {}", frame.len(), q.len()),
+            });
+        }
+        let mut out = frame.to_vec();
+        for (k, &g) in self.grasp.iter().enumerate() {
+            out[3 * g..3 * g + 3].copy_from_slice(&q[3 * k..3 * k + 3]);
+        }
+        Ok(out)
+    }
+}
+
 fn io_error(path: &Path, source: std::io::Error) -> Error {
     Error::Io {
         path: path.display().to_string(),

@@ -68,10 +68,16 @@ fn paper_and_ours(records: &[Record], scene: &str, method: &str, metric: &str, d
     find(records, scene, method, metric).map_or("—".to_string(), |r| paper_cell(r.paper_value, r.value, digits))
 }
 
-/// The `paper / ours` cells of M_rms, M_STED and M_phys for one scene and method.
+/// The `paper / ours` cells of M_rms, M_STED and M_phys for one scene and method, with
+/// the seeds' spread (`± sd`) where the evaluation trained several.
 fn embed_cells(records: &[Record], scene: &str, method: &str) -> [String; 3] {
-    [("m-rms", 3), ("m-sted", 5), ("m-phys", 2)]
-        .map(|(metric, digits)| paper_and_ours(records, scene, method, metric, digits))
+    [("m-rms", 3), ("m-sted", 5), ("m-phys", 2)].map(|(metric, digits)| {
+        let cell = paper_and_ours(records, scene, method, metric, digits);
+        match find(records, scene, method, &format!("{metric}-sd")) {
+            Some(sd) => format!("{cell} ± {:.digits$}", sd.value),
+            None => cell,
+        }
+    })
 }
 
 /// Tan et al. Table I: the embedding's M_rms, M_STED and M_phys per scene and method on
@@ -98,8 +104,8 @@ fn tan_table_1(records: &[Record]) -> Table {
                   between methods of one scene are comparable). Paper rows: SHEET+[11] = `sheet-ms`, +holes = \
                   `sheet-ms-holes`, SHEET+[38] = `sheet-fem`, +obstacle = `sheet-fem-obstacle`, BALL+[11] = \
                   `ball-ms`, BALL+[38] = `ball-fem`, +0.1 P_s / +0.1 P_b = `ball-fem-soft-stretch` / \
-                  `ball-fem-soft-bend`. The paper's meshes, data sizes and training differ from ours (tables.md \
-                  notes)."
+                  `ball-fem-soft-bend`. Ours: the mean over seeds ± their spread where there are several. The \
+                  paper's meshes, data sizes and training differ from ours (tables.md notes)."
             .into(),
         header: ["scene", "method", "M_rms", "M_STED", "M_phys"]
             .map(String::from)

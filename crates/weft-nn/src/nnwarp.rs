@@ -369,11 +369,20 @@ pub struct NodeMlp {
 }
 
 impl NodeMlp {
-    /// The network's raw output for standardised inputs `x` (one node: a batch of one
-    /// through [`NodeMlp::net_batch`], the runtime's only implementation of the layers).
-    fn net(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
-        let a = self.net_batch(&x.map(|v| v as f32), 1);
-        std::array::from_fn(|d| a[d] as f64)
+    /// The network's raw outputs for standardised input rows (column-major through
+    /// [`NodeMlp::net_batch`], the runtime's only implementation of the layers).
+    fn net_rows(&self, rows: impl ExactSizeIterator<Item = [f64; INPUTS]>) -> Vec<[f64; OUTPUTS]> {
+        let n = rows.len();
+        let mut x = vec![0.0f32; n * INPUTS];
+        for (k, row) in rows.enumerate() {
+            for (d, v) in row.into_iter().enumerate() {
+                x[d * n + k] = v as f32;
+            }
+        }
+        let a = self.net_batch(&x, n);
+        (0..n)
+            .map(|k| std::array::from_fn(|d| f64::from(a[d * n + k])))
+            .collect()
     }
 
     /// The network's raw outputs for `n` nodes at once: `x` holds their standardised
@@ -409,15 +418,34 @@ impl NodeMlp {
     /// The raw output at rest, `net(x₀)`: it depends on the contextual inputs only, so a
     /// runtime computes it once per node ([`NnWarp::new`]).
     pub fn at_rest(&self, x: &[f64; INPUTS]) -> [f64; OUTPUTS] {
-        let mut x0 = self.standardization.input(x);
-        x0[..KINEMATIC].copy_from_slice(&self.standardization.input(&[0.0; INPUTS])[..KINEMATIC]);
-        self.net(&x0)
+        self.at_rest_batch(std::slice::from_ref(x))[0]
+    }
+
+    /// [`NodeMlp::at_rest`] of many nodes' raw inputs at once.
+    pub fn at_rest_batch(&self, inputs: &[[f64; INPUTS]]) -> Vec<[f64; OUTPUTS]> {
+        let zero = self.standardization.input(&[0.0; INPUTS]);
+        self.net_rows(inputs.iter().map(|x| {
+            let mut x0 = self.standardization.input(x);
+            x0[..KINEMATIC].copy_from_slice(&zero[..KINEMATIC]);
+            x0
+        }))
+    }
+
+    /// The corrections (aligned frame, unit-sphere units) of many nodes from their raw
+    /// inputs and their [`NodeMlp::at_rest`] outputs: `(net(x) − net(x₀)) σ_out`, every
+    /// node through one batched pass of the network.
+    pub fn corrections(&self, inputs: &[[f64; INPUTS]], rest: &[[f64; OUTPUTS]]) -> Vec<[f64; OUTPUTS]> {
+        let std = &self.standardization.output_std;
+        self.net_rows(inputs.iter().map(|x| self.standardization.input(x)))
+            .into_iter()
+            .zip(rest)
+            .map(|(a, r)| std::array::from_fn(|d| (a[d] - r[d]) * std[d]))
+            .collect()
     }
 
     /// The correction from raw inputs `x` and their [`NodeMlp::at_rest`] output.
     pub fn forward_from_rest(&self, x: &[f64; INPUTS], rest: &[f64; OUTPUTS]) -> [f64; OUTPUTS] {
-        let a = self.net(&self.standardization.input(x));
-        std::array::from_fn(|d| (a[d] - rest[d]) * self.standardization.output_std[d])
+        self.corrections(std::slice::from_ref(x), std::slice::from_ref(rest))[0]
     }
 
     /// The correction (aligned frame, unit-sphere units) of one node's raw inputs; zero
@@ -438,14 +466,15 @@ pub struct NnWarp {
 
 impl NnWarp {
     pub fn new(context: WarpContext, mlp: NodeMlp) -> Self {
-        let rest = context
+        let inputs: Vec<[f64; INPUTS]> = context
             .free
             .iter()
             .map(|&i| {
                 let c = context.context[i];
-                mlp.at_rest(&[0.0, 0.0, 0.0, c[0], c[1], c[2], context.poisson])
+                [0.0, 0.0, 0.0, c[0], c[1], c[2], context.poisson]
             })
             .collect();
+        let rest = mlp.at_rest_batch(&inputs);
         Self { context, mlp, rest }
     }
 
@@ -501,22 +530,17 @@ impl NnWarp {
         let n = out.len();
         let free = &self.context.free[start..start + n];
         let rest = &self.rest[start..start + n];
-        let standardization = &self.mlp.standardization;
-        let mut x = vec![0.0f32; n * INPUTS];
+        let mut x = Vec::with_capacity(n);
         let mut q = Vec::with_capacity(n);
-        for (k, (slot, &i)) in out.iter_mut().zip(free).enumerate() {
+        for (slot, &i) in out.iter_mut().zip(free) {
             let (qi, xi, wi) = self.context.node_input(linear, i);
-            for (d, v) in standardization.input(&xi).into_iter().enumerate() {
-                x[d * n + k] = v as f32;
-            }
+            x.push(xi);
             q.push(qi);
             slot.1 = wi;
         }
-        let a = self.mlp.net_batch(&x, n);
-        for (k, ((slot, r), q)) in out.iter_mut().zip(rest).zip(&q).enumerate() {
-            // As `NodeMlp::forward_from_rest`, node by node.
-            let d = Vector3::from_fn(|c, _| (a[c * n + k] as f64 - r[c]) * standardization.output_std[c]);
-            slot.0 = q.inverse() * d / self.context.scale;
+        let d = self.mlp.corrections(&x, rest);
+        for ((slot, d), q) in out.iter_mut().zip(d).zip(&q) {
+            slot.0 = q.inverse() * Vector3::from(d) / self.context.scale;
         }
     }
 }
@@ -858,28 +882,13 @@ pub fn correction_rms(mlp: &NodeMlp, inputs: &[[f64; INPUTS]], targets: &[[f64; 
         .par_chunks(chunk)
         .zip(targets.par_chunks(chunk))
         .map(|(x, y)| {
-            let n = x.len();
-            // Column-major standardised inputs, and the same rows at rest (kinematic
-            // inputs zero): the runtime's correction is net(x) − net(x₀).
-            let mut now = vec![0.0f32; n * INPUTS];
-            let mut rest = vec![0.0f32; n * INPUTS];
-            let zero = mlp.standardization.input(&[0.0; INPUTS]);
-            for (k, row) in x.iter().enumerate() {
-                let s = mlp.standardization.input(row);
-                for d in 0..INPUTS {
-                    now[d * n + k] = s[d] as f32;
-                    rest[d * n + k] = if d < KINEMATIC { zero[d] } else { s[d] } as f32;
-                }
-            }
-            let (a, a0) = (mlp.net_batch(&now, n), mlp.net_batch(&rest, n));
-            let mut sum = 0.0;
-            for (k, t) in y.iter().enumerate() {
-                for d in 0..OUTPUTS {
-                    let c = f64::from(a[d * n + k] - a0[d * n + k]) * mlp.standardization.output_std[d];
-                    sum += (c - t[d]).powi(2);
-                }
-            }
-            sum
+            // The runtime's correction, net(x) − net(x₀), of every pair.
+            let corrections = mlp.corrections(x, &mlp.at_rest_batch(x));
+            corrections
+                .iter()
+                .zip(y)
+                .map(|(c, t)| (0..OUTPUTS).map(|d| (c[d] - t[d]).powi(2)).sum::<f64>())
+                .sum::<f64>()
         })
         .sum();
     let rms = (squares / (inputs.len() * OUTPUTS) as f64).sqrt();

@@ -329,42 +329,6 @@ fn store_cached<S>(cache: &ForwardCache<S>, inputs: Vec<f32>, solutions: Vec<S>)
     }
 }
 
-/// Per-example warm starts of a projection op: the last solution (or what a warm start
-/// needs of it) found for each example key, shared by the op's clones.
-#[derive(Debug)]
-struct WarmStarts<S>(Arc<std::sync::Mutex<std::collections::HashMap<usize, S>>>);
-
-impl<S> Default for WarmStarts<S> {
-    fn default() -> Self {
-        Self(Arc::default())
-    }
-}
-
-impl<S> Clone for WarmStarts<S> {
-    fn clone(&self) -> Self {
-        Self(Arc::clone(&self.0))
-    }
-}
-
-impl<S: Clone> WarmStarts<S> {
-    /// The stored start of each of `keys` (none without keys: a cold batch of `n`).
-    fn starts(&self, keys: Option<&[usize]>, n: usize) -> Vec<Option<S>> {
-        match (keys, self.0.lock()) {
-            (Some(keys), Ok(map)) => keys.iter().map(|k| map.get(k).cloned()).collect(),
-            _ => vec![None; n],
-        }
-    }
-
-    /// Remembers `values[b]` for `keys[b]` (nothing without keys).
-    fn remember(&self, keys: Option<&[usize]>, values: impl Iterator<Item = S>) {
-        if let (Some(keys), Ok(mut map)) = (keys, self.0.lock()) {
-            for (k, v) in keys.iter().zip(values) {
-                map.insert(*k, v);
-            }
-        }
-    }
-}
-
 /// `keys` as the op's example keys, one per batch entry of `predictions`.
 fn example_keys(what: &'static str, predictions: &Tensor, keys: &[usize]) -> crate::error::Result<Arc<Vec<usize>>> {
     if keys.len() != predictions.dim(0)? {
@@ -393,7 +357,7 @@ fn example_keys(what: &'static str, predictions: &Tensor, keys: &[usize]) -> cra
 pub struct QuasistaticProjection {
     layer: Arc<weft_proj::QuasistaticLayer>,
     keys: Option<Arc<Vec<usize>>>,
-    previous: WarmStarts<Vec<f64>>,
+    previous: Arc<weft_proj::WarmStarts<usize, Vec<f64>>>,
     last: ForwardCache<weft_proj::quasistatic::QuasistaticSolution>,
 }
 
@@ -402,7 +366,7 @@ impl QuasistaticProjection {
         Self {
             layer,
             keys: None,
-            previous: WarmStarts::default(),
+            previous: Arc::default(),
             last: Arc::default(),
         }
     }
@@ -464,15 +428,11 @@ impl QuasistaticProjection {
             .previous
             .starts(self.keys.as_deref().map(Vec::as_slice), preds.len());
         let scaling = Self::scaling(mu);
-        let solutions: Vec<_> = preds
-            .par_iter()
-            .zip(&starts)
-            .map(|(p, s)| {
-                self.layer
-                    .forward_from(p, &scaling, s.as_deref())
-                    .map(|(solution, _)| solution)
-                    .map_err(op_error)
-            })
+        let solutions: Vec<_> = self
+            .layer
+            .forward_batch_from(&preds, &scaling, &starts)
+            .into_iter()
+            .map(|r| r.map(|(solution, _)| solution).map_err(op_error))
             .collect::<candle_core::Result<_>>()?;
         self.previous.remember(
             self.keys.as_deref().map(Vec::as_slice),
@@ -555,7 +515,7 @@ impl candle_core::CustomOp2 for QuasistaticProjection {
 pub struct InextensibilityProjection {
     layer: Arc<weft_proj::InextensibilityLayer>,
     keys: Option<Arc<Vec<usize>>>,
-    previous: WarmStarts<weft_proj::SocpSolution>,
+    previous: Arc<weft_proj::WarmStarts<usize, weft_proj::SocpSolution>>,
     last: ForwardCache<weft_proj::SocpSolution>,
 }
 
@@ -564,7 +524,7 @@ impl InextensibilityProjection {
         Self {
             layer,
             keys: None,
-            previous: WarmStarts::default(),
+            previous: Arc::default(),
             last: Arc::default(),
         }
     }

@@ -57,6 +57,17 @@ fn cpu() -> Device {
     Device::Cpu
 }
 
+/// A tensor's values as flat f64.
+fn flat(t: &Tensor) -> Vec<f64> {
+    t.flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap()
+        .into_iter()
+        .map(f64::from)
+        .collect()
+}
+
 fn sheet(n: usize) -> weft_mesh::TriMesh {
     weft_mesh::generators::sheet(n, 0.3).unwrap()
 }
@@ -394,15 +405,6 @@ fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
     let mesh = sheet(6);
     let adj = NormalizedAdjacency::new(&mesh).unwrap();
     let s = sequence(&mesh, 6, 0.7);
-    let flat = |t: &Tensor| -> Vec<f64> {
-        t.flatten_all()
-            .unwrap()
-            .to_vec1::<f32>()
-            .unwrap()
-            .into_iter()
-            .map(f64::from)
-            .collect()
-    };
     let frame = |k: usize| flat(&s.drive.skinned.narrow(1, k, 1).unwrap());
     for variant in Variant::ALL {
         let mut params = Params::new(&cpu(), 9);
@@ -537,6 +539,21 @@ fn scheduled_sampling_spans_teacher_forcing_to_roll_out_and_the_curriculum_grows
         ..Recipe::default()
     };
     assert!(close(loss(always, 3), rolled));
+    // Validation scores teacher-forced by default and as a roll-out when asked, on both
+    // paths (the fused kernels and candle's autograd).
+    let score = |recipe: Recipe, kernels: weft_nn::altconv::Kernels| -> f64 {
+        let mut t = training(recipe);
+        t.path = weft_nn::altconv::TrainingPath::new(kernels);
+        t.validation_score().unwrap()
+    };
+    let rollout_validation = Recipe {
+        validation_rollout: true,
+        ..Recipe::default()
+    };
+    for kernels in [weft_nn::altconv::Kernels::Fused, weft_nn::altconv::Kernels::Autograd] {
+        assert!(close(score(Recipe::default(), kernels), forced), "{kernels:?}");
+        assert!(close(score(rollout_validation, kernels), rolled), "{kernels:?}");
+    }
     // About half the steps fed back: neither extreme, and the same draws again.
     let half = Recipe {
         sampling_max: 0.5,
@@ -699,6 +716,32 @@ fn training_with_either_path_reaches_the_same_losses() {
                 (f - r).abs() <= 1e-3 * r,
                 "{variant:?} epoch {e}: fused {f}, autograd {r}"
             );
+        }
+    }
+}
+
+/// The selected `limb-jiggle` model of each row, published under
+/// `docs/results/models/altconv/<variant>` (docs/ALTCONV.md), loads with the recipe it was
+/// trained under and rolls a surface out. The cells' weights do not depend on the mesh, so
+/// a small sheet stands in for the limb.
+#[test]
+fn the_published_altconv_models_load_and_roll_out() {
+    use weft_nn::altconv::AltConvRuntime;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/results/models/altconv");
+    let mesh = sheet(4);
+    let adj = NormalizedAdjacency::new(&mesh).unwrap();
+    let s = sequence(&mesh, 6, 0.2);
+    let frame = |t: &Tensor, k: usize| flat(&t.narrow(1, k, 1).unwrap());
+    for variant in Variant::ALL {
+        let (config, _, net) = weft_nn::altconv::load_model(&root.join(variant.name()), &cpu()).unwrap();
+        assert_eq!(config.variant, variant);
+        assert!(config.recipe.validation_rollout && config.steps == 50, "{config:?}");
+        let mut runtime = AltConvRuntime::new(&net, adj.clone()).unwrap();
+        runtime.start(&frame(&s.drive.skinned, 0), &frame(&s.truth, 0)).unwrap();
+        for k in 1..6 {
+            let y = runtime.step(&frame(&s.drive.skinned, k)).unwrap();
+            assert_eq!(y.len(), 3 * mesh.num_vertices());
+            assert!(y.iter().all(|v| v.is_finite()), "{variant:?}");
         }
     }
 }

@@ -463,29 +463,7 @@ fn cloth_potential_op_is_the_elastic_terms_and_its_gradient_matches_finite_diffe
 
 /// The quick `sheet-ms` simulated for `frames` frames, as an in-memory dataset.
 fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
-    let scene = ClothScene::builtin("sheet-ms", true).unwrap();
-    let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
-    let rest = sim.mesh().clone();
-    let grasp = sim.grasp_vertices().to_vec();
-    let (mut positions, mut controls, mut labels) = (sim.integrator().positions().to_vec(), Vec::new(), Vec::new());
-    for m in 0..frames {
-        let (q, label) = sim.controls_at(m);
-        controls.extend(q.iter().flat_map(|p| [p.x, p.y, p.z]));
-        labels.push(label.code());
-        if m + 1 < frames {
-            positions.extend(sim.step().unwrap().positions);
-        }
-    }
-    let sequence =
-        weft_data::ClothSequence::new(0, positions, controls, labels, rest.num_vertices(), grasp.len()).unwrap();
-    weft_data::ClothDataset {
-        dir: std::env::temp_dir(),
-        name: "sheet-ms".into(),
-        scene,
-        rest,
-        grasp,
-        sequences: vec![sequence],
-    }
+    weft_data::ClothDataset::simulate("sheet-ms", ClothScene::builtin("sheet-ms", true).unwrap(), frames).unwrap()
 }
 
 #[test]
@@ -790,6 +768,69 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
         )
         .is_err()
     );
+}
+
+/// The PCA + MLP roll-out against steps computed by hand: a one-component PCA of two
+/// vertices moving along a known direction, one grasped vertex, and a latent MLP with no
+/// hidden layer and chosen weights, so `z_m = w·[z_{m−2}, z_{m−1}, q_m] + b` and
+/// `x_m = x̄ + (z_m / s) d`.
+#[test]
+fn the_pca_simulator_rolls_out_the_hand_computed_steps() {
+    use std::collections::BTreeMap;
+    use weft_nn::embed::{LatentSimulator, LatentSimulatorConfig};
+    use weft_nn::pca::PositionPca;
+    use weft_nn::pca_simulator::PcaSimulator;
+    let r = std::f64::consts::FRAC_1_SQRT_2;
+    let mean = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+    let d = [r, 0.0, 0.0, 0.0, r, 0.0];
+    let along = |t: f64| -> Vec<f64> { (0..6).map(|i| mean[i] + t * d[i]).collect() };
+    let pca = PositionPca::fit(&[-1.0, -0.5, 0.5, 1.0].map(along), 1).unwrap();
+    // The basis is d up to its sign.
+    let sign = pca.encode(&along(1.0))[0];
+    assert!((sign.abs() - 1.0).abs() < 1e-12, "{sign}");
+    let mut params = Params::new(&Device::Cpu, 0);
+    let mlp = LatentSimulator::new(
+        &mut params,
+        LatentSimulatorConfig {
+            latent: 1,
+            controls: 3,
+            hidden: vec![],
+        },
+    )
+    .unwrap();
+    let (w, b) = ([0.5f32, 0.25, 1.0, -2.0, 0.1], 0.05f32);
+    let tensors = BTreeMap::from([
+        (
+            "latent_sim.fc0.w".to_string(),
+            Tensor::from_vec(w.to_vec(), (5, 1), &Device::Cpu).unwrap(),
+        ),
+        (
+            "latent_sim.fc0.b".to_string(),
+            Tensor::from_vec(vec![b], 1, &Device::Cpu).unwrap(),
+        ),
+    ]);
+    params.assign(&tensors, "test weights").unwrap();
+    let scale = 2.0;
+    let sim = PcaSimulator {
+        pca,
+        scale,
+        params,
+        mlp,
+    };
+    let (ta, tb) = (0.3, -0.2);
+    let controls: [&[f64]; 2] = [&[0.1, 0.2, 0.3], &[-0.4, 0.0, 0.5]];
+    let rolled = sim.rollout(&along(ta), &along(tb), &controls).unwrap();
+    // By hand: codes s·sign·t, then the linear step twice.
+    let w: Vec<f64> = w.iter().map(|&v| f64::from(v)).collect();
+    let step =
+        |z2: f64, z1: f64, q: &[f64]| w[0] * z2 + w[1] * z1 + w[2] * q[0] + w[3] * q[1] + w[4] * q[2] + f64::from(b);
+    let (z2, z1) = (scale * sign * ta, scale * sign * tb);
+    let z3 = step(z2, z1, controls[0]);
+    let z4 = step(z1, z3, controls[1]);
+    for (got, z) in rolled.iter().zip([z3, z4]) {
+        let want = along(sign * z / scale);
+        assert!(max_norm_rel_error(got, &want) < 1e-6, "{got:?} vs {want:?}");
+    }
 }
 
 /// The latent MLP on a PCA subspace trains through the trainer (its validation loss falls

@@ -50,6 +50,7 @@ pub mod rest;
 pub mod socp;
 
 pub use axial::AxialSprings;
+pub use batch::WarmStarts;
 pub use error::{Error, Result};
 pub use metrics::{StrainSummary, strain_summary};
 pub use quasistatic::{

@@ -526,6 +526,18 @@ impl QuasistaticLayer {
         preds.par_iter().map(|p| self.forward(p.as_ref(), mu)).collect()
     }
 
+    /// [`forward_from`](Self::forward_from) over many predictions in parallel, Newton for
+    /// example `b` started at `starts[b]` where there is one (a warm start) and at its
+    /// prediction otherwise; `starts` of another length makes every entry an error.
+    pub fn forward_batch_from<P: AsRef<[f64]> + Sync, S: AsRef<[f64]> + Sync>(
+        &self,
+        preds: &[P],
+        mu: &ZeroLengthScaling,
+        starts: &[Option<S>],
+    ) -> Vec<Result<(QuasistaticSolution, QuasistaticReport)>> {
+        crate::batch::forward_batch_from(preds, starts, |p, s| self.forward_from(p, mu, s.map(AsRef::as_ref)))
+    }
+
     /// [`backward`](Self::backward) over many examples in parallel.
     pub fn backward_batch<G: AsRef<[f64]> + Sync>(
         &self,

@@ -654,6 +654,42 @@ fn quasistatic_batch_matches_serial() {
         assert_eq!(serial.positions(), batch[i].positions());
         assert_eq!(layer.backward(&serial, &grads[i]).unwrap(), batch_grads[i]);
     }
+    // Warm starts per example: each entry is the serial solve from its own start (or
+    // from its prediction), and a start list of another length is refused entry by entry.
+    let starts: Vec<Option<Vec<f64>>> = vec![None, Some(batch[1].positions().to_vec()), None, Some(preds[0].clone())];
+    let warm = layer.forward_batch_from(&preds, &scaling, &starts);
+    for (i, r) in warm.into_iter().enumerate() {
+        let (serial, _) = layer.forward_from(&preds[i], &scaling, starts[i].as_deref()).unwrap();
+        assert_eq!(r.unwrap().0.positions(), serial.positions(), "example {i}");
+    }
+    let short = layer.forward_batch_from(&preds, &scaling, &starts[..3]);
+    assert_eq!(short.len(), 4);
+    assert!(short.iter().all(|r| matches!(
+        r,
+        Err(Error::LengthMismatch {
+            expected: 4,
+            got: 3,
+            ..
+        })
+    )));
+}
+
+#[test]
+fn warm_starts_return_what_was_remembered_for_each_key() {
+    let store: weft_proj::WarmStarts<i64, Vec<f64>> = Default::default();
+    assert_eq!(store.starts(None, 2), vec![None, None], "no keys: a cold batch");
+    assert_eq!(store.starts(Some(&[3, 7]), 2), vec![None, None]);
+    store.remember(Some(&[7, 3]), [vec![7.0], vec![3.0]].into_iter());
+    store.remember(None, [vec![0.0]].into_iter());
+    assert_eq!(
+        store.starts(Some(&[3, 5, 7]), 3),
+        vec![Some(vec![3.0]), None, Some(vec![7.0])]
+    );
+    store.remember(Some(&[3]), [vec![-3.0]].into_iter());
+    assert_eq!(store.starts(Some(&[3]), 1), vec![Some(vec![-3.0])], "the latest wins");
+    assert_eq!(store.keys(), vec![3, 7]);
+    store.clear();
+    assert!(store.keys().is_empty());
 }
 
 #[test]

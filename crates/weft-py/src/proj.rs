@@ -3,8 +3,7 @@
 //! per-example warm starts keyed by the caller's example ids, as weft-nn's candle ops
 //! keep them. A batch is all or nothing: on any example's error nothing is remembered.
 
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -12,7 +11,8 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use weft_proj::quasistatic::QuasistaticSolution;
 use weft_proj::{
-    InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, SocpSolution, ZeroLengthScaling,
+    InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, SocpSolution, WarmStarts,
+    ZeroLengthScaling,
 };
 
 use crate::arrays;
@@ -54,54 +54,6 @@ fn all_or_first_error<T>(results: Vec<Result<T, weft_proj::Error>>) -> PyResult<
         .collect()
 }
 
-/// Per-example warm starts: the last solution (or what a warm start needs of it) found
-/// for each example key.
-#[derive(Debug)]
-struct WarmStore<S>(Mutex<HashMap<i64, S>>);
-
-impl<S: Clone> WarmStore<S> {
-    fn new() -> Self {
-        Self(Mutex::default())
-    }
-
-    fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, HashMap<i64, S>>> {
-        self.0
-            .lock()
-            .map_err(|_| PyValueError::new_err("warm-start store poisoned"))
-    }
-
-    /// The stored start of each of `keys` (none without keys: a cold batch of `n`).
-    fn starts(&self, keys: &Option<Vec<i64>>, n: usize) -> PyResult<Vec<Option<S>>> {
-        let warm = self.lock()?;
-        Ok(match keys {
-            Some(k) => k.iter().map(|key| warm.get(key).cloned()).collect(),
-            None => vec![None; n],
-        })
-    }
-
-    /// Remembers `values[b]` for `keys[b]` (nothing without keys).
-    fn remember(&self, keys: &Option<Vec<i64>>, values: impl Iterator<Item = S>) -> PyResult<()> {
-        if let Some(k) = keys {
-            let mut warm = self.lock()?;
-            for (key, v) in k.iter().zip(values) {
-                warm.insert(*key, v);
-            }
-        }
-        Ok(())
-    }
-
-    fn keys(&self) -> PyResult<Vec<i64>> {
-        let mut k: Vec<i64> = self.lock()?.keys().copied().collect();
-        k.sort_unstable();
-        Ok(k)
-    }
-
-    fn clear(&self) -> PyResult<()> {
-        self.lock()?.clear();
-        Ok(())
-    }
-}
-
 /// `grad_output` as one flat gradient per example of a forward call of `examples`.
 fn gradients(grad_output: &PyReadonlyArray3<'_, f64>, vertices: usize, examples: usize) -> PyResult<Vec<Vec<f64>>> {
     let grads = arrays::batch("grad_output", grad_output, vertices)?;
@@ -134,7 +86,7 @@ fn split_reports<'py, S, R: serde::Serialize>(
 #[derive(Debug)]
 pub struct Inextensibility {
     layer: Arc<InextensibilityLayer>,
-    warm: WarmStore<SocpSolution>,
+    warm: WarmStarts<i64, SocpSolution>,
 }
 
 /// The solutions of one forward call, for its backward call (opaque).
@@ -171,7 +123,7 @@ impl Inextensibility {
         let layer = InextensibilityLayer::new(&rest, eps, settings).map_err(errors::proj)?;
         Ok(Self {
             layer: Arc::new(layer),
-            warm: WarmStore::new(),
+            warm: WarmStarts::default(),
         })
     }
 
@@ -222,14 +174,15 @@ impl Inextensibility {
         let v = self.layer.num_vertices();
         let preds = arrays::batch("predictions", &predictions, v)?;
         check_keys(&keys, preds.len())?;
-        let starts = self.warm.starts(&keys, preds.len())?;
+        let starts = self.warm.starts(keys.as_deref(), preds.len());
         let layer = Arc::clone(&self.layer);
         let results = py.detach(move || {
             let previous: Vec<Option<&SocpSolution>> = starts.iter().map(Option::as_ref).collect();
             layer.forward_batch_from(&preds, &previous)
         });
         let solved = all_or_first_error(results)?;
-        self.warm.remember(&keys, solved.iter().map(|(s, _)| s.warm_start()))?;
+        self.warm
+            .remember(keys.as_deref(), solved.iter().map(|(s, _)| s.warm_start()));
         let (solutions, reports) = split_reports(py, solved)?;
         let positions = solutions.iter().map(|s| s.positions().to_vec()).collect();
         Ok((arrays::to_batch(py, positions, v)?, SocpBatch { solutions }, reports))
@@ -253,12 +206,12 @@ impl Inextensibility {
     }
 
     /// The example keys with a remembered solution, sorted.
-    fn warm_keys(&self) -> PyResult<Vec<i64>> {
+    fn warm_keys(&self) -> Vec<i64> {
         self.warm.keys()
     }
 
     /// Forgets every example's warm start.
-    fn clear_warm_starts(&self) -> PyResult<()> {
+    fn clear_warm_starts(&self) {
         self.warm.clear()
     }
 }
@@ -269,7 +222,7 @@ impl Inextensibility {
 #[derive(Debug)]
 pub struct Quasistatic {
     layer: Arc<QuasistaticLayer>,
-    warm: WarmStore<Vec<f64>>,
+    warm: WarmStarts<i64, Vec<f64>>,
 }
 
 /// The solutions of one forward call, for its backward call (opaque).
@@ -337,7 +290,7 @@ impl Quasistatic {
         let layer = QuasistaticLayer::new(&rest, params).map_err(errors::proj)?;
         Ok(Self {
             layer: Arc::new(layer),
-            warm: WarmStore::new(),
+            warm: WarmStarts::default(),
         })
     }
 
@@ -361,19 +314,12 @@ impl Quasistatic {
         let preds = arrays::batch("predictions", &predictions, v)?;
         check_keys(&keys, preds.len())?;
         let scaling = self.scaling(mu)?;
-        let starts = self.warm.starts(&keys, preds.len())?;
+        let starts = self.warm.starts(keys.as_deref(), preds.len());
         let layer = Arc::clone(&self.layer);
-        let results = py.detach(move || {
-            use rayon::prelude::*;
-            preds
-                .par_iter()
-                .zip(&starts)
-                .map(|(p, s)| layer.forward_from(p, &scaling, s.as_deref()))
-                .collect::<Vec<_>>()
-        });
+        let results = py.detach(move || layer.forward_batch_from(&preds, &scaling, &starts));
         let solved = all_or_first_error(results)?;
         self.warm
-            .remember(&keys, solved.iter().map(|(s, _)| s.positions().to_vec()))?;
+            .remember(keys.as_deref(), solved.iter().map(|(s, _)| s.positions().to_vec()));
         let (solutions, reports) = split_reports(py, solved)?;
         let positions = solutions.iter().map(|s| s.positions().to_vec()).collect();
         Ok((
@@ -406,12 +352,12 @@ impl Quasistatic {
     }
 
     /// The example keys with a remembered equilibrium, sorted.
-    fn warm_keys(&self) -> PyResult<Vec<i64>> {
+    fn warm_keys(&self) -> Vec<i64> {
         self.warm.keys()
     }
 
     /// Forgets every example's warm start.
-    fn clear_warm_starts(&self) -> PyResult<()> {
+    fn clear_warm_starts(&self) {
         self.warm.clear()
     }
 }

@@ -86,21 +86,36 @@ fn find<'a>(
 }
 
 /// Tan et al.: the physics-based loss makes the embedding physically more plausible —
-/// `ours` below the baseline without it (`no-pb`) in M_phys, scene by scene. Reproduced
-/// when it is so on at least the paper's share of the scenes (Table I: 9 of 10), or on
-/// every scene where the paper prints no pair.
+/// `ours` below the baseline without it (`no-pb`) in M_phys at no cost in accuracy. A
+/// design scene (the resolution study's coarser sheets aside) counts when `ours`'s M_phys
+/// is below `no-pb`'s by more than the two seed spreads (`-sd` records) together and its
+/// M_rms is within 2 % of `no-pb`'s; reproduced when at least three quarters of the scenes
+/// count (6 of Tan et al.'s 8; the paper: lower on 9 of its 10 pairs).
 fn embed_claim(records: &[Record]) -> Claim {
+    const RMS_TOLERANCE: f64 = 0.02;
+    let value = |scene: &str, method: &str, metric: &str| find(records, "embed", Some(scene), method, metric);
+    let sd = |scene: &str, method: &str, metric: &str| {
+        value(scene, method, &format!("{metric}-sd")).map_or(0.0, |r| r.value)
+    };
     let mut ours = (0, 0);
     let mut paper = (0, 0);
+    let mut accurate = (0, 0);
     for r in records
         .iter()
         .filter(|r| r.experiment == "embed" && r.method == "ours" && r.metric == "m-phys")
     {
-        let Some(base) = find(records, "embed", Some(&r.scene), "no-pb", "m-phys") else {
+        let scene = r.scene.as_str();
+        if COARSE_SHEETS.contains(&scene) {
+            continue;
+        }
+        let Some(base) = value(scene, "no-pb", "m-phys") else {
             continue;
         };
+        let rms = (value(scene, "ours", "m-rms"), value(scene, "no-pb", "m-rms"));
+        let within = matches!(rms, (Some(a), Some(b)) if a.value <= (1.0 + RMS_TOLERANCE) * b.value);
+        let margin = sd(scene, "ours", "m-phys") + sd(scene, "no-pb", "m-phys");
         ours.1 += 1;
-        if r.value < base.value {
+        if within && r.value + margin < base.value {
             ours.0 += 1;
         }
         if let (Some(p), Some(q)) = (r.paper_value, base.paper_value) {
@@ -109,10 +124,18 @@ fn embed_claim(records: &[Record]) -> Claim {
                 paper.0 += 1;
             }
         }
+        if let Some(a) = rms.0
+            && let Some(p) = a.paper_value
+        {
+            accurate.1 += 1;
+            if a.value <= p {
+                accurate.0 += 1;
+            }
+        }
     }
     let verdict = if ours.1 == 0 {
         Verdict::NotMeasured
-    } else if (paper.1 > 0 && ours.0 * paper.1 >= paper.0 * ours.1) || (paper.1 == 0 && ours.0 == ours.1) {
+    } else if 4 * ours.0 >= 3 * ours.1 {
         Verdict::Reproduced
     } else {
         Verdict::NotReproduced
@@ -121,12 +144,18 @@ fn embed_claim(records: &[Record]) -> Claim {
         paper: "Tan et al. 2018, mesh embedding with a physics-based loss",
         experiment: "embed",
         claim: "The physics-based loss lowers M_phys (physical implausibility) below the baseline trained without it, \
-                on (nearly) every scene",
+                beyond the seeds' spread and with M_rms within 2 %, on at least three quarters of the scenes",
         paper_figure: format!("lower on {} of {} scenes (Table I)", paper.0, paper.1),
-        ours: format!("lower on {} of {} scenes", ours.0, ours.1),
+        ours: format!(
+            "lower on {} of {} scenes; `ours` M_rms at or below the paper's on {} of {}",
+            ours.0, ours.1, accurate.0, accurate.1
+        ),
         verdict,
     }
 }
+
+/// The resolution study's coarser sheets (Tan et al. Table III), not design scenes.
+const COARSE_SHEETS: [&str; 2] = ["sheet-ms-33", "sheet-ms-17"];
 
 /// The largest roll-out window recorded for the test split of `altconv`.
 fn longest_rollout(records: &[Record]) -> Option<(usize, String)> {
@@ -662,25 +691,39 @@ mod tests {
     }
 
     #[test]
-    fn the_embedding_claim_needs_the_papers_share_of_scenes() {
-        let pair = |scene: &str, ours: f64, base: f64, paper: Option<(f64, f64)>| {
-            let mut a = rec("embed", scene, "ours", "m-phys", Some("test"), ours);
-            let mut b = rec("embed", scene, "no-pb", "m-phys", Some("test"), base);
-            a.paper_value = paper.map(|p| p.0);
-            b.paper_value = paper.map(|p| p.1);
-            [a, b]
+    fn the_embedding_claim_needs_three_quarters_of_the_scenes_beyond_the_spread() {
+        // (ours, no-pb) M_phys with their spreads, and M_rms.
+        let pair = |scene: &str, phys: (f64, f64), sd: (f64, f64), rms: (f64, f64)| {
+            let mut v = Vec::new();
+            for (method, p, s, m) in [("ours", phys.0, sd.0, rms.0), ("no-pb", phys.1, sd.1, rms.1)] {
+                v.push(rec("embed", scene, method, "m-phys", Some("test"), p));
+                v.push(rec("embed", scene, method, "m-phys-sd", Some("test"), s));
+                v.push(rec("embed", scene, method, "m-rms", Some("test"), m));
+            }
+            v
         };
-        let mut r: Vec<Record> = pair("a", 1.0, 2.0, None).into();
-        assert_eq!(embed_claim(&r).verdict, Verdict::Reproduced);
-        r.extend(pair("b", 3.0, 2.0, None));
+        let good = |scene: &str| pair(scene, (1.0, 2.0), (0.1, 0.1), (10.0, 10.0));
+        let mut r: Vec<Record> = ["a", "b", "c"].into_iter().flat_map(good).collect();
+        // Lower, but within the spread.
+        r.extend(pair("d", (1.0, 2.0), (0.6, 0.6), (10.0, 10.0)));
         let c = embed_claim(&r);
-        assert_eq!(c.verdict, Verdict::NotReproduced, "no paper pair: every scene");
-        assert_eq!(c.ours, "lower on 1 of 2 scenes");
-        // The paper lower on one of its two scenes: one of two is its share.
-        let mut r: Vec<Record> = pair("a", 1.0, 2.0, Some((1.0, 2.0))).into();
-        r.extend(pair("b", 3.0, 2.0, Some((3.0, 2.0))));
+        assert_eq!(c.verdict, Verdict::Reproduced, "3 of 4 count");
+        assert!(c.ours.starts_with("lower on 3 of 4 scenes"), "{}", c.ours);
+        // Lower beyond the spread, but 3 % less accurate.
+        r.extend(pair("e", (1.0, 2.0), (0.1, 0.1), (10.3, 10.0)));
+        assert_eq!(embed_claim(&r).verdict, Verdict::NotReproduced, "3 of 5 count");
+        // The resolution study's coarser sheets are not design scenes.
+        let mut r: Vec<Record> = ["a", "b", "c"].into_iter().flat_map(good).collect();
+        r.extend(pair("sheet-ms-17", (3.0, 2.0), (0.1, 0.1), (10.0, 10.0)));
         assert_eq!(embed_claim(&r).verdict, Verdict::Reproduced);
-        assert_eq!(embed_claim(&r).paper_figure, "lower on 1 of 2 scenes (Table I)");
+        // The paper's share and its M_rms as printed.
+        let mut r = pair("a", (1.0, 2.0), (0.0, 0.0), (10.0, 10.0));
+        r[0].paper_value = Some(1.0);
+        r[3].paper_value = Some(2.0);
+        r[2].paper_value = Some(9.0);
+        let c = embed_claim(&r);
+        assert_eq!(c.paper_figure, "lower on 1 of 1 scenes (Table I)");
+        assert!(c.ours.ends_with("at or below the paper's on 0 of 1"), "{}", c.ours);
     }
 
     #[test]

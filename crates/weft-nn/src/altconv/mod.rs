@@ -593,6 +593,11 @@ pub struct Recipe {
     /// the start). Validation always scores the full window.
     pub curriculum_start: usize,
     pub curriculum_epochs: usize,
+    /// Score validation as a roll-out (every step from the model's own previous
+    /// prediction, as the evaluation scores it) instead of teacher-forced (the paper's
+    /// Eq. 12 on the validation sequences). The kept epoch is the one that rolls out best:
+    /// a teacher-forced score can fall while the roll-out drifts further.
+    pub validation_rollout: bool,
 }
 
 impl Default for Recipe {
@@ -602,6 +607,7 @@ impl Default for Recipe {
             sampling_epochs: [0, 0],
             curriculum_start: 0,
             curriculum_epochs: 0,
+            validation_rollout: false,
         }
     }
 }
@@ -777,8 +783,8 @@ impl SequenceTensors {
 
 /// Teacher-forced training (§5.1, loss Eq. 12) of a network through
 /// [`crate::trainer::Trainer`]: examples are the training sequences (each holding at
-/// least `steps + 1` frames), the validation score is Eq. 12 teacher-forced on the
-/// validation sequences (metres).
+/// least `steps + 1` frames), the validation score is Eq. 12 on the validation sequences
+/// (metres), teacher-forced or, with [`Recipe::validation_rollout`], rolled out.
 #[derive(Debug)]
 pub struct AltConvTraining<'a> {
     pub net: &'a AltConvNet,
@@ -864,8 +870,8 @@ impl crate::trainer::Trainable for AltConvTraining<'_> {
         match &self.path {
             TrainingPath::Fused(workspace) => {
                 let mut total = 0.0;
+                let forced = vec![!self.recipe.validation_rollout; self.steps + 1];
                 for s in self.validation {
-                    let forced = vec![true; self.steps + 1];
                     let predicted =
                         self.net
                             .run_fused(self.adj, &s.drive, Some(&s.truth), self.steps, &forced, workspace)?;
@@ -875,7 +881,13 @@ impl crate::trainer::Trainable for AltConvTraining<'_> {
                 }
                 Ok(total / self.validation.len() as f64)
             }
-            TrainingPath::Autograd => mean_error(self.net, self.adj, self.validation, self.steps, true),
+            TrainingPath::Autograd => mean_error(
+                self.net,
+                self.adj,
+                self.validation,
+                self.steps,
+                !self.recipe.validation_rollout,
+            ),
         }
     }
 }

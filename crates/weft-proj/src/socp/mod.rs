@@ -593,17 +593,15 @@ impl InextensibilityLayer {
         Ok((solution, report))
     }
 
-    /// [`forward_from`](Self::forward_from) over many predictions in parallel.
+    /// [`forward_from`](Self::forward_from) over many predictions in parallel, one
+    /// previous solution (or none) per prediction; a `previous` of another length makes
+    /// every entry an error.
     pub fn forward_batch_from<P: AsRef<[f64]> + Sync>(
         &self,
         preds: &[P],
         previous: &[Option<&SocpSolution>],
     ) -> Vec<Result<(SocpSolution, SocpReport)>> {
-        preds
-            .par_iter()
-            .zip(previous)
-            .map(|(p, prev)| self.forward_from(p.as_ref(), *prev))
-            .collect()
+        crate::batch::forward_batch_from(preds, previous, |p, prev| self.forward_from(p, prev.copied()))
     }
 
     /// [`forward`](Self::forward) over many predictions in parallel (rayon over examples).
