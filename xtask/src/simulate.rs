@@ -38,6 +38,9 @@ pub struct SimulateArgs {
     /// measurements; 1410 = the default).
     #[arg(long)]
     pub vertices: Option<usize>,
+    /// Cloth scenes only: Newton's globalisation, overriding the scene's.
+    #[arg(long, value_parser = ["line-search", "trust-region"])]
+    pub globalization: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -65,6 +68,13 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
             anyhow::bail!("--vertices {v}: the limb comes in 1410 (default) and 6890 (SMPL-size) surface vertices")
         }
         _ => anyhow::bail!("--vertices applies to the limb scene only"),
+    }
+    match (&mut loaded.scene, args.globalization.as_deref()) {
+        (_, None) => {}
+        (AnyScene::Cloth(c), Some(g)) => {
+            c.globalization = Some(serde_json::from_value(serde_json::Value::String(g.into()))?);
+        }
+        _ => anyhow::bail!("--globalization applies to cloth scenes only"),
     }
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

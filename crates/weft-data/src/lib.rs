@@ -51,5 +51,5 @@ pub use read::{
     ClothDataset, ClothSequence, DrapeDataset, DrapeExample, LimbDataset, LimbSequence, RawArray, RawDataset,
     RawSequence, RawValues, WarpDataset, WarpSequence, is_train_frame, is_validation_frame,
 };
-pub use record::{FrameStats, Recorder, Recording};
+pub use record::{FrameStats, NewtonDetail, Recorder, Recording};
 pub use spec::{DatasetSpec, Size, Split, StoredSequence, dataset_names, sequence_seed};

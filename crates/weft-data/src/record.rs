@@ -30,6 +30,20 @@ pub struct FrameStats {
     pub seconds: f64,
     pub potential_energy_j: Option<f64>,
     pub kinetic_energy_j: Option<f64>,
+    /// Cloth only: Newton's numeric factorisations (each diagonally shifted retry
+    /// counted too), conjugate-gradient iterations and rejected trust-region steps, and
+    /// the strategy of a retried step (docs/CLOTH.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub newton_detail: Option<NewtonDetail>,
+}
+
+/// Where a cloth frame's Newton iterations went.
+#[derive(Debug, Clone, Serialize)]
+pub struct NewtonDetail {
+    pub factorizations: usize,
+    pub cg_iterations: usize,
+    pub rejected_steps: usize,
+    pub fallback: Option<String>,
 }
 
 /// Every frame of a run, frame 0 being the initial (rest or settled) state.
@@ -193,6 +207,12 @@ impl Recorder {
                     seconds: f.report.seconds,
                     potential_energy_j: Some(f.report.potential_energy),
                     kinetic_energy_j: Some(f.report.kinetic_energy),
+                    newton_detail: Some(NewtonDetail {
+                        factorizations: f.report.newton.factorizations + f.report.newton.regularizations,
+                        cg_iterations: f.report.newton.cg_iterations,
+                        rejected_steps: f.report.newton.rejected_steps,
+                        fallback: f.report.fallback.map(|h| format!("{h:?}")),
+                    }),
                 }
             }
             Self::Volume(s) => {
@@ -213,6 +233,7 @@ impl Recorder {
                     seconds: f.seconds,
                     potential_energy_j: None,
                     kinetic_energy_j: None,
+                    newton_detail: None,
                 }
             }
             Self::SoftTissue(s) => {
@@ -229,6 +250,7 @@ impl Recorder {
                     seconds: r.seconds,
                     potential_energy_j: r.steps.last().map(|s| s.potential_energy),
                     kinetic_energy_j: r.steps.last().map(|s| s.kinetic_energy),
+                    newton_detail: None,
                 }
             }
         };

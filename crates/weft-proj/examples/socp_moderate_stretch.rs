@@ -12,6 +12,26 @@ use weft_proj::{ConicSolver, InextensibilityLayer, SocpSettings};
 
 fn main() {
     let rest = weft_mesh::generators::sheet(55, 1.0).expect("sheet");
+    // An optional seed draws the stretch field's phases and frequencies at random.
+    let seed: Option<u64> = std::env::args().nth(1).map(|a| a.parse().expect("seed: an integer"));
+    let mut draw = {
+        let mut state = seed.unwrap_or(0).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5;
+        move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        }
+    };
+    let (fx, px, fy, py) = match seed {
+        Some(_) => (
+            1.0 + 4.0 * draw(),
+            std::f64::consts::TAU * draw(),
+            1.0 + 4.0 * draw(),
+            std::f64::consts::TAU * draw(),
+        ),
+        None => (3.0, 1.0, 2.0, 0.5),
+    };
     let mut state: u64 = 0x5EED;
     let mut noise = move || {
         state = state
@@ -24,7 +44,7 @@ fn main() {
         .iter()
         .flat_map(|p| {
             // Stretch factor between 1.05 and 1.30, smooth over the sheet.
-            let s = 1.05 + 0.25 * (0.5 + 0.5 * (3.0 * p.x + 1.0).sin() * (2.0 * p.y + 0.5).cos());
+            let s = 1.05 + 0.25 * (0.5 + 0.5 * (fx * p.x + px).sin() * (fy * p.y + py).cos());
             let z = 0.05 * (4.0 * p.x).sin() * (3.0 * p.y).cos();
             [s * p.x + noise(), s * p.y + noise(), z + noise()]
         })

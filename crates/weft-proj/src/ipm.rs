@@ -63,6 +63,9 @@ pub(crate) struct IpmSettings {
     pub verbose: bool,
     /// Relative gap and residuals below which `finish` is offered the iterate (once).
     pub early_finish_gap: f64,
+    /// The tolerance to continue to if `finish` declines the point that meets `tolerance`
+    /// (0: stop there).
+    pub fallback_tolerance: f64,
 }
 
 /// An interior-point solution and what it took.
@@ -76,6 +79,8 @@ pub(crate) struct IpmSolution {
     pub primal_residual: f64,
     /// `‖Kδ + Aᵀz‖∞ / max(1, ‖Kδ‖∞, ‖Aᵀz‖∞)`.
     pub dual_residual: f64,
+    /// The tolerance the point meets: `tolerance`, or the fallback it continued to.
+    pub tolerance: f64,
     pub seconds: f64,
 }
 
@@ -188,10 +193,13 @@ impl<'a> ReducedIpm<'a> {
 
     /// Solves the SOCP for the cone vector `b` (length `4m`, `b_e⁰ > 0`).
     ///
-    /// The first iterate whose relative gap and residuals are below
-    /// `settings.early_finish_gap` is offered to `finish(x, s, z)`; if that returns a
-    /// result (the caller has certified an optimum from it), the solve stops there and
-    /// returns it with the iterate.
+    /// `finish(x, s, z)` is offered the first iterate whose relative gap and residuals are
+    /// below `settings.early_finish_gap`, and the iterate that meets the tolerance; if it
+    /// returns a result (the caller has certified an optimum from that iterate), the solve
+    /// stops there and returns it with the iterate. If it declines the converged iterate
+    /// and `settings.fallback_tolerance` is tighter, the same iteration continues to that
+    /// tolerance and offers its point too; should it fail on the way, the point that met
+    /// `settings.tolerance` is returned (its [`IpmSolution::tolerance`] says which).
     pub fn solve<T>(
         &self,
         b: &[f64],
@@ -201,14 +209,19 @@ impl<'a> ReducedIpm<'a> {
         let start = Instant::now();
         let b = b.as_chunks::<4>().0;
         let m = b.len();
-        let refine = settings.iterative_refinement;
-        let failed = |status: &str, iterations: u32| Error::SolverFailed {
-            status: status.to_string(),
-            iterations,
-        };
-        let (mut x, mut s, mut z) = self.initial_point(b, refine)?;
+        let (mut x, mut s, mut z) = self.initial_point(b, settings.iterative_refinement)?;
         let mut iterations = 0;
         let mut offered = false;
+        let mut tolerance = settings.tolerance;
+        // The point that met `settings.tolerance`, kept while the solve continues.
+        let mut met: Option<IpmSolution> = None;
+        let failed = |status: &str, iterations: u32, met: Option<IpmSolution>| match met {
+            Some(point) => Ok((point, None)),
+            None => Err(Error::SolverFailed {
+                status: status.to_string(),
+                iterations,
+            }),
+        };
         loop {
             let res = self.residuals(b, &x, &s, &z);
             let relative_gap = res.gap / res.objective.max(1.0);
@@ -219,94 +232,126 @@ impl<'a> ReducedIpm<'a> {
                 );
             }
             if !(res.primal.is_finite() && res.dual.is_finite() && relative_gap.is_finite()) {
-                return Err(failed("NumericalError", iterations));
+                return failed("NumericalError", iterations, met);
             }
-            let tol = settings.tolerance;
-            let converged = res.primal <= tol && res.dual <= tol && relative_gap <= tol;
-            let near = res.primal.max(res.dual).max(relative_gap) <= settings.early_finish_gap;
-            let finished = if near && !converged && !offered {
+            let worst = res.primal.max(res.dual).max(relative_gap);
+            let converged = worst <= tolerance;
+            let solution = |x: &[f64], s: &[Cone], z: &[Cone]| IpmSolution {
+                x: x.to_vec(),
+                s: s.as_flattened().to_vec(),
+                z: z.as_flattened().to_vec(),
+                iterations,
+                primal_residual: res.primal,
+                dual_residual: res.dual,
+                tolerance,
+                seconds: start.elapsed().as_secs_f64(),
+            };
+            if converged || (worst <= settings.early_finish_gap && !offered) {
                 offered = true;
-                finish(&x, s.as_flattened(), z.as_flattened())
-            } else {
-                None
-            };
-            if converged || finished.is_some() {
-                let solution = IpmSolution {
-                    x,
-                    s: s.into_flattened(),
-                    z: z.into_flattened(),
-                    iterations,
-                    primal_residual: res.primal,
-                    dual_residual: res.dual,
-                    seconds: start.elapsed().as_secs_f64(),
-                };
-                return Ok((solution, finished));
-            }
-            if iterations >= settings.max_iterations {
-                return Err(failed("MaxIterations", iterations));
-            }
-            iterations += 1;
-
-            let scalings: Vec<NtScaling> = s
-                .iter()
-                .zip(&z)
-                .map(|(se, ze)| NtScaling::new(se, ze))
-                .collect::<Option<_>>()
-                .ok_or_else(|| failed("NumericalError", iterations))?;
-            let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
-            let factor_start = Instant::now();
-            let factor = self.system.factorize(&blocks)?;
-            let factor_seconds = factor_start.elapsed().as_secs_f64();
-            let newton = NewtonSystem {
-                ipm: self,
-                blocks: &blocks,
-                factor: &factor,
-                scalings: &scalings,
-                refine,
-            };
-            let bx: Vec<f64> = res.rx.iter().map(|v| -v).collect();
-            let bz: Vec<Cone> = res.rz.iter().map(|c| c.map(|v| -v)).collect();
-
-            // Predictor (affine scaling): λ ∘ (W dz + W⁻¹ ds) = −λ ∘ λ.
-            let lambda_sq: Vec<Cone> = scalings.iter().map(|w| jordan_product(&w.lambda, &w.lambda)).collect();
-            let mut bs: Vec<Cone> = lambda_sq.iter().map(|l| l.map(|v| -v)).collect();
-            let affine = newton.solve(&bx, &bz, &bs);
-            let alpha_affine = max_step(&scalings, &s, &z, &affine).min(1.0);
-            // Mehrotra's centring σ = (1 − α_aff)³, Clarabel's rule (`centering_parameter`
-            // in its `solver/core/solver.rs`). CVXOPT's `(gap_aff / gap)³` took the same
-            // 14 iterations on the paper-size sheet.
-            let sigma = (1.0 - alpha_affine).powi(3);
-            let mu = res.gap / m as f64;
-
-            // Corrector: −λ∘λ − (W⁻¹ds_aff) ∘ (W dz_aff) + σμ e.
-            for (((bse, l2), ds), dz) in bs
-                .iter_mut()
-                .zip(&lambda_sq)
-                .zip(&affine.ds_scaled)
-                .zip(&affine.dz_scaled)
-            {
-                let second_order = jordan_product(ds, dz);
-                *bse = std::array::from_fn(|k| -l2[k] - second_order[k]);
-                bse[0] += sigma * mu;
-            }
-            let step = newton.solve(&bx, &bz, &bs);
-            let alpha = (STEP_FRACTION * max_step(&scalings, &s, &z, &step)).min(1.0);
-            if settings.verbose {
-                eprintln!(
-                    "      α_aff {alpha_affine:.3} σ {sigma:.2e} α {alpha:.3} (assembly + factorisation {:.1} ms)",
-                    1e3 * factor_seconds
-                );
-            }
-            if !(alpha > 1e-12) {
-                return Err(failed("StepTooSmall", iterations));
-            }
-            x.iter_mut().zip(&step.dx).for_each(|(v, d)| *v += alpha * d);
-            for (v, d) in s.iter_mut().zip(&step.ds).chain(z.iter_mut().zip(&step.dz)) {
-                for k in 0..4 {
-                    v[k] += alpha * d[k];
+                if let Some(finished) = finish(&x, s.as_flattened(), z.as_flattened()) {
+                    return Ok((solution(&x, &s, &z), Some(finished)));
+                }
+                if converged {
+                    let tighter = settings.fallback_tolerance;
+                    if !(tighter > 0.0 && tighter < tolerance) {
+                        return Ok((solution(&x, &s, &z), None));
+                    }
+                    // Declined: continue from here rather than restart (a cold solve to
+                    // the tighter tolerance cost as many iterations again).
+                    met = Some(solution(&x, &s, &z));
+                    tolerance = tighter;
                 }
             }
+            if iterations >= settings.max_iterations {
+                return failed("MaxIterations", iterations, met);
+            }
+            iterations += 1;
+            if let Err(error) = self.advance(&res, m, settings, iterations, &mut x, &mut s, &mut z) {
+                return match met {
+                    Some(point) => Ok((point, None)),
+                    None => Err(error),
+                };
+            }
         }
+    }
+
+    /// Iteration `iteration` of the predictor–corrector method from `(x, s, z)` with
+    /// residuals `res`, in place.
+    #[allow(clippy::too_many_arguments)]
+    fn advance(
+        &self,
+        res: &Residuals,
+        m: usize,
+        settings: &IpmSettings,
+        iteration: u32,
+        x: &mut [f64],
+        s: &mut [Cone],
+        z: &mut [Cone],
+    ) -> Result<()> {
+        let failed = |status: &str| Error::SolverFailed {
+            status: status.to_string(),
+            iterations: iteration,
+        };
+        let scalings: Vec<NtScaling> = s
+            .iter()
+            .zip(z.iter())
+            .map(|(se, ze)| NtScaling::new(se, ze))
+            .collect::<Option<_>>()
+            .ok_or_else(|| failed("NumericalError"))?;
+        let blocks: Vec<Block3> = scalings.iter().map(NtScaling::inverse_squared_block).collect();
+        let factor_start = Instant::now();
+        let factor = self.system.factorize(&blocks)?;
+        let factor_seconds = factor_start.elapsed().as_secs_f64();
+        let newton = NewtonSystem {
+            ipm: self,
+            blocks: &blocks,
+            factor: &factor,
+            scalings: &scalings,
+            refine: settings.iterative_refinement,
+        };
+        let bx: Vec<f64> = res.rx.iter().map(|v| -v).collect();
+        let bz: Vec<Cone> = res.rz.iter().map(|c| c.map(|v| -v)).collect();
+
+        // Predictor (affine scaling): λ ∘ (W dz + W⁻¹ ds) = −λ ∘ λ.
+        let lambda_sq: Vec<Cone> = scalings.iter().map(|w| jordan_product(&w.lambda, &w.lambda)).collect();
+        let mut bs: Vec<Cone> = lambda_sq.iter().map(|l| l.map(|v| -v)).collect();
+        let affine = newton.solve(&bx, &bz, &bs);
+        let alpha_affine = max_step(&scalings, s, z, &affine).min(1.0);
+        // Mehrotra's centring σ = (1 − α_aff)³, Clarabel's rule (`centering_parameter`
+        // in its `solver/core/solver.rs`). CVXOPT's `(gap_aff / gap)³` took the same
+        // 14 iterations on the paper-size sheet.
+        let sigma = (1.0 - alpha_affine).powi(3);
+        let mu = res.gap / m as f64;
+
+        // Corrector: −λ∘λ − (W⁻¹ds_aff) ∘ (W dz_aff) + σμ e.
+        for (((bse, l2), ds), dz) in bs
+            .iter_mut()
+            .zip(&lambda_sq)
+            .zip(&affine.ds_scaled)
+            .zip(&affine.dz_scaled)
+        {
+            let second_order = jordan_product(ds, dz);
+            *bse = std::array::from_fn(|k| -l2[k] - second_order[k]);
+            bse[0] += sigma * mu;
+        }
+        let step = newton.solve(&bx, &bz, &bs);
+        let alpha = (STEP_FRACTION * max_step(&scalings, s, z, &step)).min(1.0);
+        if settings.verbose {
+            eprintln!(
+                "      α_aff {alpha_affine:.3} σ {sigma:.2e} α {alpha:.3} (assembly + factorisation {:.1} ms)",
+                1e3 * factor_seconds
+            );
+        }
+        if !(alpha > 1e-12) {
+            return Err(failed("StepTooSmall"));
+        }
+        x.iter_mut().zip(&step.dx).for_each(|(v, d)| *v += alpha * d);
+        for (v, d) in s.iter_mut().zip(&step.ds).chain(z.iter_mut().zip(&step.dz)) {
+            for k in 0..4 {
+                v[k] += alpha * d[k];
+            }
+        }
+        Ok(())
     }
 }
 

@@ -367,6 +367,8 @@ impl QuasistaticLayer {
                     time: started.elapsed(),
                     residual_history: k.residual_history,
                     residual_floor: 0.0,
+                    cg_iterations: k.cg_iterations,
+                    rejected_steps: 0,
                 };
                 (report, k.cg_iterations, None)
             }
@@ -465,6 +467,8 @@ impl QuasistaticLayer {
             factorizations: first.factorizations + second.factorizations,
             time: first.time + second.time,
             residual_history: history,
+            cg_iterations: first.cg_iterations + second.cg_iterations,
+            rejected_steps: first.rejected_steps + second.rejected_steps,
             ..second
         })
     }

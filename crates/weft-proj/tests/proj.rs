@@ -895,6 +895,22 @@ fn socp_heavy_stretch_is_polished_or_handed_over_tight() {
                 Some(_) => assert!(report.kkt_residual < 1e-13, "{case}: polished {report:?}"),
                 None => {
                     assert_eq!(report.handover_tolerance, Some(weft_proj::HANDOVER_TOLERANCE), "{case}");
+                    // The hand-over continues the iteration that met the default
+                    // tolerance instead of restarting it: the same iterates as a solve
+                    // straight to the hand-over tolerance (a cold restart cost both solves).
+                    let (straight, straight_report) = with(SocpSettings {
+                        tolerance: weft_proj::HANDOVER_TOLERANCE,
+                        polish: false,
+                        ..SocpSettings::default()
+                    });
+                    assert!(
+                        report.iterations <= straight_report.iterations + 1,
+                        "{case}: {} iterations against {} straight to the hand-over tolerance",
+                        report.iterations,
+                        straight_report.iterations
+                    );
+                    let gap = max_norm_rel_error(sol.positions(), straight.positions());
+                    assert!(gap < 1e-9, "{case}: {gap:e} from the straight tight solve");
                     assert!(
                         report.kkt_residual < 0.1 * raw.kkt_residual,
                         "{case}: handed over at KKT {:e}, default-tolerance point {:e}",

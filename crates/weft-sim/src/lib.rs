@@ -47,7 +47,7 @@ pub use integrators::{
     ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear, Quasistatic,
     QuasistaticReport, RayleighDamping, StepReport,
 };
-pub use newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
+pub use newton::{Globalization, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 pub use scenes::{
     AnyScene, BUILTIN_SCENES, BUILTIN_VOLUME_SCENES, ClothScene, ClothSimulation, Frame, LoadedScene, MotionLabel,
     SoftTissueScene, VolumeScene, VolumeSimulation, builtin_names, is_cloth_elastic, load,

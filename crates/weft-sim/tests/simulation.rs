@@ -5,7 +5,9 @@ use nalgebra::Vector3;
 use weft_mesh::{Topology, generators};
 use weft_sim::energies::{ConstantForce, ObstaclePenalty, ObstacleShape, Springs};
 use weft_sim::scenes::cloth::{ClothModel, GraspVertices, Motion, MotionSegment};
-use weft_sim::{ClothScene, ClothSimulation, Energy, HessianProjection, ImplicitEuler, NewtonSettings, NewtonSolver};
+use weft_sim::{
+    ClothScene, ClothSimulation, Energy, Globalization, HessianProjection, ImplicitEuler, NewtonSettings, NewtonSolver,
+};
 use weft_testkit::{TestRng, fd_gradient, max_norm_rel_error};
 
 const G: f64 = 9.81;
@@ -89,6 +91,75 @@ fn reused_factorisations_reach_the_same_minimiser_with_fewer_factorisations() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(diff < 1e-9, "minimisers differ by {diff}");
+}
+
+#[test]
+fn trust_region_reaches_the_line_search_minimiser_quadratically_on_few_factorisations() {
+    // Every spring of the pinned stretched sheet is in tension, so the projected Hessian
+    // (the preconditioner) equals the exact one near the answer: conjugate gradients
+    // converge in a few iterations, the kept factor serves several Newton steps, and the
+    // trust region must end where the line search does, quadratically.
+    let (springs, x0, fixed) = pinned_stretched_sheet(2, 0.04);
+    let terms: [&dyn Energy; 1] = [&springs];
+    let mut solver = NewtonSolver::new(x0.len(), &terms, fixed).unwrap();
+    let run = |solver: &mut NewtonSolver, globalization: Globalization| {
+        let settings = NewtonSettings {
+            tolerance: 1e-10,
+            projection: HessianProjection::Never,
+            globalization,
+            ..Default::default()
+        };
+        let mut x = x0.clone();
+        let report = solver.minimize(&terms, &mut x, &settings).unwrap();
+        (x, report)
+    };
+    let (line, _) = run(&mut solver, Globalization::LineSearch);
+    let (trust, report) = run(&mut solver, Globalization::TrustRegion);
+    assert!(report.residual <= 1e-10, "{report:?}");
+    assert!(report.cg_iterations >= report.iterations, "{report:?}");
+    assert!(
+        report.factorizations < report.iterations,
+        "{} factorisations in {} iterations",
+        report.factorizations,
+        report.iterations
+    );
+    let diff = line.iter().zip(&trust).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(diff < 1e-9, "minimisers differ by {diff}");
+    let h = &report.residual_history;
+    let fast = h.windows(2).any(|w| w[0] < 1e-3 && w[0] > 1e-9 && w[1] < 1e-2 * w[0]);
+    assert!(fast, "no superlinear step in residual history {h:?}");
+}
+
+#[test]
+fn trust_region_frames_of_a_wrinkling_sheet_converge_to_the_line_search_frames() {
+    // The quick mass-spring sheet wrinkles from its first frames (compressed springs: an
+    // indefinite exact Hessian). Both globalisations must converge every frame to the
+    // tolerance, and since each frame's minimiser is reached from the same start on the
+    // same seeded branch, land on the same frames to well below the solver tolerance's
+    // effect on positions.
+    let frames = |globalization: Globalization| {
+        let mut scene = ClothScene::builtin("sheet-ms", true).unwrap();
+        scene.globalization = Some(globalization);
+        let mut sim = ClothSimulation::new(scene, None).unwrap();
+        let mut out = Vec::new();
+        let mut iterations = 0;
+        for _ in 0..8 {
+            let step = sim.step().unwrap();
+            assert!(step.report.fallback.is_none(), "{globalization:?}: {:?}", step.report);
+            iterations += step.report.newton.iterations;
+            out.push(sim.integrator().positions().to_vec());
+        }
+        (out, iterations)
+    };
+    let (line, _) = frames(Globalization::LineSearch);
+    let (trust, _) = frames(Globalization::TrustRegion);
+    for (f, (a, b)) in line.iter().zip(&trust).enumerate() {
+        let diff = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max);
+        assert!(
+            diff < 1e-4,
+            "frame {f}: the globalisations' frames differ by {diff:e} m"
+        );
+    }
 }
 
 #[test]

@@ -180,8 +180,8 @@ pub struct SocpReport {
     /// interior-point solution is returned then).
     pub polish_iterations: Option<usize>,
     /// When the polish was rejected at the requested tolerance, the tighter one
-    /// ([`HANDOVER_TOLERANCE`]) the interior-point method was run to again before the
-    /// point was handed over (its iterations are included in `iterations`).
+    /// ([`HANDOVER_TOLERANCE`]) the interior-point method continued to before the point
+    /// was handed over (its iterations are included in `iterations`).
     pub handover_tolerance: Option<f64>,
     /// Wall time of the whole forward pass, including the conic solve (s).
     pub time_seconds: f64,
@@ -380,28 +380,34 @@ impl InextensibilityLayer {
     }
 
     /// Solves the SOCP for `b` with the reduced-system interior-point method. With the
-    /// polish on, its first iterate within `early_polish_gap` is polished; if the polish
-    /// certifies the optimum there, that ends the solve (the seconds in the polish are
-    /// returned apart from the interior-point time).
-    fn solve_reduced_ipm(&self, b: &[f64], tolerance: f64) -> Result<(ConicSolution, Option<Polished>, f64)> {
+    /// polish on, its first iterate within `early_polish_gap` and its converged iterate
+    /// are polished, and if the polish certifies the optimum that ends the solve. If the
+    /// polish rejects the converged point, the iteration continues to
+    /// [`HANDOVER_TOLERANCE`] (see [`forward`](Self::forward)) and that point is polished
+    /// once more. Returns the solution, the polished point if any, the seconds in the
+    /// polish (apart from the interior-point time) and whether the point was handed over
+    /// at [`HANDOVER_TOLERANCE`].
+    fn solve_reduced_ipm(&self, b: &[f64]) -> Result<(ConicSolution, Option<Polished>, f64, bool)> {
+        let polish = self.settings.polish;
         let settings = IpmSettings {
-            tolerance,
+            tolerance: self.settings.tolerance,
             max_iterations: self.settings.max_iterations,
             iterative_refinement: self.settings.iterative_refinement,
             verbose: self.settings.verbose,
-            early_finish_gap: if self.settings.polish && tolerance == self.settings.tolerance {
-                self.settings.early_polish_gap
-            } else {
-                0.0
-            },
+            early_finish_gap: if polish { self.settings.early_polish_gap } else { 0.0 },
+            fallback_tolerance: if polish { HANDOVER_TOLERANCE } else { 0.0 },
         };
         let mut polish_seconds = 0.0;
         let (sol, polished) = ReducedIpm::new(&self.system).solve(b, &settings, |x, s, z| {
+            if !polish {
+                return None;
+            }
             let start = Instant::now();
             let polished = self.polish(b, x, s, z);
             polish_seconds += start.elapsed().as_secs_f64();
             polished
         })?;
+        let handed_over = polished.is_none() && sol.tolerance < self.settings.tolerance;
         let conic = ConicSolution {
             x: sol.x,
             s: sol.s,
@@ -412,7 +418,7 @@ impl InextensibilityLayer {
             primal_residual: sol.primal_residual,
             dual_residual: sol.dual_residual,
         };
-        Ok((conic, polished, polish_seconds))
+        Ok((conic, polished, polish_seconds, handed_over))
     }
 
     /// The conic right-hand side `b` of a prediction (module docs).
@@ -478,49 +484,30 @@ impl InextensibilityLayer {
         let start = Instant::now();
         self.rest.check_positions("prediction", pred)?;
         let b = self.rhs(pred);
-        let (mut conic, early, mut polish_seconds) = match self.settings.solver {
-            ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b, self.settings.tolerance)?,
-            ConicSolver::Clarabel => (self.solve_clarabel(&b)?, None, 0.0),
+        // The reduced IPM polishes inside its iteration and continues to
+        // HANDOVER_TOLERANCE when the polish is rejected: on degenerate problems (more
+        // edges at their bound than a nearly flat sheet has in-plane freedoms, so the
+        // multipliers are not unique and no active-set Newton step is defined) the
+        // interior-point point itself is the answer, and at the default tolerance its
+        // primal error is about the square root of the tolerance, far above its KKT
+        // residual. A failure on the way keeps the point that met the tolerance.
+        let (conic, polished, polish_seconds, handed_over) = match self.settings.solver {
+            ConicSolver::ReducedIpm => self.solve_reduced_ipm(&b)?,
+            ConicSolver::Clarabel => {
+                let conic = self.solve_clarabel(&b)?;
+                let start = Instant::now();
+                let polished = self
+                    .settings
+                    .polish
+                    .then(|| self.polish(&b, &conic.x, &conic.s, &conic.z))
+                    .flatten();
+                (conic, polished, start.elapsed().as_secs_f64(), false)
+            }
         };
         check_output("conic solution", &conic.x)?;
         check_output("conic slacks", &conic.s)?;
         check_output("conic duals", &conic.z)?;
-        let mut polish_once = |conic: &ConicSolution| {
-            let start = Instant::now();
-            let polished = self
-                .settings
-                .polish
-                .then(|| self.polish(&b, &conic.x, &conic.s, &conic.z))
-                .flatten();
-            polish_seconds += start.elapsed().as_secs_f64();
-            polished
-        };
-        let mut polished = early.or_else(|| polish_once(&conic));
-        let mut handover_tolerance = None;
-        if self.settings.polish
-            && polished.is_none()
-            && self.settings.solver == ConicSolver::ReducedIpm
-            && self.settings.tolerance > HANDOVER_TOLERANCE
-        {
-            // The polish was rejected, so the interior-point point itself is the answer.
-            // On degenerate problems (more edges at their bound than a nearly flat sheet
-            // has in-plane freedoms) its primal error is about the square root of the
-            // tolerance, far above its KKT residual: solve again to HANDOVER_TOLERANCE.
-            // A failure there keeps the point already found.
-            if let Ok((tight, _, _)) = self.solve_reduced_ipm(&b, HANDOVER_TOLERANCE) {
-                if check_output("conic solution", &tight.x).is_ok() {
-                    let iterations = conic.iterations + tight.iterations;
-                    let seconds = conic.seconds + tight.seconds;
-                    conic = ConicSolution {
-                        iterations,
-                        seconds,
-                        ..tight
-                    };
-                    handover_tolerance = Some(HANDOVER_TOLERANCE);
-                    polished = polish_once(&conic);
-                }
-            }
-        }
+        let handover_tolerance = handed_over.then_some(HANDOVER_TOLERANCE);
         self.finish(pred, start, conic, polished, polish_seconds, handover_tolerance)
     }
 

@@ -246,7 +246,18 @@ impl InextensibilityLayer {
             if !(tnorm.is_finite() && tnorm < 1e3 * norm.max(1e-12)) {
                 return None;
             }
+            // After the first step Newton converges quadratically here; a residual that
+            // no longer halves is at its round-off floor (the caller accepts it at
+            // 1e-12) or crawling on a singular system (multipliers not unique; the
+            // caller rejects it). Either way more steps only cost factorisations.
+            let stalled = iterations >= 2 && tnorm > 0.5 * norm;
+            if stalled && tnorm >= norm {
+                break;
+            }
             (delta, lambda, r, r_len, norm) = (trial, trial_lambda, tr, tr_len, tnorm);
+            if stalled {
+                break;
+            }
         }
         Some((delta, lambda, norm, iterations))
     }

@@ -14,7 +14,7 @@ use std::time::Instant;
 use crate::energies::Inertia;
 use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result};
-use crate::newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
+use crate::newton::{Globalization, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 
 /// What one time step did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -27,7 +27,8 @@ pub struct StepReport {
     /// Wall time of the whole step, including bookkeeping (s).
     pub seconds: f64,
     /// The Hessian strategy of a second attempt, when the first (the settings') did not
-    /// converge: `Never` and `WhenIndefinite` fall back on each other.
+    /// converge: `Never` and `WhenIndefinite` fall back on each other; a trust-region
+    /// step falls back on the line search with the configured strategy.
     pub fallback: Option<HessianProjection>,
 }
 
@@ -149,7 +150,11 @@ impl ImplicitEuler {
                 // crumpling sheet; projecting is steady there but slow to leave a saddle
                 // (docs/CLOTH.md, "Definiteness"). Where one fails the other often
                 // converges, so a failed step is retried once with the other.
+                // The trust region does not use the projection: its retry is the line
+                // search with the configured one.
+                let trust_region = self.settings.globalization == Globalization::TrustRegion;
                 let other = match self.settings.projection {
+                    _ if trust_region => self.settings.projection,
                     HessianProjection::Never => HessianProjection::WhenIndefinite,
                     HessianProjection::WhenIndefinite => HessianProjection::Never,
                     HessianProjection::Always => return Err(first),
@@ -157,6 +162,7 @@ impl ImplicitEuler {
                 x.copy_from_slice(&start_x);
                 let settings = NewtonSettings {
                     projection: other,
+                    globalization: Globalization::LineSearch,
                     ..self.settings
                 };
                 let r = self.solver.minimize(&all, &mut x, &settings).map_err(|_| first)?;

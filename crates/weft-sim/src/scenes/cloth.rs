@@ -13,7 +13,7 @@ use crate::energies::{ConstantForce, DihedralBending, Membrane, ObstaclePenalty,
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_positive};
 use crate::integrators::implicit_euler::{ImplicitEuler, StepReport};
-use crate::newton::HessianProjection;
+use crate::newton::{Globalization, HessianProjection};
 use crate::rng::SplitMix64;
 
 /// Where the cloth mesh comes from.
@@ -185,6 +185,10 @@ pub struct ClothScene {
     /// `when-indefinite` (exact, else per-element projection) for FEM (docs/CLOTH.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hessian: Option<HessianProjection>,
+    /// Newton's globalisation (`line-search`, the default, or `trust-region`; see
+    /// [`crate::newton::Globalization`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub globalization: Option<Globalization>,
 }
 
 fn one() -> f64 {
@@ -306,6 +310,7 @@ impl ClothScene {
             relative_tolerance: default_rel_tol(),
             symmetry_breaking: default_symmetry_breaking(),
             hessian: None,
+            globalization: None,
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -592,6 +597,7 @@ impl ClothSimulation {
         let max_weight = integrator.masses().iter().fold(0.0f64, |m, x| m.max(*x)) * 9.81;
         integrator.settings.tolerance = scene.relative_tolerance * max_weight.max(1e-12);
         integrator.settings.max_iterations = scene.max_newton_iterations;
+        integrator.settings.globalization = scene.globalization.unwrap_or_default();
         integrator.settings.projection = scene.hessian.unwrap_or(match scene.model {
             ClothModel::MassSpring { .. } => HessianProjection::Never,
             ClothModel::Fem { .. } => HessianProjection::WhenIndefinite,

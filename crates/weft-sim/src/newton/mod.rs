@@ -1,5 +1,9 @@
 //! Newton's method with SPD projection, a descent-guaranteeing line search and a reused
-//! symbolic Cholesky factorisation — the one nonlinear solver of weft.
+//! symbolic Cholesky factorisation — the one nonlinear solver of weft — or, as the
+//! alternative globalisation, a trust region on the exact Hessian solved by
+//! preconditioned conjugate gradients (`trust_region`).
+
+mod trust_region;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -37,6 +41,29 @@ pub struct NewtonSettings {
     /// converges quadratically and the Hessian barely changes, so such chord steps
     /// (Shamanskii's method) cost one solve instead of one factorisation. Off by default.
     pub reuse_factorization: bool,
+    /// How steps are kept safe away from the minimiser.
+    pub globalization: Globalization,
+}
+
+/// How Newton keeps its steps safe where the quadratic model is poor (saddles, folds,
+/// large steps).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Globalization {
+    /// A backtracking line search along `−H⁻¹g`, `H` made positive definite per
+    /// [`NewtonSettings::projection`] (one or more numeric factorisations per iteration).
+    #[default]
+    LineSearch,
+    /// A trust region on the **exact** Hessian, its subproblem solved by Steihaug–Toint
+    /// conjugate gradients preconditioned with a Cholesky factor of the element-projected
+    /// (positive semi-definite) Hessian that is kept across iterations and calls while it
+    /// serves (Conn, Gould & Toint, *Trust-Region Methods*, Alg. 7.5.1; Nocedal & Wright,
+    /// Alg. 7.2). A negative-curvature direction is followed to the region's boundary
+    /// rather than damped by a global shift, and most iterations cost a few sparse
+    /// products and triangular solves instead of a factorisation.
+    /// [`NewtonSettings::projection`] and [`NewtonSettings::reuse_factorization`] are
+    /// not used (the factor is kept by its own rule).
+    TrustRegion,
 }
 
 /// Residual contraction of a fresh Newton step above which its factor is kept
@@ -73,6 +100,7 @@ impl Default for NewtonSettings {
             max_line_search: 40,
             projection: HessianProjection::WhenIndefinite,
             reuse_factorization: false,
+            globalization: Globalization::LineSearch,
         }
     }
 }
@@ -101,6 +129,55 @@ pub struct NewtonReport {
     /// The round-off floor of the residual force at the last factorisation (N); the
     /// tolerance applied is the larger of this and the requested one.
     pub residual_floor: f64,
+    /// Conjugate-gradient iterations (trust region only; each one a sparse product and a
+    /// preconditioner solve).
+    pub cg_iterations: usize,
+    /// Trust-region steps rejected because the energy did not follow the model (each is
+    /// counted in `iterations` too).
+    pub rejected_steps: usize,
+}
+
+impl NewtonReport {
+    /// The report of a minimisation that has not iterated yet.
+    fn starting(energy: f64, residual: f64) -> Self {
+        Self {
+            iterations: 0,
+            residual,
+            initial_residual: residual,
+            energy,
+            line_search_halvings: 0,
+            regularizations: 0,
+            factorizations: 0,
+            time: Duration::ZERO,
+            residual_history: Vec::new(),
+            residual_floor: 0.0,
+            cg_iterations: 0,
+            rejected_steps: 0,
+        }
+    }
+}
+
+/// Factorises `matrix + τI` with the smallest `τ` (within 2×) that works, starting at a
+/// quarter of `last_shift`, from 1e-8 of the mean diagonal and doubling: `(factor,
+/// attempts, τ)`.
+fn shifted_factor(
+    cholesky: &CholeskySolver,
+    matrix: &SymmetricMatrix,
+    last_shift: f64,
+) -> Result<(weft_linalg::CholeskyFactor, usize, f64)> {
+    let n = matrix.dim();
+    let mean_diag = (0..n).map(|i| matrix.get(i, i).abs()).sum::<f64>() / n as f64;
+    let floor = 1e-8 * mean_diag.max(1e-12);
+    let mut shift = floor.max(0.25 * last_shift);
+    for attempt in 1..=SHIFT_ATTEMPTS {
+        let mut shifted = matrix.clone();
+        shifted.add_diagonal(shift);
+        if let Ok(f) = cholesky.factorize(&shifted) {
+            return Ok((f, attempt, shift));
+        }
+        shift *= 2.0;
+    }
+    Err(weft_linalg::Error::NotPositiveDefinite.into())
 }
 
 mod duration_seconds {
@@ -123,6 +200,9 @@ pub struct NewtonSolver {
     dir: Vec<f64>,
     trial: Vec<f64>,
     last_shift: f64,
+    /// The trust region's preconditioner: the projected Hessian, its factor while it
+    /// serves, and the radius the last call ended with.
+    preconditioner: trust_region::Preconditioner,
 }
 
 impl NewtonSolver {
@@ -147,12 +227,13 @@ impl NewtonSolver {
         let cholesky = CholeskySolver::new(pattern.clone())?;
         Ok(Self {
             fixed,
-            hessian: SymmetricMatrix::zeros(pattern),
+            hessian: SymmetricMatrix::zeros(pattern.clone()),
             cholesky,
             grad: vec![0.0; num_dofs],
             dir: vec![0.0; num_dofs],
             trial: vec![0.0; num_dofs],
             last_shift: 0.0,
+            preconditioner: trust_region::Preconditioner::new(pattern),
         })
     }
 
@@ -169,6 +250,8 @@ impl NewtonSolver {
                 got: fixed.len(),
             });
         }
+        // A kept preconditioner eliminated the old fixed DOFs.
+        self.preconditioner.invalidate();
         self.fixed = fixed;
         Ok(())
     }
@@ -233,20 +316,9 @@ impl NewtonSolver {
         // that must wrinkle: 180 iterations on the 65 × 65 mass-spring sheet's first frame
         // against 1191 with projected Hessians, docs/CLOTH.md).
         // The shift changes only the step, never the minimiser.
-        let n = self.hessian.dim();
-        let mean_diag = (0..n).map(|i| self.hessian.get(i, i).abs()).sum::<f64>() / n as f64;
-        let floor = 1e-8 * mean_diag.max(1e-12);
-        let mut shift = floor.max(0.25 * self.last_shift);
-        for attempt in 1..=SHIFT_ATTEMPTS {
-            let mut shifted = self.hessian.clone();
-            shifted.add_diagonal(shift);
-            if let Ok(f) = self.cholesky.factorize(&shifted) {
-                self.last_shift = shift;
-                return Ok((f, attempt));
-            }
-            shift *= 2.0;
-        }
-        Err(weft_linalg::Error::NotPositiveDefinite.into())
+        let (factor, attempts, shift) = shifted_factor(&self.cholesky, &self.hessian, self.last_shift)?;
+        self.last_shift = shift;
+        Ok((factor, attempts))
     }
 
     /// The Newton direction `d = −H⁻¹ g` on free DOFs into `self.dir`, or steepest descent
@@ -358,13 +430,20 @@ impl NewtonSolver {
         x: &mut [f64],
         settings: &NewtonSettings,
     ) -> Result<NewtonReport> {
-        let start = Instant::now();
-        let n = x.len();
-        if n != self.fixed.len() {
+        match settings.globalization {
+            Globalization::LineSearch => self.minimize_line_search(terms, x, settings),
+            Globalization::TrustRegion => self.minimize_trust_region(terms, x, settings),
+        }
+    }
+
+    /// Checks `x` against the solver and evaluates the energy and gradient there (into
+    /// `self.grad`): `(energy, free residual)`.
+    fn start(&mut self, terms: &[&dyn Energy], x: &[f64]) -> Result<(f64, f64)> {
+        if x.len() != self.fixed.len() {
             return Err(Error::LengthMismatch {
                 what: "positions",
                 expected: self.fixed.len(),
-                got: n,
+                got: x.len(),
             });
         }
         if let Some(i) = x.iter().position(|v| !v.is_finite()) {
@@ -373,30 +452,64 @@ impl NewtonSolver {
                 dof: i,
             });
         }
-        let mut energy = total_value(terms, x);
-        let mut grad = std::mem::take(&mut self.grad);
-        total_gradient(terms, x, &mut grad);
-        if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
-            self.grad = grad;
+        let energy = total_value(terms, x);
+        total_gradient(terms, x, &mut self.grad);
+        if let Some(i) = self.grad.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "initial gradient",
                 dof: i,
             });
         }
-        let initial_residual = self.free_residual(&grad);
+        Ok((energy, self.free_residual(&self.grad)))
+    }
+
+    /// Moves `x` to `self.trial` (an accepted step), evaluates the gradient there into
+    /// `grad` and records the residual: returns it, and whether the step could not change
+    /// any coordinate by more than its rounding, so Newton can make no further progress —
+    /// then the solve ends converged if the residual is within 16× `tolerance`, with
+    /// [`Error::NotConverged`] otherwise.
+    fn take_step(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+        grad: &mut [f64],
+        tolerance: f64,
+        report: &mut NewtonReport,
+    ) -> Result<(f64, bool)> {
+        let xmax = weft_linalg::max_abs(x.iter().copied());
+        let moved = weft_linalg::max_abs(x.iter().zip(&self.trial).map(|(a, b)| b - a));
+        x.copy_from_slice(&self.trial);
+        total_gradient(terms, x, grad);
+        if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "gradient",
+                dof: i,
+            });
+        }
+        let residual = self.free_residual(grad);
+        report.residual_history.push(residual);
+        let stalled = moved <= 4.0 * f64::EPSILON * xmax;
+        if stalled && residual > 16.0 * tolerance {
+            return Err(Error::NotConverged {
+                iterations: report.iterations,
+                residual,
+                tolerance,
+            });
+        }
+        Ok((residual, stalled))
+    }
+
+    fn minimize_line_search(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+        settings: &NewtonSettings,
+    ) -> Result<NewtonReport> {
+        let start = Instant::now();
+        let (mut energy, initial_residual) = self.start(terms, x)?;
+        let mut grad = std::mem::take(&mut self.grad);
         let mut residual = initial_residual;
-        let mut report = NewtonReport {
-            iterations: 0,
-            residual,
-            initial_residual,
-            energy,
-            line_search_halvings: 0,
-            regularizations: 0,
-            factorizations: 0,
-            time: Duration::ZERO,
-            residual_history: Vec::new(),
-            residual_floor: 0.0,
-        };
+        let mut report = NewtonReport::starting(energy, residual);
         let mut held: Option<weft_linalg::CholeskyFactor> = None;
         let mut floor = 0.0f64;
         let result = (|| {
@@ -434,30 +547,12 @@ impl NewtonSolver {
                     });
                 }
                 energy = trial_energy;
-                // A step that cannot change any coordinate by more than its rounding means
-                // Newton can make no further progress.
-                let xmax = weft_linalg::max_abs(x.iter().copied());
-                let moved = weft_linalg::max_abs(x.iter().zip(&self.trial).map(|(a, b)| b - a));
-                x.copy_from_slice(&self.trial);
-                total_gradient(terms, x, &mut grad);
-                if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
-                    return Err(Error::NonFinite {
-                        what: "gradient",
-                        dof: i,
-                    });
-                }
                 let previous = residual;
-                residual = self.free_residual(&grad);
-                report.residual_history.push(residual);
-                if moved <= 4.0 * f64::EPSILON * xmax {
-                    if residual <= 16.0 * settings.tolerance.max(floor) {
-                        break;
-                    }
-                    return Err(Error::NotConverged {
-                        iterations: report.iterations,
-                        residual,
-                        tolerance: settings.tolerance.max(floor),
-                    });
+                let stalled;
+                (residual, stalled) =
+                    self.take_step(terms, x, &mut grad, settings.tolerance.max(floor), &mut report)?;
+                if stalled {
+                    break;
                 }
                 if settings.reuse_factorization && full_step {
                     let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
