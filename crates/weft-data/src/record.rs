@@ -30,8 +30,9 @@ pub struct FrameStats {
     pub seconds: f64,
     pub potential_energy_j: Option<f64>,
     pub kinetic_energy_j: Option<f64>,
-    /// Cloth only: Newton's numeric factorisations (each diagonally shifted retry
-    /// counted too), conjugate-gradient iterations and rejected trust-region steps, and
+    /// Cloth only: Newton's numeric factorisations (one per assembled matrix plus each
+    /// diagonally shifted attempt; the projected second attempt of `when-indefinite` is
+    /// not counted), conjugate-gradient iterations and rejected trust-region steps, and
     /// the strategy of a retried step (docs/CLOTH.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub newton_detail: Option<NewtonDetail>,

@@ -430,10 +430,25 @@ impl NewtonSolver {
         x: &mut [f64],
         settings: &NewtonSettings,
     ) -> Result<NewtonReport> {
-        match settings.globalization {
-            Globalization::LineSearch => self.minimize_line_search(terms, x, settings),
-            Globalization::TrustRegion => self.minimize_trust_region(terms, x, settings),
-        }
+        let start = Instant::now();
+        let (energy, residual) = self.start(terms, x)?;
+        let mut progress = Progress {
+            energy,
+            residual,
+            floor: 0.0,
+            grad: std::mem::take(&mut self.grad),
+            report: NewtonReport::starting(energy, residual),
+        };
+        let result = match settings.globalization {
+            Globalization::LineSearch => self.line_search_steps(terms, x, settings, &mut progress),
+            Globalization::TrustRegion => self.trust_region_steps(terms, x, settings, &mut progress),
+        };
+        self.grad = std::mem::take(&mut progress.grad);
+        let mut report = progress.report;
+        report.residual = progress.residual;
+        report.energy = progress.energy;
+        report.time = start.elapsed();
+        result.map(|_| report)
     }
 
     /// Checks `x` against the solver and evaluates the energy and gradient there (into
@@ -463,110 +478,126 @@ impl NewtonSolver {
         Ok((energy, self.free_residual(&self.grad)))
     }
 
-    /// Moves `x` to `self.trial` (an accepted step), evaluates the gradient there into
-    /// `grad` and records the residual: returns it, and whether the step could not change
-    /// any coordinate by more than its rounding, so Newton can make no further progress —
-    /// then the solve ends converged if the residual is within 16× `tolerance`, with
+    /// Moves `x` to `self.trial` (an accepted step), evaluates the gradient there and
+    /// records the residual. Returns whether the step could not change any coordinate by
+    /// more than its rounding, so Newton can make no further progress — the solve then
+    /// ends converged if the residual is within 16× the tolerance applied, with
     /// [`Error::NotConverged`] otherwise.
     fn take_step(
         &mut self,
         terms: &[&dyn Energy],
         x: &mut [f64],
-        grad: &mut [f64],
-        tolerance: f64,
-        report: &mut NewtonReport,
-    ) -> Result<(f64, bool)> {
+        settings: &NewtonSettings,
+        progress: &mut Progress,
+    ) -> Result<bool> {
         let xmax = weft_linalg::max_abs(x.iter().copied());
         let moved = weft_linalg::max_abs(x.iter().zip(&self.trial).map(|(a, b)| b - a));
         x.copy_from_slice(&self.trial);
-        total_gradient(terms, x, grad);
-        if let Some(i) = grad.iter().position(|v| !v.is_finite()) {
+        total_gradient(terms, x, &mut progress.grad);
+        if let Some(i) = progress.grad.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "gradient",
                 dof: i,
             });
         }
-        let residual = self.free_residual(grad);
-        report.residual_history.push(residual);
+        progress.residual = self.free_residual(&progress.grad);
+        progress.report.residual_history.push(progress.residual);
         let stalled = moved <= 4.0 * f64::EPSILON * xmax;
-        if stalled && residual > 16.0 * tolerance {
-            return Err(Error::NotConverged {
-                iterations: report.iterations,
-                residual,
-                tolerance,
-            });
+        if stalled && progress.residual > 16.0 * progress.tolerance(settings) {
+            return Err(progress.not_converged(progress.tolerance(settings)));
         }
-        Ok((residual, stalled))
+        Ok(stalled)
     }
 
-    fn minimize_line_search(
+    /// Newton iterations with the line search (see [`Globalization::LineSearch`]).
+    fn line_search_steps(
         &mut self,
         terms: &[&dyn Energy],
         x: &mut [f64],
         settings: &NewtonSettings,
-    ) -> Result<NewtonReport> {
-        let start = Instant::now();
-        let (mut energy, initial_residual) = self.start(terms, x)?;
-        let mut grad = std::mem::take(&mut self.grad);
-        let mut residual = initial_residual;
-        let mut report = NewtonReport::starting(energy, residual);
+        progress: &mut Progress,
+    ) -> Result<()> {
         let mut held: Option<weft_linalg::CholeskyFactor> = None;
-        let mut floor = 0.0f64;
-        let result = (|| {
-            while residual > settings.tolerance.max(floor) {
-                if report.iterations >= settings.max_iterations {
-                    return Err(Error::NotConverged {
-                        iterations: report.iterations,
-                        residual,
-                        tolerance: settings.tolerance.max(floor),
-                    });
+        while progress.iterate(settings)? {
+            let (factor, fresh) = match held.take() {
+                Some(f) => (f, false),
+                None => {
+                    let (f, shifts) = self.factorize_at(terms, x, settings.projection)?;
+                    progress.report.regularizations += shifts;
+                    progress.report.factorizations += 1;
+                    progress.floor = self.residual_floor(x);
+                    progress.report.residual_floor = progress.floor;
+                    (f, true)
                 }
-                report.iterations += 1;
-                let (factor, fresh) = match held.take() {
-                    Some(f) => (f, false),
-                    None => {
-                        let (f, shifts) = self.factorize_at(terms, x, settings.projection)?;
-                        report.regularizations += shifts;
-                        report.factorizations += 1;
-                        floor = self.residual_floor(x);
-                        report.residual_floor = floor;
-                        (f, true)
-                    }
-                };
-                let slope = self.direction(&factor, &grad);
-                let choice = self.line_search(terms, x, &mut grad, energy, residual, slope, settings, &mut report);
-                let accepted = choice.is_some();
-                let (trial_energy, full_step) = choice.unwrap_or((energy, false));
-                if !accepted {
-                    // No decrease is possible along a descent direction: the problem is
-                    // broken or badly scaled. Stop with a clear error rather than loop.
-                    return Err(Error::NotConverged {
-                        iterations: report.iterations,
-                        residual,
-                        tolerance: settings.tolerance,
-                    });
-                }
-                energy = trial_energy;
-                let previous = residual;
-                let stalled;
-                (residual, stalled) =
-                    self.take_step(terms, x, &mut grad, settings.tolerance.max(floor), &mut report)?;
-                if stalled {
-                    break;
-                }
-                if settings.reuse_factorization && full_step {
-                    let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
-                    if residual * needed <= previous {
-                        held = Some(factor);
-                    }
+            };
+            let slope = self.direction(&factor, &progress.grad);
+            let choice = self.line_search(
+                terms,
+                x,
+                &mut progress.grad,
+                progress.energy,
+                progress.residual,
+                slope,
+                settings,
+                &mut progress.report,
+            );
+            let Some((trial_energy, full_step)) = choice else {
+                // No decrease is possible along a descent direction: the problem is
+                // broken or badly scaled. Stop with a clear error rather than loop.
+                return Err(progress.not_converged(settings.tolerance));
+            };
+            progress.energy = trial_energy;
+            let previous = progress.residual;
+            if self.take_step(terms, x, settings, progress)? {
+                break;
+            }
+            if settings.reuse_factorization && full_step {
+                let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
+                if progress.residual * needed <= previous {
+                    held = Some(factor);
                 }
             }
-            Ok(())
-        })();
-        self.grad = grad;
-        report.residual = residual;
-        report.energy = energy;
-        report.time = start.elapsed();
-        result.map(|_| report)
+        }
+        Ok(())
+    }
+}
+
+/// One minimisation's running state, shared by both globalisations.
+struct Progress {
+    /// Total energy at the current point (J).
+    energy: f64,
+    /// Max-norm residual force on free DOFs at the current point (N).
+    residual: f64,
+    /// The residual's round-off floor at the last assembly (see `residual_floor`).
+    floor: f64,
+    /// The gradient at the current point.
+    grad: Vec<f64>,
+    report: NewtonReport,
+}
+
+impl Progress {
+    /// The tolerance applied: the requested one or the round-off floor, the larger.
+    fn tolerance(&self, settings: &NewtonSettings) -> f64 {
+        settings.tolerance.max(self.floor)
+    }
+
+    /// Starts the next iteration: `false` once converged, an error at the iteration cap.
+    fn iterate(&mut self, settings: &NewtonSettings) -> Result<bool> {
+        if self.residual <= self.tolerance(settings) {
+            return Ok(false);
+        }
+        if self.report.iterations >= settings.max_iterations {
+            return Err(self.not_converged(self.tolerance(settings)));
+        }
+        self.report.iterations += 1;
+        Ok(true)
+    }
+
+    fn not_converged(&self, tolerance: f64) -> Error {
+        Error::NotConverged {
+            iterations: self.report.iterations,
+            residual: self.residual,
+            tolerance,
+        }
     }
 }

@@ -13,11 +13,10 @@
 //! construction, so no shift search is needed and one factor serves many iterations.
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use weft_linalg::{CholeskyFactor, SymmetricMatrix, SymmetricPattern};
 
-use super::{NewtonReport, NewtonSettings, NewtonSolver, shifted_factor};
+use super::{NewtonReport, NewtonSettings, NewtonSolver, Progress, shifted_factor};
 use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result};
 
@@ -181,126 +180,101 @@ impl NewtonSolver {
         Ok(())
     }
 
-    /// Minimises `Σ terms` from `x` with the trust region (see [`super::Globalization`]).
-    pub(super) fn minimize_trust_region(
+    /// Newton iterations with the trust region (see [`super::Globalization`]).
+    pub(super) fn trust_region_steps(
         &mut self,
         terms: &[&dyn Energy],
         x: &mut [f64],
         settings: &NewtonSettings,
-    ) -> Result<NewtonReport> {
-        let start = Instant::now();
-        let (mut energy, initial_residual) = self.start(terms, x)?;
-        let mut grad = std::mem::take(&mut self.grad);
-        let mut residual = initial_residual;
-        let mut report = NewtonReport::starting(energy, residual);
-        let mut floor = 0.0f64;
+        progress: &mut Progress,
+    ) -> Result<()> {
+        let initial_residual = progress.residual;
         let mut radius = f64::NAN;
         let mut assembled = false;
-        let mut hd = vec![0.0; x.len()];
-        let result = (|| {
-            while residual > settings.tolerance.max(floor) {
-                if report.iterations >= settings.max_iterations {
-                    return Err(Error::NotConverged {
-                        iterations: report.iterations,
-                        residual,
-                        tolerance: settings.tolerance.max(floor),
-                    });
+        let mut scratch = vec![0.0; x.len()];
+        while progress.iterate(settings)? {
+            if !assembled {
+                self.hessian.set_zero();
+                for t in terms {
+                    t.add_hessian(x, false, &mut self.hessian);
                 }
-                report.iterations += 1;
-                if !assembled {
-                    self.hessian.set_zero();
-                    for t in terms {
-                        t.add_hessian(x, false, &mut self.hessian);
-                    }
-                    self.hessian.constrain_dofs(&self.fixed);
-                    let values = self.hessian.values();
-                    if let Some((_, dof, _)) = self.hessian.pattern().entries().find(|e| !values[e.0].is_finite()) {
-                        return Err(Error::NonFinite { what: "Hessian", dof });
-                    }
-                    floor = self.residual_floor(x);
-                    report.residual_floor = floor;
-                    self.refresh_preconditioner(terms, x, &mut report)?;
-                    assembled = true;
+                self.hessian.constrain_dofs(&self.fixed);
+                let values = self.hessian.values();
+                if let Some((_, dof, _)) = self.hessian.pattern().entries().find(|e| !values[e.0].is_finite()) {
+                    return Err(Error::NonFinite { what: "Hessian", dof });
                 }
-                let factor = self.preconditioner.factor.take().expect("refreshed above");
-                if radius.is_nan() {
-                    // The first radius: the preconditioned gradient step's length, the
-                    // Newton step's if H were M.
-                    let r: Vec<f64> = grad
-                        .iter()
-                        .zip(&self.fixed)
-                        .map(|(g, f)| if *f { 0.0 } else { -g })
-                        .collect();
-                    let mut z = vec![0.0; r.len()];
-                    precondition(&factor, &self.fixed, &r, &mut z);
-                    radius = dot(&r, &z).max(0.0).sqrt();
-                }
-                // Inexact Newton: the model's residual cut by η = min(½, √(r/r₀)) (a
-                // superlinear forcing sequence), and well below the tolerance at the end.
-                let eta = (residual / initial_residual.max(f64::MIN_POSITIVE)).sqrt().min(0.5);
-                let stop = (eta * residual).max(0.1 * settings.tolerance.max(floor));
-                let sub = self.steihaug(&factor, &grad, radius, stop);
-                self.preconditioner.factor = Some(factor);
-                self.preconditioner.last_cg = sub.iterations;
-                report.cg_iterations += sub.iterations;
-                // The model's decrease −(gᵀd + ½ dᵀHd) against the energy's.
-                self.hessian.mul_vec(&self.dir, &mut hd);
-                let predicted = -(0..x.len())
-                    .filter(|&i| !self.fixed[i])
-                    .map(|i| self.dir[i] * (grad[i] + 0.5 * hd[i]))
-                    .sum::<f64>();
-                for i in 0..x.len() {
-                    self.trial[i] = x[i] + self.dir[i];
-                }
-                let (change, roundoff) = energy_change(terms, x, &self.trial);
-                let measurable = predicted > 64.0 * f64::EPSILON * roundoff;
+                progress.floor = self.residual_floor(x);
+                progress.report.residual_floor = progress.floor;
+                self.refresh_preconditioner(terms, x, &mut progress.report)?;
+                assembled = true;
+            }
+            let factor = self.preconditioner.factor.take().expect("refreshed above");
+            let grad = &progress.grad;
+            if radius.is_nan() {
+                // The first radius: the preconditioned gradient step's length, the
+                // Newton step's if H were M.
+                let r: Vec<f64> = grad
+                    .iter()
+                    .zip(&self.fixed)
+                    .map(|(g, f)| if *f { 0.0 } else { -g })
+                    .collect();
+                precondition(&factor, &self.fixed, &r, &mut scratch);
+                radius = dot(&r, &scratch).max(0.0).sqrt();
+            }
+            // Inexact Newton: the model's residual cut by η = min(½, √(r/r₀)) (a
+            // superlinear forcing sequence), and well below the tolerance at the end.
+            let residual = progress.residual;
+            let eta = (residual / initial_residual.max(f64::MIN_POSITIVE)).sqrt().min(0.5);
+            let stop = (eta * residual).max(0.1 * progress.tolerance(settings));
+            let sub = self.steihaug(&factor, grad, radius, stop);
+            self.preconditioner.factor = Some(factor);
+            self.preconditioner.last_cg = sub.iterations;
+            progress.report.cg_iterations += sub.iterations;
+            // The model's decrease −(gᵀd + ½ dᵀHd) against the energy's.
+            let hd = &mut scratch;
+            self.hessian.mul_vec(&self.dir, hd);
+            let predicted = -(0..x.len())
+                .filter(|&i| !self.fixed[i])
+                .map(|i| self.dir[i] * (grad[i] + 0.5 * hd[i]))
+                .sum::<f64>();
+            for i in 0..x.len() {
+                self.trial[i] = x[i] + self.dir[i];
+            }
+            let (change, roundoff) = energy_change(terms, x, &self.trial);
+            let measurable = predicted > 64.0 * f64::EPSILON * roundoff;
+            let accepted = if measurable {
+                change.is_finite() && -change >= ACCEPT_RATIO * predicted
+            } else {
+                // Below the energy's round-off the ratio carries no information:
+                // judge the step by the residual force, as the line search does.
+                let trial_grad = &mut scratch;
+                total_gradient(terms, &self.trial, trial_grad);
+                let r = self.free_residual(trial_grad);
+                r.is_finite() && r < residual
+            };
+            if !accepted {
+                progress.report.rejected_steps += 1;
+                radius = 0.25 * sub.norm;
                 let xmax = weft_linalg::max_abs(x.iter().copied());
                 let moved = weft_linalg::max_abs(self.dir.iter().copied());
-                let accepted = if measurable {
-                    change.is_finite() && -change >= ACCEPT_RATIO * predicted
-                } else {
-                    // Below the energy's round-off the ratio carries no information:
-                    // judge the step by the residual force, as the line search does.
-                    total_gradient(terms, &self.trial, &mut grad);
-                    let r = self.free_residual(&grad);
-                    let better = r.is_finite() && r < residual;
-                    total_gradient(terms, x, &mut grad);
-                    better
-                };
-                let ratio = if measurable { -change / predicted } else { 1.0 };
-                if !accepted {
-                    report.rejected_steps += 1;
-                    radius = 0.25 * sub.norm;
-                    if moved <= 4.0 * f64::EPSILON * xmax || !(radius > 0.0) {
-                        return Err(Error::NotConverged {
-                            iterations: report.iterations,
-                            residual,
-                            tolerance: settings.tolerance.max(floor),
-                        });
-                    }
-                    continue;
+                if moved <= 4.0 * f64::EPSILON * xmax || !(radius > 0.0) {
+                    return Err(progress.not_converged(progress.tolerance(settings)));
                 }
-                if ratio < 0.25 {
-                    radius = 0.25 * sub.norm;
-                } else if ratio > 0.75 && sub.boundary {
-                    radius *= 2.0;
-                }
-                energy += change;
-                assembled = false;
-                let stalled;
-                (residual, stalled) =
-                    self.take_step(terms, x, &mut grad, settings.tolerance.max(floor), &mut report)?;
-                if stalled {
-                    break;
-                }
+                continue;
             }
-            Ok(())
-        })();
-        self.grad = grad;
-        report.residual = residual;
-        report.energy = energy;
-        report.time = start.elapsed();
-        result.map(|_| report)
+            let ratio = if measurable { -change / predicted } else { 1.0 };
+            if ratio < 0.25 {
+                radius = 0.25 * sub.norm;
+            } else if ratio > 0.75 && sub.boundary {
+                radius *= 2.0;
+            }
+            progress.energy += change;
+            assembled = false;
+            if self.take_step(terms, x, settings, progress)? {
+                break;
+            }
+        }
+        Ok(())
     }
 }
 
