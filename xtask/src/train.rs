@@ -83,7 +83,7 @@ pub enum TrainCommand {
     /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
     #[command(after_help = ALTCONV_CONFIG)]
     Altconv(AltconvArgs),
-    /// Geng et al.'s pose → cloth network on the `drape` dataset, alone or trained through
+    /// Geng et al.'s pose → cloth network on a drape dataset (`drape` or `drape-loose`), alone or trained through
     /// the inextensibility or the quasistatic layer (fixed or learned μ).
     #[command(after_help = DRAPE_CONFIG)]
     Drape(DrapeArgs),
@@ -139,7 +139,7 @@ pub enum LearnMu {
 
 #[derive(Args)]
 pub struct DrapeArgs {
-    /// A `drape` dataset directory written by `cargo xtask dataset drape`.
+    /// A drape dataset directory written by `cargo xtask dataset drape` (or `drape-loose`).
     #[arg(long)]
     pub data: PathBuf,
     /// Where the model is written: `config.json`, the trainer's run (`training.json`: per

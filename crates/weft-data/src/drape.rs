@@ -1,6 +1,7 @@
-//! The `drape` dataset (design §8, Geng et al. §2): poses `θ` of the limb with the
-//! sleeve's kinematic guess `r̃(θ)` and its draped ground truth `r(θ)`
-//! (`weft_sim::scenes::drape`).
+//! The `drape` and `drape-loose` datasets (design §8, Geng et al. §2): poses `θ` of the
+//! limb with the sleeve's kinematic guess `r̃(θ)` and its draped ground truth `r(θ)`
+//! (`weft_sim::scenes::drape`) — the close-fitting sleeve ([`DrapeParams::standard`])
+//! and the loose one ([`DrapeParams::loose`]).
 //!
 //! Examples are stored in chunks (one "sequence" of the dataset machinery per chunk, so
 //! sharding, resuming and checksums work unchanged); the chunks are split in order into
@@ -22,19 +23,23 @@ use weft_sim::scenes::soft_tissue::ArmPose;
 use crate::files::Array;
 use crate::spec::{DatasetSpec, Size, StoredSequence};
 
-/// The dataset's name.
+/// The close-fitting sleeve's dataset.
 pub const NAME: &str = crate::spec::DRAPE;
+/// The loose sleeve's dataset.
+pub const LOOSE: &str = crate::spec::DRAPE_LOOSE;
 
 /// Draws of a pose before an example slot gives up.
 pub const MAX_DRAWS: usize = 8;
 
 pub use crate::spec::drape_counts as counts;
 
-/// The scene's parameters at a size.
-pub fn params(size: Size) -> DrapeParams {
-    match size {
-        Size::Quick => DrapeParams::quick(),
-        Size::Standard | Size::Paper => DrapeParams::standard(),
+/// The scene's parameters of drape dataset `name` (`drape` or `drape-loose`) at a size.
+pub fn params(name: &str, size: Size) -> DrapeParams {
+    match (name == LOOSE, size) {
+        (false, Size::Quick) => DrapeParams::quick(),
+        (false, Size::Standard | Size::Paper) => DrapeParams::standard(),
+        (true, Size::Quick) => DrapeParams::loose_quick(),
+        (true, Size::Standard | Size::Paper) => DrapeParams::loose(),
     }
 }
 
@@ -44,7 +49,7 @@ pub fn example(drape: &Drape, seed: u64, j: usize) -> crate::Result<(DrapeExampl
     let mut rng = SplitMix64::new(crate::spec::sequence_seed(seed, j));
     let mut rejected = Vec::new();
     for _ in 0..MAX_DRAWS {
-        let pose = ArmPose::sample(&mut rng);
+        let pose = drape.sample_pose(&mut rng);
         match drape.solve(&pose) {
             Ok(e) => return Ok((e, rejected)),
             Err(e) => rejected.push((pose, e.to_string())),
@@ -58,7 +63,7 @@ pub fn example(drape: &Drape, seed: u64, j: usize) -> crate::Result<(DrapeExampl
 
 /// Generates chunk `i` (sequence seed `seed`).
 pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> crate::Result<StoredSequence> {
-    let drape = Drape::new(params(spec.size))?;
+    let drape = Drape::new(params(&spec.name, spec.size))?;
     let start = std::time::Instant::now();
     let solved: Vec<(DrapeExample, Vec<(ArmPose, String)>)> = (0..spec.frames)
         .into_par_iter()
@@ -85,6 +90,10 @@ pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> crat
     let mut metadata = HashMap::new();
     metadata.insert("newton_iterations".into(), serde_json::to_string(&iterations)?);
     metadata.insert("rejected_poses".into(), serde_json::to_string(&rejected)?);
+    if drape.params().settle_steps > 0 {
+        let settle: Vec<usize> = solved.iter().map(|(e, _)| e.settle_iterations).collect();
+        metadata.insert("settle_iterations".into(), serde_json::to_string(&settle)?);
+    }
     metadata.insert(
         "units".into(),
         "pose [examples, 3]: shoulder flexion, shoulder abduction, elbow flexion (rad); guess and truth \

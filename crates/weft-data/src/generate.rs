@@ -18,7 +18,7 @@ use weft_sim::LoadedScene;
 use crate::error::{Context, Error, Result, ensure};
 use crate::files::{progress_bar, safetensors_bytes, sha256_file, sha256_hex, write_bytes, write_json, write_text};
 use crate::record::Recorder;
-use crate::spec::{DRAPE, DatasetSpec, NNWARP, Size, Split, StoredSequence, sequence_seed};
+use crate::spec::{DatasetSpec, NNWARP, Size, Split, StoredSequence, is_drape, sequence_seed};
 use crate::{drape, nnwarp};
 
 /// One slice of the sequences.
@@ -202,9 +202,9 @@ pub fn generate(spec: &DatasetSpec, out: &Path, options: &GenerateOptions) -> Re
     let scene_toml = base.scene.to_toml()?;
     // weft-mesh's writers (atomic, full precision) write the rest shape; they are
     // deterministic, so rewriting it on a resume leaves the same bytes.
-    let rest_files: Vec<&str> = if spec.name == DRAPE {
+    let rest_files: Vec<&str> = if is_drape(&spec.name) {
         // The sleeve and the body at the neutral pose, and the scene's parameters.
-        let scene = weft_sim::scenes::drape::Drape::new(drape::params(spec.size))?;
+        let scene = weft_sim::scenes::drape::Drape::new(drape::params(&spec.name, spec.size))?;
         let sleeve = scene.sleeve();
         weft_mesh::io::write_obj(&out.join("sleeve.obj"), sleeve.positions(), sleeve.faces())?;
         let body = scene.body_rest();
@@ -293,7 +293,7 @@ pub fn generate(spec: &DatasetSpec, out: &Path, options: &GenerateOptions) -> Re
     )?;
     for i in todo {
         let wall = Instant::now();
-        let rec = if spec.name == DRAPE {
+        let rec = if is_drape(&spec.name) {
             drape::chunk(spec, sequence_seed(seed, i), i, &bar)?
         } else if spec.name == NNWARP {
             let rec = nnwarp::sequence(spec, sequence_seed(seed, i), i)?;
@@ -525,12 +525,14 @@ mod tests {
 
     #[test]
     fn drape_chunks_split_into_geng_sized_training_validation_and_test_sets() {
-        for (size, want) in [
-            (Size::Quick, (16, 4, 4)),
-            (Size::Standard, (1000, 200, 200)),
-            (Size::Paper, (8000, 200, 200)),
-        ] {
-            let spec = DatasetSpec::new(drape::NAME, size).unwrap();
+        for (name, size, want) in [drape::NAME, drape::LOOSE].into_iter().flat_map(|name| {
+            [
+                (name, Size::Quick, (16, 4, 4)),
+                (name, Size::Standard, (1000, 200, 200)),
+                (name, Size::Paper, (8000, 200, 200)),
+            ]
+        }) {
+            let spec = DatasetSpec::new(name, size).unwrap();
             assert_eq!(
                 spec.stored_frames(),
                 spec.frames,
@@ -541,7 +543,7 @@ mod tests {
             assert_eq!(
                 (examples("train"), examples("validation"), examples("test")),
                 want,
-                "{size:?}"
+                "{name} {size:?}"
             );
             // In index order: every training chunk before every validation chunk before every test chunk.
             let order: Vec<&str> = (0..n).map(|i| spec.split.of_sequence(i, n)).collect();

@@ -666,6 +666,8 @@ pub struct DrapeExample {
 #[derive(Debug, Clone)]
 pub struct DrapeDataset {
     pub dir: PathBuf,
+    /// `drape` or `drape-loose`.
+    pub name: String,
     /// The sleeve at rest (`sleeve.obj`); every example is in its vertex order.
     pub sleeve: TriMesh,
     /// The body at the neutral pose (`body.obj`).
@@ -674,9 +676,16 @@ pub struct DrapeDataset {
 }
 
 impl DrapeDataset {
-    /// Reads every chunk of the `drape` dataset in `dir`.
+    /// Reads every chunk of the `drape` or `drape-loose` dataset in `dir`.
     pub fn load(dir: &Path) -> Result<Self> {
-        let (manifest_path, manifest) = read_manifest(dir, Some("drape"))?;
+        let (manifest_path, manifest) = read_manifest(dir, None)?;
+        let name = manifest["dataset"].as_str().unwrap_or_default().to_string();
+        if !crate::spec::is_drape(&name) {
+            return Err(data_error(
+                &manifest_path,
+                format!("holds dataset {name:?}, not a drape one (drape, drape-loose)"),
+            ));
+        }
         let read = |name: &str| -> Result<TriMesh> {
             let p = dir.join(name);
             weft_mesh::io::read_obj(&p).map_err(|e| data_error(&p, e.to_string()))
@@ -710,6 +719,7 @@ impl DrapeDataset {
         }
         Ok(Self {
             dir: dir.to_path_buf(),
+            name,
             sleeve,
             body,
             examples,

@@ -9,8 +9,15 @@ use weft_sim::AnyScene;
 use crate::error::{Context, Result, ensure};
 use crate::files::Array;
 
-/// The name of the `drape` dataset.
+/// The name of the `drape` dataset (the close-fitting sleeve).
 pub const DRAPE: &str = "drape";
+/// The name of the `drape-loose` dataset (the loose sleeve, issue 33).
+pub const DRAPE_LOOSE: &str = "drape-loose";
+
+/// Whether `name` is one of the drape datasets (the same chunked layout and reader).
+pub fn is_drape(name: &str) -> bool {
+    name == DRAPE || name == DRAPE_LOOSE
+}
 /// The name of the `nnwarp` dataset.
 pub const NNWARP: &str = "nnwarp";
 
@@ -27,13 +34,13 @@ pub fn drape_counts(size: Size) -> (usize, usize, usize, usize) {
 
 /// The datasets: every built-in cloth scene (Tan et al. §VI, design §3), the
 /// soft-tissue `limb` (design §6), NNWarp's registered beam sequences (design §7) and
-/// the sleeve `drape` examples (design §8).
+/// the sleeve `drape` and loose-sleeve `drape-loose` examples (design §8).
 pub fn dataset_names() -> Vec<&'static str> {
     weft_sim::BUILTIN_SCENES
         .iter()
         .copied()
         .chain(weft_sim::scenes::load::SOFT_TISSUE_SCENES)
-        .chain([NNWARP, DRAPE])
+        .chain([NNWARP, DRAPE, DRAPE_LOOSE])
         .collect()
 }
 
@@ -108,7 +115,7 @@ impl DatasetSpec {
     /// Frames stored per sequence: the simulated ones and the initial state, or for
     /// `drape` the examples of a chunk.
     pub fn stored_frames(&self) -> usize {
-        if self.name == DRAPE {
+        if is_drape(&self.name) {
             self.frames
         } else {
             self.frames + 1
@@ -168,7 +175,7 @@ impl DatasetSpec {
             dataset_names().join(", ")
         );
         let quick = size == Size::Quick;
-        if name == DRAPE {
+        if is_drape(name) {
             // A "sequence" is a chunk of independent examples; "frames" its size.
             let (train, validation, test, chunk) = drape_counts(size);
             return Ok(Self {

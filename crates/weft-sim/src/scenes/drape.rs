@@ -25,9 +25,9 @@ use parry3d_f64::query::PointQueryWithLocation;
 use weft_mesh::TriMesh;
 use weft_mesh::limb::{LimbParams, limb};
 
-use crate::energies::{ConstantForce, DihedralBending, Membrane, ObstaclePenalty, ObstacleShape};
+use crate::energies::{ConstantForce, DihedralBending, Inertia, Membrane, ObstaclePenalty, ObstacleShape};
 use crate::energy::Energy;
-use crate::error::{Error, Result, check_positive};
+use crate::error::{Error, Result, check_nonnegative, check_positive};
 use crate::newton::{HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 use crate::rng::SplitMix64;
 use crate::scenes::soft_tissue::{
@@ -71,6 +71,53 @@ pub struct DrapeParams {
     /// heaviest vertex's weight.
     pub relative_tolerance: f64,
     pub max_iterations: usize,
+    /// Range of shoulder flexion and of abduction drawn for a pose: each in
+    /// `±shoulder_range` (rad).
+    #[serde(
+        default = "default_shoulder_range",
+        skip_serializing_if = "is_default_shoulder_range"
+    )]
+    pub shoulder_range: f64,
+    /// Range `[lo, hi]` of elbow flexion drawn for a pose (rad).
+    #[serde(default = "default_elbow_flexion", skip_serializing_if = "is_default_elbow_flexion")]
+    pub elbow_flexion: [f64; 2],
+    /// Damped release before the equilibrium solve: this many proximal steps, each
+    /// minimising the energy plus `Σ mᵢ‖x − x_k‖²/(2τ²)` from the previous one (implicit
+    /// Euler steps from rest, velocities discarded), then Newton on the energy alone.
+    /// 0 (the sleeve's setting) solves from the guess directly.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub settle_steps: usize,
+    /// The settle steps' `τ` (s).
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub settle_time_step: f64,
+    /// Kinematic guess by skinning the sleeve itself with its own weights — a smoothstep
+    /// from the upper arm to the forearm over ± this half-width (m) about the elbow —
+    /// instead of binding each vertex to the body triangle under it. 0 (the sleeve's
+    /// setting) binds. A sleeve centimetres off the arm needs it: bound to the body,
+    /// its offsets turn with the body's crushed inner-elbow triangles and cross already
+    /// at 0.5 rad of elbow flexion, while skinning with a blend wider than the body's
+    /// keeps the guess unfolded over the scene's range (docs/DRAPE.md).
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub skinned_guess_half_width: f64,
+}
+
+fn default_shoulder_range() -> f64 {
+    SHOULDER_RANGE
+}
+fn is_default_shoulder_range(v: &f64) -> bool {
+    *v == SHOULDER_RANGE
+}
+fn default_elbow_flexion() -> [f64; 2] {
+    [ELBOW_MID - ELBOW_HALF_RANGE, ELBOW_MID + ELBOW_HALF_RANGE]
+}
+fn is_default_elbow_flexion(v: &[f64; 2]) -> bool {
+    *v == default_elbow_flexion()
+}
+fn is_zero(v: &usize) -> bool {
+    *v == 0
+}
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl DrapeParams {
@@ -107,6 +154,11 @@ impl DrapeParams {
             contact_margin: 0.003,
             relative_tolerance: 1e-2,
             max_iterations: 200,
+            shoulder_range: SHOULDER_RANGE,
+            elbow_flexion: default_elbow_flexion(),
+            settle_steps: 0,
+            settle_time_step: 0.0,
+            skinned_guess_half_width: 0.0,
         }
     }
     /// A 16 × 12 = 192-vertex sleeve on the quick limb, for tests.
@@ -116,6 +168,53 @@ impl DrapeParams {
             sleeve_around: 16,
             sleeve_rings: 12,
             ..Self::standard()
+        }
+    }
+    /// The loose sleeve (issue 33's garment that hangs): 64 × 47 = 3008 vertices from the
+    /// shoulder to mid-forearm, 3 cm off the arm, so the slack hangs as a bag under the
+    /// arm, slides along it as the arm tilts and folds at the elbow (docs/DRAPE.md, "The
+    /// loose sleeve"). The shoulder turns ±1 rad, twice the sleeve's range: the arm
+    /// tilts up to 57° either way, so the sleeve slides towards the hand or bunches at the
+    /// seam. (Abduction, about the vertical, turns the whole scene rigidly about the
+    /// gravity axis; the drape depends on it only through that rotation.)
+    ///
+    /// A lighter, stiffer cloth than the sleeve's (150 N/m, 0.5 kg/m², bending 3e-5 N·m):
+    /// its bending length `(B/ρg)^⅓` is about 1.8 cm, so folds span several edges, and it
+    /// stretches millimetres, not centimetres, under its own weight. The guess skins the
+    /// sleeve with its own weights, blended over ±10 cm about the elbow: bound to the body
+    /// 3 cm off the skin, its inner-elbow offsets would cross from 0.5 rad of elbow
+    /// flexion. Skinned, it stays unfolded up to 1.0 rad, the scene's range (it checks
+    /// the corners of the range when built; at 1.1 rad the inner elbow crushes). Newton
+    /// starts after three settle steps of 0.05 s from the guess, which lower the sleeve
+    /// onto the arm as a damped fall would instead of in one long Newton step: with them,
+    /// starts 2 mm off the guess end on the same equilibrium, without them in others
+    /// millimetres away (docs/DRAPE.md, "How unique the loose sleeve's equilibrium is").
+    pub fn loose() -> Self {
+        Self {
+            sleeve_around: 64,
+            sleeve_rings: 47,
+            sleeve_start: 0.01,
+            sleeve_end: 0.45,
+            offset: 0.03,
+            young: 150.0,
+            bend_stiffness: 3e-5,
+            density: 0.5,
+            max_iterations: 400,
+            shoulder_range: 1.0,
+            elbow_flexion: [0.1, 1.0],
+            settle_steps: 3,
+            settle_time_step: 0.05,
+            skinned_guess_half_width: 0.1,
+            ..Self::standard()
+        }
+    }
+    /// The loose sleeve at 16 × 12 on the quick limb, for tests.
+    pub fn loose_quick() -> Self {
+        Self {
+            limb: LimbResolution::Quick,
+            sleeve_around: 16,
+            sleeve_rings: 12,
+            ..Self::loose()
         }
     }
     fn validate(&self) -> Result<()> {
@@ -132,6 +231,49 @@ impl DrapeParams {
         ] {
             check_positive(name, v)?;
         }
+        if !(self.poisson.is_finite() && (0.0..0.5).contains(&self.poisson)) {
+            return Err(Error::InvalidParameter {
+                name: "Poisson ratio",
+                value: self.poisson,
+                reason: "must lie in [0, 0.5)",
+            });
+        }
+        if self.sleeve_around < 3 || self.sleeve_rings < 2 {
+            return Err(Error::Scene(format!(
+                "the sleeve needs at least 3 vertices around and 2 rings, got {} and {}",
+                self.sleeve_around, self.sleeve_rings
+            )));
+        }
+        if self.seam_offset > self.offset {
+            return Err(Error::Scene(format!(
+                "the seam offset ({} m) must not exceed the sleeve's offset ({} m)",
+                self.seam_offset, self.offset
+            )));
+        }
+        if !self.gravity.iter().all(|g| g.is_finite()) || Vector3::from(self.gravity).norm() == 0.0 {
+            return Err(Error::Scene(format!(
+                "gravity must be finite and non-zero, got {:?}",
+                self.gravity
+            )));
+        }
+        let right = std::f64::consts::FRAC_PI_2;
+        if !(self.shoulder_range.is_finite() && self.shoulder_range > 0.0 && self.shoulder_range <= right) {
+            return Err(Error::InvalidParameter {
+                name: "shoulder range (rad)",
+                value: self.shoulder_range,
+                reason: "must lie in (0, π/2]",
+            });
+        }
+        let [lo, hi] = self.elbow_flexion;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi && hi <= right) {
+            return Err(Error::Scene(format!(
+                "the elbow flexion range must satisfy 0 ≤ lo < hi ≤ π/2 rad, got [{lo}, {hi}]"
+            )));
+        }
+        if self.settle_steps > 0 {
+            check_positive("settle time step (s)", self.settle_time_step)?;
+        }
+        check_nonnegative("skinned guess half-width (m)", self.skinned_guess_half_width)?;
         let length = self.limb.params().length;
         if !(0.0 < self.sleeve_start && self.sleeve_start < self.sleeve_end && self.sleeve_end < length) {
             return Err(Error::Scene(format!(
@@ -148,10 +290,15 @@ impl ArmPose {
     /// shoulder flexion and abduction in ±0.5 rad, elbow flexion in [0.1, 1.3] rad, no
     /// bounce.
     pub fn sample(rng: &mut SplitMix64) -> Self {
+        Self::sample_in(rng, SHOULDER_RANGE, default_elbow_flexion())
+    }
+    /// A pose drawn uniformly with shoulder flexion and abduction in `±shoulder` and
+    /// elbow flexion in `[elbow[0], elbow[1]]` (rad), in that order, no bounce.
+    pub fn sample_in(rng: &mut SplitMix64, shoulder: f64, elbow: [f64; 2]) -> Self {
         Self {
-            shoulder_flexion: rng.uniform(-SHOULDER_RANGE, SHOULDER_RANGE),
-            shoulder_abduction: rng.uniform(-SHOULDER_RANGE, SHOULDER_RANGE),
-            elbow_flexion: rng.uniform(ELBOW_MID - ELBOW_HALF_RANGE, ELBOW_MID + ELBOW_HALF_RANGE),
+            shoulder_flexion: rng.uniform(-shoulder, shoulder),
+            shoulder_abduction: rng.uniform(-shoulder, shoulder),
+            elbow_flexion: rng.uniform(elbow[0], elbow[1]),
             bounce: 0.0,
         }
     }
@@ -178,6 +325,15 @@ fn triangle_frame(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Matri
     Matrix3::from_columns(&[e1, n.cross(&e1), n])
 }
 
+/// The eight corners `(flexion, abduction, elbow)` of a pose range.
+fn range_corners(shoulder: f64, lo: f64, hi: f64) -> impl Iterator<Item = (f64, f64, f64)> {
+    [-shoulder, shoulder].into_iter().flat_map(move |f| {
+        [-shoulder, shoulder]
+            .into_iter()
+            .flat_map(move |a| [lo, hi].map(|e| (f, a, e)))
+    })
+}
+
 /// The drape scene, built once and solved per pose.
 #[derive(Debug)]
 pub struct Drape {
@@ -187,10 +343,13 @@ pub struct Drape {
     body_weights: Vec<f64>,
     sleeve: TriMesh,
     binding: Vec<Binding>,
+    /// The sleeve's own forearm weights when the guess skins it (empty when it binds).
+    sleeve_weights: Vec<f64>,
     sewn: Vec<usize>,
     membrane: Membrane,
     bending: DihedralBending,
     gravity: ConstantForce,
+    masses: Vec<f64>,
     max_weight: f64,
 }
 
@@ -202,7 +361,10 @@ pub struct DrapeExample {
     pub guess: Vec<f64>,
     /// `r(θ)`, flat (m).
     pub truth: Vec<f64>,
+    /// The final equilibrium solve.
     pub report: NewtonReport,
+    /// Newton iterations of the settle steps before it (0 without them).
+    pub settle_iterations: usize,
 }
 
 impl Drape {
@@ -251,6 +413,19 @@ impl Drape {
             })
             .collect::<Result<Vec<_>>>()?;
         let sewn = (0..params.sleeve_around).collect();
+        let sleeve_weights = if params.skinned_guess_half_width > 0.0 {
+            let (joint, half) = (limb_params.joint * limb_params.length, params.skinned_guess_half_width);
+            sleeve
+                .positions()
+                .iter()
+                .map(|x| {
+                    let s = ((x.x - (joint - half)) / (2.0 * half)).clamp(0.0, 1.0);
+                    s * s * (3.0 - 2.0 * s)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         let topology = weft_mesh::Topology::new(&sleeve);
         let membrane = Membrane::new(&sleeve, params.young, params.poisson)?;
         let bending = DihedralBending::new(&sleeve, &topology, params.bend_stiffness)?;
@@ -258,19 +433,79 @@ impl Drape {
         let g = Vector3::from(params.gravity).norm();
         let max_weight = masses.iter().fold(0.0f64, |m, x| m.max(*x)) * g;
         let gravity = ConstantForce::gravity(&masses, params.gravity)?;
-        Ok(Self {
+        let drape = Self {
             params,
             limb: limb_params,
             body,
             body_weights,
             sleeve,
             binding,
+            sleeve_weights,
             sewn,
             membrane,
             bending,
             gravity,
+            masses,
             max_weight,
-        })
+        };
+        drape.check_guess()?;
+        Ok(drape)
+    }
+
+    /// The guess must not fold the sleeve anywhere in the pose range: at each corner of
+    /// the range no triangle may turn over against the body triangle its first vertex is
+    /// bound to (the sign of its normal along that triangle's normal changes from rest)
+    /// or shrink below 0.3 of its rest area. A folded guess (offsets crossing on the
+    /// inside of a bent elbow) would start Newton from a self-intersecting sleeve, and
+    /// the scene has no self-contact.
+    fn check_guess(&self) -> Result<()> {
+        let faces = self.sleeve.faces();
+        let normal = |p: &[Vector3<f64>], [a, b, c]: [usize; 3]| (p[b] - p[a]).cross(&(p[c] - p[a]));
+        let body_normal = |p: &[Vector3<f64>], v: usize| {
+            let [i, j, k] = self.body.faces()[self.binding[v].triangle];
+            (p[j] - p[i]).cross(&(p[k] - p[i]))
+        };
+        let rest_body = self.body.positions();
+        let rest = self.sleeve.positions();
+        let (s, [lo, hi]) = (self.params.shoulder_range, self.params.elbow_flexion);
+        for (flexion, abduction, elbow) in range_corners(s, lo, hi) {
+            let pose = ArmPose {
+                shoulder_flexion: flexion,
+                shoulder_abduction: abduction,
+                elbow_flexion: elbow,
+                bounce: 0.0,
+            };
+            let transforms = pose.bone_transforms(&self.limb.joint_position());
+            let body = self.skin(&transforms);
+            let guess: Vec<Vector3<f64>> = self
+                .guess_on(&transforms, &body)
+                .chunks(3)
+                .map(|x| Vector3::new(x[0], x[1], x[2]))
+                .collect();
+            let folded = faces
+                .iter()
+                .filter(|&&f| {
+                    let (n0, n) = (normal(rest, f), normal(&guess, f));
+                    let side0 = n0.dot(&body_normal(rest_body, f[0]));
+                    let side = n.dot(&body_normal(&body, f[0]));
+                    side0 * side <= 0.0 || n.norm() < 0.3 * n0.norm()
+                })
+                .count();
+            if folded > 0 {
+                return Err(Error::Scene(format!(
+                    "the kinematic guess folds {folded} sleeve triangles at elbow flexion {elbow} rad \
+                     (shoulder {flexion}, {abduction} rad); narrow the elbow range or the offset"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// A pose drawn from the scene's ranges ([`DrapeParams::shoulder_range`],
+    /// [`DrapeParams::elbow_flexion`]); for the sleeve's defaults the same draw as
+    /// [`ArmPose::sample`].
+    pub fn sample_pose(&self, rng: &mut SplitMix64) -> ArmPose {
+        ArmPose::sample_in(rng, self.params.shoulder_range, self.params.elbow_flexion)
     }
 
     pub fn params(&self) -> &DrapeParams {
@@ -304,13 +539,23 @@ impl Drape {
             .collect()
     }
 
-    /// `r̃(θ)`: every sleeve vertex carried by its posed parent triangle (flat, m).
+    /// `r̃(θ)`: every sleeve vertex carried by its posed parent triangle, or skinned with
+    /// the sleeve's own weights ([`DrapeParams::skinned_guess_half_width`]) (flat, m).
     pub fn kinematic_guess(&self, pose: &ArmPose) -> Vec<f64> {
-        let body = self.skin(&pose.bone_transforms(&self.limb.joint_position()));
-        self.guess_on(&body)
+        let transforms = pose.bone_transforms(&self.limb.joint_position());
+        self.guess_on(&transforms, &self.skin(&transforms))
     }
 
-    fn guess_on(&self, body: &[Vector3<f64>]) -> Vec<f64> {
+    fn guess_on(&self, transforms: &[BoneTransform; 2], body: &[Vector3<f64>]) -> Vec<f64> {
+        if !self.sleeve_weights.is_empty() {
+            return self
+                .sleeve
+                .positions()
+                .iter()
+                .zip(&self.sleeve_weights)
+                .flat_map(|(x, &w)| blend(x, w, transforms).data.0[0])
+                .collect();
+        }
         let faces = self.body.faces();
         self.binding
             .iter()
@@ -327,8 +572,15 @@ impl Drape {
     /// The draped sleeve at `pose`: Newton on membrane + bending + gravity + contact
     /// against `B(θ)` from `r̃(θ)`, the sewn ring held at `r̃(θ)`.
     pub fn solve(&self, pose: &ArmPose) -> Result<DrapeExample> {
-        let posed = self.body(pose)?;
-        let guess = self.guess_on(posed.positions());
+        self.solve_from(pose, None)
+    }
+
+    /// [`Self::solve`] from `start` instead of the guess (flat, m; the sewn ring is
+    /// still held at the guess), to probe how unique the equilibrium is.
+    pub fn solve_from(&self, pose: &ArmPose, start: Option<&[f64]>) -> Result<DrapeExample> {
+        let transforms = pose.bone_transforms(&self.limb.joint_position());
+        let posed = self.body.with_positions(self.skin(&transforms))?;
+        let guess = self.guess_on(&transforms, posed.positions());
         let n = self.sleeve.num_vertices();
         let contact = ObstaclePenalty::new(
             ObstacleShape::mesh(&posed)?,
@@ -346,12 +598,59 @@ impl Drape {
             ..NewtonSettings::default()
         };
         let mut truth = guess.clone();
+        if let Some(start) = start {
+            if start.len() != truth.len() {
+                return Err(Error::LengthMismatch {
+                    what: "drape start positions",
+                    expected: truth.len(),
+                    got: start.len(),
+                });
+            }
+            for (v, (t, s)) in truth.chunks_mut(3).zip(start.chunks(3)).enumerate() {
+                if !self.sewn.contains(&v) {
+                    t.copy_from_slice(s);
+                }
+            }
+        }
+        let settle_iterations = self.settle(&terms, &mut truth, &settings)?;
         let report = solver.minimize(&terms, &mut truth, &settings)?;
         Ok(DrapeExample {
             pose: *pose,
             guess,
             truth,
             report,
+            settle_iterations,
         })
+    }
+
+    /// The damped release of [`DrapeParams::settle_steps`]: returns the Newton
+    /// iterations it took. A settle step that stops short of its tolerance is kept —
+    /// it only prepares the start of the equilibrium solve, which decides convergence.
+    fn settle(&self, terms: &[&dyn Energy], x: &mut [f64], settings: &NewtonSettings) -> Result<usize> {
+        if self.params.settle_steps == 0 {
+            return Ok(0);
+        }
+        let mut inertia = Inertia::new(self.masses.clone(), self.params.settle_time_step, x)?;
+        let fixed = crate::anchors::fixed_dofs(x.len() / 3, &self.sewn)?;
+        let mut solver: Option<NewtonSolver> = None;
+        let settle = NewtonSettings {
+            max_iterations: 50,
+            ..*settings
+        };
+        let mut iterations = 0;
+        for _ in 0..self.params.settle_steps {
+            inertia.set_history(x, x)?;
+            let all: Vec<&dyn Energy> = terms.iter().copied().chain([&inertia as &dyn Energy]).collect();
+            let solver = match &mut solver {
+                Some(s) => s,
+                None => solver.insert(NewtonSolver::new(x.len(), &all, fixed.clone())?),
+            };
+            match solver.minimize(&all, x, &settle) {
+                Ok(r) => iterations += r.iterations,
+                Err(Error::NotConverged { .. }) => iterations += settle.max_iterations,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(iterations)
     }
 }
