@@ -212,7 +212,7 @@ impl Recorder {
                         factorizations: f.report.newton.factorizations + f.report.newton.regularizations,
                         cg_iterations: f.report.newton.cg_iterations,
                         rejected_steps: f.report.newton.rejected_steps,
-                        fallback: f.report.fallback.map(|h| format!("{h:?}")),
+                        fallback: f.report.newton.fallback.map(|h| format!("{h:?}")),
                     }),
                 }
             }

@@ -198,7 +198,7 @@ fn cloth_run(model: &str, n: usize, k: f64, dt: f64, steps: usize, tol_factor: f
         res = res.max(f.report.newton.residual);
         secs += f.report.seconds;
         clamped |= (shift_is_fallback && f.report.newton.regularizations > 0)
-            || f.report.fallback.is_some()
+            || f.report.newton.fallback.is_some()
             || f.report.newton.residual_floor > sim.integrator().settings.tolerance;
     }
     Ok(Run {
@@ -263,8 +263,9 @@ fn tet_run(
         its += r.newton.iterations as f64;
         res = res.max(r.newton.residual);
         secs += r.seconds;
-        clamped |=
-            r.newton.regularizations > 0 || r.fallback.is_some() || r.newton.residual_floor > ie.settings.tolerance;
+        clamped |= r.newton.regularizations > 0
+            || r.newton.fallback.is_some()
+            || r.newton.residual_floor > ie.settings.tolerance;
     }
     Ok(Run {
         positions: ie.positions().to_vec(),
@@ -295,7 +296,8 @@ fn tissue_run(fat: f64, amplitude: f64, frames: usize, tol_factor: f64) -> crate
             its += r.newton.iterations as f64;
             res = res.max(r.newton.residual);
             steps += 1;
-            clamped |= r.newton.regularizations > 0 || r.fallback.is_some() || r.newton.residual_floor > tolerance;
+            clamped |=
+                r.newton.regularizations > 0 || r.newton.fallback.is_some() || r.newton.residual_floor > tolerance;
         }
     }
     Ok(Run {

@@ -369,6 +369,7 @@ impl QuasistaticLayer {
                     residual_floor: 0.0,
                     cg_iterations: k.cg_iterations,
                     rejected_steps: 0,
+                    fallback: None,
                 };
                 (report, k.cg_iterations, None)
             }

@@ -14,7 +14,7 @@ use std::time::Instant;
 use crate::energies::Inertia;
 use crate::energy::{Energy, total_gradient};
 use crate::error::{Error, Result};
-use crate::newton::{Globalization, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
+use crate::newton::{NewtonReport, NewtonSettings, NewtonSolver};
 
 /// What one time step did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -26,10 +26,6 @@ pub struct StepReport {
     pub kinetic_energy: f64,
     /// Wall time of the whole step, including bookkeeping (s).
     pub seconds: f64,
-    /// The Hessian strategy of a second attempt, when the first (the settings') did not
-    /// converge: `Never` and `WhenIndefinite` fall back on each other; a trust-region
-    /// step falls back on the line search with the configured strategy.
-    pub fallback: Option<HessianProjection>,
 }
 
 /// The implicit Euler integrator over a list of potential terms.
@@ -140,37 +136,8 @@ impl ImplicitEuler {
         for &(dof, value) in prescribed {
             x[dof] = value;
         }
-        let start_x = x.clone();
         let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
-        let mut fallback = None;
-        let newton = match self.solver.minimize(&all, &mut x, &self.settings) {
-            Ok(r) => r,
-            Err(first @ Error::NotConverged { .. }) => {
-                // Shifting the exact Hessian leaves saddles fast but can wander in a
-                // crumpling sheet; projecting is steady there but slow to leave a saddle
-                // (docs/CLOTH.md, "Definiteness"). Where one fails the other often
-                // converges, so a failed step is retried once with the other.
-                // The trust region does not use the projection: its retry is the line
-                // search with the configured one.
-                let trust_region = self.settings.globalization == Globalization::TrustRegion;
-                let other = match self.settings.projection {
-                    _ if trust_region => self.settings.projection,
-                    HessianProjection::Never => HessianProjection::WhenIndefinite,
-                    HessianProjection::WhenIndefinite => HessianProjection::Never,
-                    HessianProjection::Always => return Err(first),
-                };
-                x.copy_from_slice(&start_x);
-                let settings = NewtonSettings {
-                    projection: other,
-                    globalization: Globalization::LineSearch,
-                    ..self.settings
-                };
-                let r = self.solver.minimize(&all, &mut x, &settings).map_err(|_| first)?;
-                fallback = Some(other);
-                r
-            }
-            Err(e) => return Err(e),
-        };
+        let newton = self.solver.minimize(&all, &mut x, &self.settings)?;
         drop(all);
         let potential_energy = self.terms.iter().map(|t| t.value(&x)).sum();
         let dt = self.dt();
@@ -191,7 +158,6 @@ impl ImplicitEuler {
             potential_energy,
             kinetic_energy,
             seconds: start.elapsed().as_secs_f64(),
-            fallback,
         })
     }
 

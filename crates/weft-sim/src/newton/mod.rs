@@ -43,6 +43,21 @@ pub struct NewtonSettings {
     pub reuse_factorization: bool,
     /// How steps are kept safe away from the minimiser.
     pub globalization: Globalization,
+    /// When a minimisation does not converge, start it once more from the same point with
+    /// the other strategy: shifting the exact Hessian ([`HessianProjection::Never`])
+    /// leaves saddles fast but can wander in a crumpling sheet, projecting
+    /// ([`HessianProjection::WhenIndefinite`]) is steady there but slow to leave a
+    /// saddle, and where one fails the other often converges (docs/CLOTH.md,
+    /// "Definiteness"). A trust region is retried with the line search and the
+    /// configured projection; [`HessianProjection::Always`] has no other strategy. The
+    /// report says which was used ([`NewtonReport::fallback`]). On by default; written
+    /// into a scene file only when off.
+    #[serde(skip_serializing_if = "is_true")]
+    pub retry_other_strategy: bool,
+}
+
+fn is_true(v: &bool) -> bool {
+    *v
 }
 
 /// How Newton keeps its steps safe where the quadratic model is poor (saddles, folds,
@@ -101,6 +116,7 @@ impl Default for NewtonSettings {
             projection: HessianProjection::WhenIndefinite,
             reuse_factorization: false,
             globalization: Globalization::LineSearch,
+            retry_other_strategy: true,
         }
     }
 }
@@ -135,6 +151,11 @@ pub struct NewtonReport {
     /// Trust-region steps rejected because the energy did not follow the model (each is
     /// counted in `iterations` too).
     pub rejected_steps: usize,
+    /// The projection of the retry when the configured strategy did not converge and the
+    /// retry did ([`NewtonSettings::retry_other_strategy`]); the report's counts are the
+    /// retry's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<HessianProjection>,
 }
 
 impl NewtonReport {
@@ -153,6 +174,7 @@ impl NewtonReport {
             residual_floor: 0.0,
             cg_iterations: 0,
             rejected_steps: 0,
+            fallback: None,
         }
     }
 }
@@ -424,7 +446,42 @@ impl NewtonSolver {
     }
 
     /// Minimises `Σ terms` from `x` (updated in place). Fixed DOFs keep their values.
+    /// A minimisation that does not converge is retried once with the other strategy
+    /// ([`NewtonSettings::retry_other_strategy`]); if that fails too, the first error is
+    /// returned.
     pub fn minimize(
+        &mut self,
+        terms: &[&dyn Energy],
+        x: &mut [f64],
+        settings: &NewtonSettings,
+    ) -> Result<NewtonReport> {
+        let start = settings.retry_other_strategy.then(|| x.to_vec());
+        let first = match self.minimize_once(terms, x, settings) {
+            Err(e @ Error::NotConverged { .. }) => e,
+            other => return other,
+        };
+        let other = match (settings.globalization, settings.projection) {
+            (Globalization::TrustRegion, p) => p,
+            (_, HessianProjection::Never) => HessianProjection::WhenIndefinite,
+            (_, HessianProjection::WhenIndefinite) => HessianProjection::Never,
+            (_, HessianProjection::Always) => return Err(first),
+        };
+        let Some(start) = start else {
+            return Err(first);
+        };
+        x.copy_from_slice(&start);
+        let retry = NewtonSettings {
+            projection: other,
+            globalization: Globalization::LineSearch,
+            ..*settings
+        };
+        let mut report = self.minimize_once(terms, x, &retry).map_err(|_| first)?;
+        report.fallback = Some(other);
+        Ok(report)
+    }
+
+    /// One minimisation with `settings`' strategy, no retry.
+    fn minimize_once(
         &mut self,
         terms: &[&dyn Energy],
         x: &mut [f64],

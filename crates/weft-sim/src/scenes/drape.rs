@@ -595,6 +595,10 @@ impl Drape {
             tolerance: self.params.relative_tolerance * self.max_weight,
             max_iterations: self.params.max_iterations,
             projection: HessianProjection::WhenIndefinite,
+            // A pose that does not converge is replaced by the next draw (the datasets
+            // record it), not retried with another strategy: the published datasets
+            // were made so.
+            retry_other_strategy: false,
             ..NewtonSettings::default()
         };
         let mut truth = guess.clone();
