@@ -168,6 +168,10 @@ pub struct DrapeArgs {
     /// function of μ alone, written to `mu-scan.json`.
     #[arg(long, value_delimiter = ',')]
     pub scan_mu: Vec<f64>,
+    /// Train on the first N training examples only (a data-size study); validation and
+    /// test stay whole.
+    #[arg(long)]
+    pub train_examples: Option<usize>,
     #[command(flatten)]
     pub common: Common,
 }
@@ -307,7 +311,16 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         weft_nn::drape::DrapeTensors::of_split(&dataset, name, &device)
             .with_context(|| format!("the {name} split of {}", args.data.display()))
     };
-    let (train, validation, test) = (split("train")?, split("validation")?, split("test")?);
+    let (mut train, validation, test) = (split("train")?, split("validation")?, split("test")?);
+    if let Some(n) = args.train_examples {
+        anyhow::ensure!(
+            n > 0 && n <= train.len(),
+            "--train-examples {n}: {} has {} training examples",
+            args.data.display(),
+            train.len()
+        );
+        train = train.select(&(0..n).collect::<Vec<_>>())?;
+    }
     anyhow::ensure!(
         !train.is_empty() && !validation.is_empty(),
         "{} needs training and validation examples (it has {} and {})",

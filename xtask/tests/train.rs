@@ -272,6 +272,23 @@ fn train_drape_continues_a_learned_mu_model_and_refuses_another_layer() {
     let out = run(&net, &["--epochs", "20"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_selected_on_validation(&net);
+    // A data-size study trains on the first N training examples; more than there are is
+    // refused by name before anything is written.
+    let few = root.join("few");
+    let out = run(&few, &["--epochs", "2", "--train-examples", "4"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.contains("4 training and 4 validation"),
+        "{err}"
+    );
+    let too_many = root.join("too-many");
+    let out = run(&too_many, &["--epochs", "2", "--train-examples", "17"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--train-examples 17") && err.contains("16 training"),
+        "{err}"
+    );
+    assert!(!too_many.exists());
     // The network alone (no layer, no warm starts) resumes bit for bit.
     let half = root.join("half");
     assert!(run(&half, &["--epochs", "10"]).status.success());
