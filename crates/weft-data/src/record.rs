@@ -30,10 +30,10 @@ pub struct FrameStats {
     pub seconds: f64,
     pub potential_energy_j: Option<f64>,
     pub kinetic_energy_j: Option<f64>,
-    /// Cloth only: Newton's numeric factorisations (one per assembled matrix plus each
-    /// diagonally shifted attempt; the projected second attempt of `when-indefinite` is
-    /// not counted), conjugate-gradient iterations and rejected trust-region steps, and
-    /// the strategy of a retried step (docs/CLOTH.md).
+    /// Cloth only: Newton's numeric factorisations (every attempt: the unprojected one,
+    /// the projected second attempt of `when-indefinite`, each diagonally shifted one),
+    /// conjugate-gradient iterations and rejected trust-region steps, and the strategy of
+    /// a retried step (docs/CLOTH.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub newton_detail: Option<NewtonDetail>,
 }
@@ -209,7 +209,7 @@ impl Recorder {
                     potential_energy_j: Some(f.report.potential_energy),
                     kinetic_energy_j: Some(f.report.kinetic_energy),
                     newton_detail: Some(NewtonDetail {
-                        factorizations: f.report.newton.factorizations + f.report.newton.regularizations,
+                        factorizations: f.report.newton.factorizations,
                         cg_iterations: f.report.newton.cg_iterations,
                         rejected_steps: f.report.newton.rejected_steps,
                         fallback: f.report.newton.fallback.map(|h| format!("{h:?}")),

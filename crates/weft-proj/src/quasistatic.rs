@@ -343,8 +343,7 @@ impl QuasistaticLayer {
                     let factor = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
                     Ok((report, factor))
                 })?;
-                let (factor, adjoint_shifts) = factor;
-                (report, 0, Some((factor, adjoint_shifts)))
+                (report, 0, Some((factor.factor, factor.shifts)))
             }
             QuasistaticSolver::NewtonKrylov => {
                 let mut hessian = SymmetricMatrix::zeros(self.pattern.clone());
@@ -493,13 +492,15 @@ impl QuasistaticLayer {
                 // Hessian at r* now (Eq. 14), refusing a saddle as the forward pass does.
                 let anchors = self.anchors(&solution.prediction, &solution.mu)?;
                 let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
-                let (factor, shifts) = self.with_solver(&terms, |solver| {
+                let at_solution = self.with_solver(&terms, |solver| {
                     solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
                 })?;
-                if shifts > 0 {
-                    return Err(Error::NotAMinimum { shifts });
+                if at_solution.shifts > 0 {
+                    return Err(Error::NotAMinimum {
+                        shifts: at_solution.shifts,
+                    });
                 }
-                factor.solve_in_place(&mut eta);
+                at_solution.factor.solve_in_place(&mut eta);
             }
         }
         let base = self.zero_length_base();

@@ -47,7 +47,7 @@ fn frames(c: &mut Criterion) {
         let [iterations, cg, factorizations, frames, shifted] = *counts.borrow();
         let per = |v: usize| v as f64 / frames.max(1) as f64;
         eprintln!(
-            "{row}: per frame over {frames} frames: {:.2} Newton iterations, {:.1} CG iterations, {:.2} factorisations and {:.2} shifted ones",
+            "{row}: per frame over {frames} frames: {:.2} Newton iterations, {:.1} CG iterations, {:.2} numeric factorisations ({:.2} of them shifted)",
             per(iterations),
             per(cg),
             per(factorizations),

@@ -56,6 +56,44 @@ fn newton_converges_quadratically_near_the_solution() {
 }
 
 #[test]
+fn every_numeric_factorisation_attempt_is_counted() {
+    // A sheet pinned at 90 % of its size: every spring is compressed, so the exact
+    // Hessian is indefinite (out-of-plane stiffness k(1 − L/l) < 0).
+    let m = generators::sheet(9, 1.0).unwrap();
+    let t = Topology::new(&m);
+    let springs = Springs::stretch(&m, &t, 100.0).unwrap();
+    let boundary = t.boundary_vertices(m.num_vertices());
+    let x: Vec<f64> = m.flat_positions().iter().map(|v| 0.9 * v).collect();
+    let fixed: Vec<bool> = (0..x.len()).map(|i| boundary[i / 3]).collect();
+    let terms: [&dyn Energy; 1] = [&springs];
+    let mut solver = NewtonSolver::new(x.len(), &terms, fixed).unwrap();
+    // Projected, the compressed springs lose their out-of-plane stiffness: the matrix is
+    // only semi-definite and needs shifted attempts after the first, each counted.
+    let always = solver.factorize_at(&terms, &x, HessianProjection::Always).unwrap();
+    assert!(always.shifts > 0);
+    assert_eq!(always.numeric, 1 + always.shifts);
+    // The exact attempt fails, then the projected one, then the shifts: all counted.
+    let when = solver
+        .factorize_at(&terms, &x, HessianProjection::WhenIndefinite)
+        .unwrap();
+    assert_eq!(when.numeric, 2 + when.shifts);
+    // The exact attempt fails, then every shifted attempt counts.
+    let never = solver.factorize_at(&terms, &x, HessianProjection::Never).unwrap();
+    assert!(never.shifts > 0);
+    assert_eq!(never.numeric, 1 + never.shifts);
+    // Stretched instead, every attempt succeeds at once.
+    let stretched: Vec<f64> = m.flat_positions().iter().map(|v| 1.1 * v).collect();
+    for projection in [
+        HessianProjection::Always,
+        HessianProjection::WhenIndefinite,
+        HessianProjection::Never,
+    ] {
+        let f = solver.factorize_at(&terms, &stretched, projection).unwrap();
+        assert_eq!((f.numeric, f.shifts), (1, 0), "{projection:?}");
+    }
+}
+
+#[test]
 fn reused_factorisations_reach_the_same_minimiser_with_fewer_factorisations() {
     // The stretched pinned sheet again, from a rougher start so that several steps are
     // needed: with `reuse_factorization` Newton must converge to the same point, factorise
@@ -76,11 +114,16 @@ fn reused_factorisations_reach_the_same_minimiser_with_fewer_factorisations() {
     };
     let (plain, plain_report) = run(&mut solver, false);
     let (reused, reused_report) = run(&mut solver, true);
-    assert_eq!(plain_report.factorizations, plain_report.iterations);
+    // One fresh matrix per iteration, each with its shifted attempts (the noisy start
+    // compresses some springs).
+    assert_eq!(
+        plain_report.factorizations,
+        plain_report.iterations + plain_report.regularizations
+    );
+    let fresh = reused_report.factorizations - reused_report.regularizations;
     assert!(
-        reused_report.factorizations < reused_report.iterations,
-        "{} factorisations in {} iterations",
-        reused_report.factorizations,
+        fresh < reused_report.iterations,
+        "{fresh} fresh matrices in {} iterations",
         reused_report.iterations
     );
     assert!(reused_report.factorizations < plain_report.factorizations);

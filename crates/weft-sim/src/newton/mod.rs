@@ -121,6 +121,16 @@ impl Default for NewtonSettings {
     }
 }
 
+/// A factorised Newton matrix ([`NewtonSolver::factorize_at`]) and what it cost.
+#[derive(Debug)]
+pub struct Factorized {
+    pub factor: weft_linalg::CholeskyFactor,
+    /// Diagonally shifted attempts it needed (0: the matrix factorised as assembled).
+    pub shifts: usize,
+    /// Numeric factorisations attempted, failed ones included.
+    pub numeric: usize,
+}
+
 /// What one minimisation did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct NewtonReport {
@@ -134,8 +144,11 @@ pub struct NewtonReport {
     pub line_search_halvings: usize,
     /// Times a diagonal shift was needed to make the Newton matrix positive definite.
     pub regularizations: usize,
-    /// Numeric factorisations (equal to `iterations` unless
-    /// [`NewtonSettings::reuse_factorization`] is on).
+    /// Numeric Cholesky factorisations attempted, failed ones included: for each matrix
+    /// factorised, the unprojected attempt, the projected second attempt of
+    /// [`HessianProjection::WhenIndefinite`] and every diagonally shifted attempt. One per
+    /// iteration where the matrix is positive definite at the first attempt, unless
+    /// [`NewtonSettings::reuse_factorization`] keeps a factor.
     pub factorizations: usize,
     #[serde(with = "duration_seconds")]
     pub time: Duration,
@@ -302,14 +315,13 @@ impl NewtonSolver {
     }
 
     /// Assembles the Hessian of `terms` at `x` (projected per `projection`) with fixed
-    /// DOFs eliminated, factorises it (shifting the diagonal if needed) and returns the
-    /// factor and the number of diagonal shifts that were needed.
+    /// DOFs eliminated and factorises it, shifting the diagonal if needed.
     pub fn factorize_at(
         &mut self,
         terms: &[&dyn Energy],
         x: &[f64],
         projection: HessianProjection,
-    ) -> Result<(weft_linalg::CholeskyFactor, usize)> {
+    ) -> Result<Factorized> {
         let attempts: &[bool] = match projection {
             HessianProjection::Always => &[true],
             HessianProjection::WhenIndefinite => &[false, true],
@@ -322,7 +334,13 @@ impl NewtonSolver {
             }
             self.hessian.constrain_dofs(&self.fixed);
             match self.cholesky.factorize(&self.hessian) {
-                Ok(f) => return Ok((f, 0)),
+                Ok(factor) => {
+                    return Ok(Factorized {
+                        factor,
+                        shifts: 0,
+                        numeric: k + 1,
+                    });
+                }
                 Err(weft_linalg::Error::NotPositiveDefinite) if k + 1 < attempts.len() => continue,
                 Err(weft_linalg::Error::NotPositiveDefinite) => break,
                 Err(e) => return Err(e.into()),
@@ -338,9 +356,13 @@ impl NewtonSolver {
         // that must wrinkle: 180 iterations on the 65 × 65 mass-spring sheet's first frame
         // against 1191 with projected Hessians, docs/CLOTH.md).
         // The shift changes only the step, never the minimiser.
-        let (factor, attempts, shift) = shifted_factor(&self.cholesky, &self.hessian, self.last_shift)?;
+        let (factor, shifts, shift) = shifted_factor(&self.cholesky, &self.hessian, self.last_shift)?;
         self.last_shift = shift;
-        Ok((factor, attempts))
+        Ok(Factorized {
+            factor,
+            shifts,
+            numeric: attempts.len() + shifts,
+        })
     }
 
     /// The Newton direction `d = −H⁻¹ g` on free DOFs into `self.dir`, or steepest descent
@@ -579,9 +601,13 @@ impl NewtonSolver {
             let (factor, fresh) = match held.take() {
                 Some(f) => (f, false),
                 None => {
-                    let (f, shifts) = self.factorize_at(terms, x, settings.projection)?;
+                    let Factorized {
+                        factor: f,
+                        shifts,
+                        numeric,
+                    } = self.factorize_at(terms, x, settings.projection)?;
                     progress.report.regularizations += shifts;
-                    progress.report.factorizations += 1;
+                    progress.report.factorizations += numeric;
                     progress.floor = self.residual_floor(x);
                     progress.report.residual_floor = progress.floor;
                     (f, true)

@@ -170,6 +170,7 @@ impl NewtonSolver {
             Err(weft_linalg::Error::NotPositiveDefinite) => {
                 let (f, attempts, shift) = shifted_factor(&self.cholesky, &pc.matrix, pc.shift)?;
                 report.regularizations += attempts;
+                report.factorizations += attempts;
                 pc.shift = shift;
                 f
             }
