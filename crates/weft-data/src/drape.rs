@@ -17,7 +17,7 @@ use crate::error::Context;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use weft_sim::rng::SplitMix64;
-use weft_sim::scenes::drape::{Drape, DrapeExample, DrapeParams};
+use weft_sim::scenes::drape::{Drape, DrapeExample, DrapeParams, POSE_ANGLES};
 use weft_sim::scenes::soft_tissue::ArmPose;
 
 use crate::files::Array;
@@ -96,14 +96,15 @@ pub fn chunk(spec: &DatasetSpec, seed: u64, i: usize, bar: &ProgressBar) -> crat
     }
     metadata.insert(
         "units".into(),
-        "pose [examples, 3]: shoulder flexion, shoulder abduction, elbow flexion (rad); guess and truth \
+        "pose [examples, 4]: shoulder flexion, shoulder abduction, shoulder twist, elbow flexion (rad); guess \
+         and truth \
          [examples, vertices, 3]: the sleeve's kinematic guess and its draped equilibrium (m), vertices as in \
          sleeve.obj"
             .into(),
     );
     Ok(StoredSequence {
         arrays: vec![
-            Array::f64("pose", vec![f, 3], &poses),
+            Array::f64("pose", vec![f, POSE_ANGLES], &poses),
             Array::f64("guess", vec![f, v, 3], &guess),
             Array::f64("truth", vec![f, v, 3], &truth),
         ],

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use safetensors::{Dtype, SafeTensors};
 use weft_mesh::TriMesh;
 use weft_sim::ClothScene;
+use weft_sim::scenes::drape::POSE_ANGLES;
 
 use crate::error::{Error, Result};
 
@@ -656,8 +657,8 @@ impl LimbDataset {
 pub struct DrapeExample {
     /// `train`, `validation` or `test` (the split of its chunk).
     pub split: String,
-    /// Shoulder flexion, shoulder abduction, elbow flexion (rad).
-    pub pose: [f64; 3],
+    /// Shoulder flexion, shoulder abduction, shoulder twist, elbow flexion (rad).
+    pub pose: [f64; POSE_ANGLES],
     pub guess: Vec<f64>,
     pub truth: Vec<f64>,
 }
@@ -695,7 +696,7 @@ impl DrapeDataset {
         let mut examples = Vec::new();
         for_each_listed(dir, &manifest_path, &manifest, |file| {
             let path = &file.path;
-            let (f, pose) = f64_array(path, &file.tensors, "pose", &[3])?;
+            let (f, pose) = f64_array(path, &file.tensors, "pose", &[POSE_ANGLES])?;
             let (fg, guess) = f64_array(path, &file.tensors, "guess", &[v, 3])?;
             let (ft, truth) = f64_array(path, &file.tensors, "truth", &[v, 3])?;
             if f != fg || f != ft {
@@ -707,7 +708,7 @@ impl DrapeDataset {
             for k in 0..f {
                 examples.push(DrapeExample {
                     split: file.split.to_string(),
-                    pose: [pose[3 * k], pose[3 * k + 1], pose[3 * k + 2]],
+                    pose: std::array::from_fn(|i| pose[POSE_ANGLES * k + i]),
                     guess: guess[3 * v * k..3 * v * (k + 1)].to_vec(),
                     truth: truth[3 * v * k..3 * v * (k + 1)].to_vec(),
                 });

@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::layers::{Dense, leaky_relu};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
 use crate::params::{Init, Params};
+pub use weft_sim::scenes::drape::POSE_ANGLES;
 
 /// Shape of [`DrapeNet`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -39,7 +40,7 @@ impl Default for DrapeNetConfig {
     }
 }
 
-/// θ `[B, 3]` → offsets `d` `[B, V, 3]` (m).
+/// θ `[B, POSE_ANGLES]` → offsets `d` `[B, V, 3]` (m).
 #[derive(Debug, Clone)]
 pub struct DrapeNet {
     hidden: Vec<Dense>,
@@ -58,7 +59,7 @@ impl DrapeNet {
             });
         }
         let mut hidden = Vec::with_capacity(config.hidden.len());
-        let mut c_in = 3;
+        let mut c_in = POSE_ANGLES;
         for (k, &w) in config.hidden.iter().enumerate() {
             hidden.push(Dense::new(params, &format!("hidden{k}"), c_in, w)?);
             c_in = w;
@@ -76,13 +77,13 @@ impl DrapeNet {
         self.num_vertices
     }
 
-    /// The offsets `d(θ)` for poses `[B, 3]` (rad), `[B, V, 3]` in metres.
+    /// The offsets `d(θ)` for poses `[B, POSE_ANGLES]` (rad), `[B, V, 3]` in metres.
     pub fn offsets(&self, pose: &Tensor) -> Result<Tensor> {
-        let (b, three) = pose.dims2()?;
-        if three != 3 {
+        let (b, angles) = pose.dims2()?;
+        if angles != POSE_ANGLES {
             return Err(Error::Shape {
                 what: "drape network input",
-                expected: "[B, 3] joint angles".into(),
+                expected: format!("[B, {POSE_ANGLES}] joint angles"),
                 got: format!("{:?}", pose.dims()),
             });
         }
@@ -146,7 +147,7 @@ pub struct DrapeModel {
 }
 
 impl DrapeModel {
-    /// `r̂ = r̃ + d(θ)` for poses `[B, 3]` and guesses `[B, V, 3]` (m).
+    /// `r̂ = r̃ + d(θ)` for poses `[B, POSE_ANGLES]` and guesses `[B, V, 3]` (m).
     pub fn network_output(&self, pose: &Tensor, guess: &Tensor) -> Result<Tensor> {
         Ok((guess + self.net.offsets(pose)?)?)
     }
@@ -188,13 +189,14 @@ pub struct DrapeTensors {
 }
 
 impl DrapeTensors {
-    /// From flat f64 arrays: poses `3N`, guesses and truths `3VN` (m).
+    /// From flat f64 arrays: poses `POSE_ANGLES·N`, guesses and truths `3VN` (m).
     pub fn new(pose: &[f64], guess: &[f64], truth: &[f64], num_vertices: usize, device: &Device) -> Result<Self> {
-        let n = pose.len() / 3;
-        if pose.len() != 3 * n || guess.len() != 3 * num_vertices * n || truth.len() != guess.len() || n == 0 {
+        let n = pose.len() / POSE_ANGLES;
+        if pose.len() != POSE_ANGLES * n || guess.len() != 3 * num_vertices * n || truth.len() != guess.len() || n == 0
+        {
             return Err(Error::Shape {
                 what: "drape examples",
-                expected: format!("3N pose values and 3·{num_vertices}·N guess and truth values, N ≥ 1"),
+                expected: format!("{POSE_ANGLES}N pose values and 3·{num_vertices}·N guess and truth values, N ≥ 1"),
                 got: format!("{}, {} and {}", pose.len(), guess.len(), truth.len()),
             });
         }
@@ -203,7 +205,7 @@ impl DrapeTensors {
             Ok(Tensor::from_vec(f, shape, device)?)
         };
         Ok(Self {
-            pose: t("drape poses", pose, &[n, 3])?,
+            pose: t("drape poses", pose, &[n, POSE_ANGLES])?,
             guess: t("drape guesses", guess, &[n, num_vertices, 3])?,
             truth: t("drape truths", truth, &[n, num_vertices, 3])?,
         })
@@ -225,7 +227,7 @@ impl DrapeTensors {
         self.len() == 0
     }
 
-    /// Every example's pose, flat `3N` f64 (rad).
+    /// Every example's pose, flat `POSE_ANGLES·N` f64 (rad).
     pub fn poses(&self) -> Result<Vec<f64>> {
         Ok(self.pose.to_dtype(DType::F64)?.flatten_all()?.to_vec1::<f64>()?)
     }

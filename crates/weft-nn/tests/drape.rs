@@ -51,7 +51,7 @@ fn examples() -> (Drape, DrapeTensors) {
     let d = Drape::new(DrapeParams::quick()).unwrap();
     let mut rng = SplitMix64::new(3);
     let (mut pose, mut guess, mut truth) = (Vec::new(), Vec::new(), Vec::new());
-    while pose.len() < 18 {
+    while pose.len() < 6 * weft_nn::drape::POSE_ANGLES {
         if let Ok(e) = d.solve(&ArmPose::sample(&mut rng)) {
             pose.extend(e.pose.angles());
             guess.extend(e.guess);
@@ -234,7 +234,8 @@ fn a_failing_example_is_left_out_of_predictions_and_its_batch_skipped_in_trainin
     // Example 1's pose overflows the network to a non-finite prediction, which the
     // quasistatic op refuses; the others are fine.
     let mut pose: Vec<f64> = data.poses().unwrap();
-    pose[3..6].copy_from_slice(&[1e38, -1e38, 1e38]);
+    let k = weft_nn::drape::POSE_ANGLES;
+    pose[k..2 * k].copy_from_slice(&[1e38, -1e38, 1e38, -1e38]);
     let guess: Vec<f64> = data
         .guess
         .flatten_all()

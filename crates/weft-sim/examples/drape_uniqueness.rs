@@ -7,7 +7,7 @@
 //!
 //! ```sh
 //! cargo run --release -p weft-sim --example drape_uniqueness -- [--scene sleeve|loose] [--poses N]
-//!     [--young N/m] [--density kg/m²] [--bend N·m] [--offset m] [--shoulder rad] [--elbow-max rad]
+//!     [--young N/m] [--density kg/m²] [--bend N·m] [--offset m] [--shoulder rad] [--twist rad] [--elbow-max rad]
 //!     [--settle STEPS] [--guess-half-width m]
 //! ```
 //! Defaults: the loose sleeve, 10 poses. With `--poses 0` it only builds the scene, which
@@ -43,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if args.iter().any(|a| a == "--help" || a == "-h") {
         println!(
             "drape_uniqueness [--scene sleeve|loose] [--poses N] [--young N/m] [--density kg/m²] [--bend N·m] \
-             [--offset m] [--shoulder rad] [--elbow-max rad] [--settle STEPS] [--guess-half-width m (0: bind to the body)]"
+             [--offset m] [--shoulder rad] [--twist rad] [--elbow-max rad] [--settle STEPS] [--guess-half-width m (0: bind to the body)]"
         );
         return Ok(());
     }
@@ -71,6 +71,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(v) = number("--shoulder")? {
         params.shoulder_range = v;
+    }
+    if let Some(v) = number("--twist")? {
+        params.twist_range = v;
     }
     if let Some(v) = number("--elbow-max")? {
         params.elbow_flexion[1] = v;

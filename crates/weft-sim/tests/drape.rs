@@ -25,10 +25,12 @@ fn with_a_straight_elbow_the_guess_moves_rigidly_with_the_shoulder() {
     let pose = ArmPose {
         shoulder_flexion: 0.3,
         shoulder_abduction: -0.4,
-        elbow_flexion: 0.0,
-        bounce: 0.0,
+        shoulder_twist: 0.9,
+        ..ArmPose::default()
     };
-    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), -0.4) * Rotation3::from_axis_angle(&Vector3::y_axis(), 0.3);
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), -0.4)
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), 0.3)
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), 0.9);
     let expected: Vec<f64> = d.sleeve().positions().iter().flat_map(|p| (r * p).data.0[0]).collect();
     assert!(max_diff(&d.kinematic_guess(&pose), &expected) < 1e-12);
 }
@@ -99,10 +101,12 @@ fn with_a_straight_elbow_the_skinned_guess_moves_rigidly_with_the_shoulder() {
     let pose = ArmPose {
         shoulder_flexion: -0.2,
         shoulder_abduction: 0.35,
-        elbow_flexion: 0.0,
-        bounce: 0.0,
+        shoulder_twist: -1.2,
+        ..ArmPose::default()
     };
-    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 0.35) * Rotation3::from_axis_angle(&Vector3::y_axis(), -0.2);
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 0.35)
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), -0.2)
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), -1.2);
     let expected: Vec<f64> = d.sleeve().positions().iter().flat_map(|p| (r * p).data.0[0]).collect();
     assert!(max_diff(&d.kinematic_guess(&pose), &expected) < 1e-12);
 }
@@ -111,36 +115,72 @@ fn with_a_straight_elbow_the_skinned_guess_moves_rigidly_with_the_shoulder() {
 fn the_loose_sleeves_poses_stay_in_its_ranges_and_the_sleeves_draws_are_unchanged() {
     let loose = Drape::new(DrapeParams::loose_quick()).unwrap();
     let sleeve = Drape::new(DrapeParams::quick()).unwrap();
-    let ([lo, hi], s) = (DrapeParams::loose().elbow_flexion, DrapeParams::loose().shoulder_range);
+    let params = DrapeParams::loose();
+    let ([lo, hi], s, t) = (params.elbow_flexion, params.shoulder_range, params.twist_range);
     let mut a = SplitMix64::new(3);
-    let mut widest = 0.0f64;
+    let (mut widest, mut widest_twist) = (0.0f64, 0.0f64);
     for _ in 0..200 {
         let p = loose.sample_pose(&mut a);
         assert!((lo..=hi).contains(&p.elbow_flexion), "{p:?}");
         assert!(
-            p.shoulder_flexion.abs() <= s && p.shoulder_abduction.abs() <= s,
+            p.shoulder_flexion.abs() <= s && p.shoulder_abduction.abs() <= s && p.shoulder_twist.abs() <= t,
             "{p:?}"
         );
         widest = widest.max(p.shoulder_flexion.abs());
+        widest_twist = widest_twist.max(p.shoulder_twist.abs());
     }
     assert!(widest > 0.9 * s, "the draws span the range: widest flexion {widest}");
+    assert!(
+        widest_twist > 0.9 * t,
+        "the draws span the range: widest twist {widest_twist}"
+    );
     // The sleeve's scene draws exactly as `ArmPose::sample` (its dataset stays as it was).
     let (mut a, mut b2) = (SplitMix64::new(9), SplitMix64::new(9));
     for _ in 0..50 {
-        assert_eq!(sleeve.sample_pose(&mut a), ArmPose::sample(&mut b2));
+        let p = sleeve.sample_pose(&mut a);
+        assert_eq!(p, ArmPose::sample(&mut b2));
+        assert_eq!(p.shoulder_twist, 0.0);
     }
 }
 
 #[test]
+fn shoulder_twist_turns_the_plane_the_elbow_bends_in() {
+    // Twist 0: the flexed forearm points down (−Z); twist ±π/2: sideways (±Y), level
+    // with the shoulder. A point on the forearm's axis, past the elbow, shows it.
+    let limb = weft_mesh::limb::LimbParams::default();
+    let elbow = limb.joint_position();
+    let hand = Vector3::new(limb.length, 0.0, 0.0);
+    let at = |twist: f64| {
+        let pose = ArmPose {
+            shoulder_twist: twist,
+            elbow_flexion: 0.8,
+            ..ArmPose::default()
+        };
+        pose.bone_transforms(&elbow)[1].apply(&hand)
+    };
+    let reach = (1.0 - limb.joint) * limb.length * 0.8f64.sin();
+    let (down, left, right) = (
+        at(0.0),
+        at(std::f64::consts::FRAC_PI_2),
+        at(-std::f64::consts::FRAC_PI_2),
+    );
+    assert!((down - Vector3::new(down.x, 0.0, -reach)).norm() < 1e-12, "{down:?}");
+    assert!((left - Vector3::new(down.x, reach, 0.0)).norm() < 1e-12, "{left:?}");
+    assert!((right - Vector3::new(down.x, -reach, 0.0)).norm() < 1e-12, "{right:?}");
+}
+
+#[test]
 fn the_loose_sleeve_settles_onto_the_arm_and_hangs() {
-    // 3 cm of slack: the sleeve falls onto the arm, centimetres, not millimetres.
-    let solved = assert_drapes(DrapeParams::loose_quick(), 1e-2);
+    // 3 cm of slack: the sleeve falls onto the arm, by more than 5 mm on average even
+    // where the arm is tilted steeply (up to 74°) and the slack slides along it instead —
+    // five times the close-fitting sleeve's bound.
+    let solved = assert_drapes(DrapeParams::loose_quick(), 5e-3);
     assert!(solved.iter().all(|e| e.settle_iterations > 0));
 }
 
 #[test]
 fn bad_loose_sleeve_parameters_are_typed_errors_naming_them() {
-    let cases: [(&str, fn(&mut DrapeParams)); 7] = [
+    let cases: [(&str, fn(&mut DrapeParams)); 8] = [
         ("Poisson", |p| p.poisson = 0.5),
         ("elbow flexion range", |p| p.elbow_flexion = [0.8, 0.2]),
         ("shoulder range", |p| p.shoulder_range = 2.0),
@@ -148,6 +188,7 @@ fn bad_loose_sleeve_parameters_are_typed_errors_naming_them() {
         ("seam offset", |p| p.seam_offset = 0.05),
         ("gravity", |p| p.gravity = [0.0, 0.0, f64::NAN]),
         ("skinned guess half-width", |p| p.skinned_guess_half_width = -0.1),
+        ("shoulder twist range", |p| p.twist_range = 2.0),
     ];
     for (name, spoil) in cases {
         let mut p = DrapeParams::loose_quick();
@@ -175,7 +216,7 @@ fn a_guess_that_folds_the_sleeve_at_the_elbow_is_refused() {
 fn drape_parameters_round_trip_and_the_sleeves_json_is_unchanged() {
     // The sleeve's drape.json has no field of the loose sleeve's (its datasets' bytes).
     let json = serde_json::to_string(&DrapeParams::standard()).unwrap();
-    for field in ["shoulder_range", "elbow_flexion", "settle", "skinned_guess"] {
+    for field in ["shoulder_range", "elbow_flexion", "twist", "settle", "skinned_guess"] {
         assert!(!json.contains(field), "{json}");
     }
     for p in [DrapeParams::standard(), DrapeParams::loose()] {
@@ -192,9 +233,9 @@ fn abduction_turns_the_draped_loose_sleeve_rigidly_about_the_vertical() {
     let d = Drape::new(DrapeParams::loose_quick()).unwrap();
     let pose = ArmPose {
         shoulder_flexion: 0.4,
-        shoulder_abduction: 0.0,
+        shoulder_twist: 0.5,
         elbow_flexion: 0.6,
-        bounce: 0.0,
+        ..ArmPose::default()
     };
     let turned = ArmPose {
         shoulder_abduction: 0.7,

@@ -22,7 +22,7 @@ use crate::error::Context;
 use nalgebra::Vector3;
 use weft_data::DrapeDataset;
 use weft_nn::Device;
-use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, predict_each, sqrtmse_maxdist_mm};
+use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
 use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
 use weft_nn::params::Params;
 use weft_proj::RestShape;
@@ -866,7 +866,7 @@ fn write_predictions(
     meta.insert(
         "units".into(),
         "positions (r*, the method's output) and ground_truth (r_T) [examples, vertices, 3] in metres, the `test` \
-         split of the drape dataset, vertices as in its sleeve.obj; pose [examples, 3] in radians; example_index \
+         split of the drape dataset, vertices as in its sleeve.obj; pose [examples, 4] in radians (shoulder flexion, abduction, twist, elbow flexion); example_index \
          [examples]: each example's index in the split"
             .into(),
     );
@@ -888,10 +888,10 @@ fn write_predictions(
             ),
             weft_data::files::Array::f64(
                 "pose",
-                vec![pred.len(), 3],
+                vec![pred.len(), POSE_ANGLES],
                 &pred
                     .iter()
-                    .flat_map(|(i, _)| poses[3 * i..3 * i + 3].iter().copied())
+                    .flat_map(|(i, _)| poses[POSE_ANGLES * i..POSE_ANGLES * (i + 1)].iter().copied())
                     .collect::<Vec<_>>(),
             ),
             weft_data::files::Array::i64("example_index", &index),

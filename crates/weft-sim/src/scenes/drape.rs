@@ -1,8 +1,9 @@
 //! The drape scene (design §8): a sleeve on the posed limb, our analogue of Geng et al.'s
 //! shirt on a posed body (§2, Fig. 1).
 //!
-//! - **Pose** `θ`: shoulder flexion, shoulder abduction and elbow flexion ([`ArmPose`],
-//!   no bounce), drawn uniformly from the ranges of [`super::soft_tissue::SkeletalMotion`].
+//! - **Pose** `θ`: shoulder flexion, shoulder abduction, shoulder twist and elbow flexion
+//!   ([`ArmPose`], no bounce), drawn uniformly from the scene's ranges (for the sleeve
+//!   those of [`super::soft_tissue::SkeletalMotion`], without twist).
 //! - **Body** `B(θ)`: the limb's boundary surface, linear-blend skinned by the two bones
 //!   (the weights of [`forearm_weight`]).
 //! - **Sleeve**: an open tube ([`weft_mesh::generators::tube`]) around the neutral limb
@@ -34,6 +35,9 @@ use crate::scenes::soft_tissue::{
     ArmPose, BoneTransform, ELBOW_HALF_RANGE, ELBOW_MID, SHOULDER_RANGE, blend, forearm_weight,
 };
 use crate::scenes::volume::LimbResolution;
+
+/// Joint angles in a drape pose ([`ArmPose::angles`]), the width of the network's input.
+pub const POSE_ANGLES: usize = 4;
 
 /// Geometry, material and solver settings of the drape scene.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -81,6 +85,10 @@ pub struct DrapeParams {
     /// Range `[lo, hi]` of elbow flexion drawn for a pose (rad).
     #[serde(default = "default_elbow_flexion", skip_serializing_if = "is_default_elbow_flexion")]
     pub elbow_flexion: [f64; 2],
+    /// Range of shoulder twist (about the upper arm, turning the elbow's bend plane)
+    /// drawn for a pose: `±twist_range` (rad). 0 (the sleeve's setting) draws none.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub twist_range: f64,
     /// Damped release before the equilibrium solve: this many proximal steps, each
     /// minimising the energy plus `Σ mᵢ‖x − x_k‖²/(2τ²)` from the previous one (implicit
     /// Euler steps from rest, velocities discarded), then Newton on the energy alone.
@@ -156,6 +164,7 @@ impl DrapeParams {
             max_iterations: 200,
             shoulder_range: SHOULDER_RANGE,
             elbow_flexion: default_elbow_flexion(),
+            twist_range: 0.0,
             settle_steps: 0,
             settle_time_step: 0.0,
             skinned_guess_half_width: 0.0,
@@ -173,10 +182,13 @@ impl DrapeParams {
     /// The loose sleeve (issue 33's garment that hangs): 64 × 47 = 3008 vertices from the
     /// shoulder to mid-forearm, 3 cm off the arm, so the slack hangs as a bag under the
     /// arm, slides along it as the arm tilts and folds at the elbow (docs/DRAPE.md, "The
-    /// loose sleeve"). The shoulder turns ±1 rad, twice the sleeve's range: the arm
-    /// tilts up to 57° either way, so the sleeve slides towards the hand or bunches at the
-    /// seam. (Abduction, about the vertical, turns the whole scene rigidly about the
-    /// gravity axis; the drape depends on it only through that rotation.)
+    /// loose sleeve"). The shoulder turns ±1.3 rad, 2.6 times the sleeve's range: the arm
+    /// tilts up to 74° either way, so the sleeve slides towards the hand or bunches at the
+    /// seam. The shoulder also twists ±π/2 about the upper arm, so the elbow bends
+    /// anywhere from straight down to sideways and gravity pulls the forearm's cloth
+    /// across the elbow fold instead of always into it. (Abduction, about the vertical,
+    /// turns the whole scene rigidly about the gravity axis; the drape depends on it only
+    /// through that rotation.)
     ///
     /// A lighter, stiffer cloth than the sleeve's (150 N/m, 0.5 kg/m², bending 3e-5 N·m):
     /// its bending length `(B/ρg)^⅓` is about 1.8 cm, so folds span several edges, and it
@@ -200,8 +212,9 @@ impl DrapeParams {
             bend_stiffness: 3e-5,
             density: 0.5,
             max_iterations: 400,
-            shoulder_range: 1.0,
+            shoulder_range: 1.3,
             elbow_flexion: [0.1, 1.0],
+            twist_range: std::f64::consts::FRAC_PI_2,
             settle_steps: 3,
             settle_time_step: 0.05,
             skinned_guess_half_width: 0.1,
@@ -264,6 +277,13 @@ impl DrapeParams {
                 reason: "must lie in (0, π/2]",
             });
         }
+        if !(self.twist_range.is_finite() && (0.0..=right).contains(&self.twist_range)) {
+            return Err(Error::InvalidParameter {
+                name: "shoulder twist range (rad)",
+                value: self.twist_range,
+                reason: "must lie in [0, π/2]",
+            });
+        }
         let [lo, hi] = self.elbow_flexion;
         if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi && hi <= right) {
             return Err(Error::Scene(format!(
@@ -290,21 +310,34 @@ impl ArmPose {
     /// shoulder flexion and abduction in ±0.5 rad, elbow flexion in [0.1, 1.3] rad, no
     /// bounce.
     pub fn sample(rng: &mut SplitMix64) -> Self {
-        Self::sample_in(rng, SHOULDER_RANGE, default_elbow_flexion())
+        Self::sample_in(rng, SHOULDER_RANGE, 0.0, default_elbow_flexion())
     }
-    /// A pose drawn uniformly with shoulder flexion and abduction in `±shoulder` and
-    /// elbow flexion in `[elbow[0], elbow[1]]` (rad), in that order, no bounce.
-    pub fn sample_in(rng: &mut SplitMix64, shoulder: f64, elbow: [f64; 2]) -> Self {
+    /// A pose drawn uniformly with shoulder flexion and abduction in `±shoulder`, elbow
+    /// flexion in `[elbow[0], elbow[1]]` and, when `twist` > 0, shoulder twist in
+    /// `±twist` (rad), in that order, no bounce. With `twist` 0 nothing is drawn for it,
+    /// so the stream of poses is the one drawn before the twist existed.
+    pub fn sample_in(rng: &mut SplitMix64, shoulder: f64, twist: f64, elbow: [f64; 2]) -> Self {
+        let shoulder_flexion = rng.uniform(-shoulder, shoulder);
+        let shoulder_abduction = rng.uniform(-shoulder, shoulder);
+        let elbow_flexion = rng.uniform(elbow[0], elbow[1]);
+        let shoulder_twist = if twist > 0.0 { rng.uniform(-twist, twist) } else { 0.0 };
         Self {
-            shoulder_flexion: rng.uniform(-shoulder, shoulder),
-            shoulder_abduction: rng.uniform(-shoulder, shoulder),
-            elbow_flexion: rng.uniform(elbow[0], elbow[1]),
+            shoulder_flexion,
+            shoulder_abduction,
+            shoulder_twist,
+            elbow_flexion,
             bounce: 0.0,
         }
     }
-    /// `[shoulder flexion, shoulder abduction, elbow flexion]` (rad): the network input.
-    pub fn angles(&self) -> [f64; 3] {
-        [self.shoulder_flexion, self.shoulder_abduction, self.elbow_flexion]
+    /// `[shoulder flexion, shoulder abduction, shoulder twist, elbow flexion]` (rad):
+    /// the network input.
+    pub fn angles(&self) -> [f64; POSE_ANGLES] {
+        [
+            self.shoulder_flexion,
+            self.shoulder_abduction,
+            self.shoulder_twist,
+            self.elbow_flexion,
+        ]
     }
 }
 
@@ -325,13 +358,27 @@ fn triangle_frame(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Matri
     Matrix3::from_columns(&[e1, n.cross(&e1), n])
 }
 
-/// The eight corners `(flexion, abduction, elbow)` of a pose range.
-fn range_corners(shoulder: f64, lo: f64, hi: f64) -> impl Iterator<Item = (f64, f64, f64)> {
-    [-shoulder, shoulder].into_iter().flat_map(move |f| {
-        [-shoulder, shoulder]
-            .into_iter()
-            .flat_map(move |a| [lo, hi].map(|e| (f, a, e)))
-    })
+/// The corners of a pose range: flexion and abduction at `±shoulder`, twist at
+/// `±twist`, elbow flexion at `lo` and `hi` (sixteen poses, eight without twist).
+fn range_corners(shoulder: f64, twist: f64, [lo, hi]: [f64; 2]) -> Vec<ArmPose> {
+    let twists = if twist > 0.0 { vec![-twist, twist] } else { vec![0.0] };
+    let mut corners = Vec::new();
+    for shoulder_flexion in [-shoulder, shoulder] {
+        for shoulder_abduction in [-shoulder, shoulder] {
+            for &shoulder_twist in &twists {
+                for elbow_flexion in [lo, hi] {
+                    corners.push(ArmPose {
+                        shoulder_flexion,
+                        shoulder_abduction,
+                        shoulder_twist,
+                        elbow_flexion,
+                        bounce: 0.0,
+                    });
+                }
+            }
+        }
+    }
+    corners
 }
 
 /// The drape scene, built once and solved per pose.
@@ -467,14 +514,8 @@ impl Drape {
         };
         let rest_body = self.body.positions();
         let rest = self.sleeve.positions();
-        let (s, [lo, hi]) = (self.params.shoulder_range, self.params.elbow_flexion);
-        for (flexion, abduction, elbow) in range_corners(s, lo, hi) {
-            let pose = ArmPose {
-                shoulder_flexion: flexion,
-                shoulder_abduction: abduction,
-                elbow_flexion: elbow,
-                bounce: 0.0,
-            };
+        let p = &self.params;
+        for pose in range_corners(p.shoulder_range, p.twist_range, p.elbow_flexion) {
             let transforms = pose.bone_transforms(&self.limb.joint_position());
             let body = self.skin(&transforms);
             let guess: Vec<Vector3<f64>> = self
@@ -493,8 +534,9 @@ impl Drape {
                 .count();
             if folded > 0 {
                 return Err(Error::Scene(format!(
-                    "the kinematic guess folds {folded} sleeve triangles at elbow flexion {elbow} rad \
-                     (shoulder {flexion}, {abduction} rad); narrow the elbow range or the offset"
+                    "the kinematic guess folds {folded} sleeve triangles at elbow flexion {} rad \
+                     (shoulder flexion {}, abduction {}, twist {} rad); narrow the elbow range or the offset",
+                    pose.elbow_flexion, pose.shoulder_flexion, pose.shoulder_abduction, pose.shoulder_twist
                 )));
             }
         }
@@ -502,10 +544,11 @@ impl Drape {
     }
 
     /// A pose drawn from the scene's ranges ([`DrapeParams::shoulder_range`],
-    /// [`DrapeParams::elbow_flexion`]); for the sleeve's defaults the same draw as
-    /// [`ArmPose::sample`].
+    /// [`DrapeParams::twist_range`], [`DrapeParams::elbow_flexion`]); for the sleeve's
+    /// defaults the same draw as [`ArmPose::sample`].
     pub fn sample_pose(&self, rng: &mut SplitMix64) -> ArmPose {
-        ArmPose::sample_in(rng, self.params.shoulder_range, self.params.elbow_flexion)
+        let p = &self.params;
+        ArmPose::sample_in(rng, p.shoulder_range, p.twist_range, p.elbow_flexion)
     }
 
     pub fn params(&self) -> &DrapeParams {

@@ -185,6 +185,11 @@ pub struct ArmPose {
     pub shoulder_flexion: f64,
     /// About +Z.
     pub shoulder_abduction: f64,
+    /// About the upper arm's long axis (+X at rest), before flexion and abduction: it
+    /// turns the plane the elbow bends in, positive towards +Y. The drape's loose sleeve
+    /// draws it; the limb's motions keep it 0.
+    #[serde(default)]
+    pub shoulder_twist: f64,
     /// About +Y at the elbow; positive bends the forearm towards −Z (palm down).
     pub elbow_flexion: f64,
     /// Vertical shoulder offset (m).
@@ -195,8 +200,12 @@ impl ArmPose {
     /// The transforms of the upper arm (bone 0, about the shoulder at the origin) and
     /// the forearm (bone 1, about the elbow at `elbow`, chained to bone 0).
     pub fn bone_transforms(&self, elbow: &Vector3<f64>) -> [BoneTransform; 2] {
-        let r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction)
+        let mut r0 = Rotation3::from_axis_angle(&Vector3::z_axis(), self.shoulder_abduction)
             * Rotation3::from_axis_angle(&Vector3::y_axis(), self.shoulder_flexion);
+        // Skipped at 0 so the poses without twist keep their bits.
+        if self.shoulder_twist != 0.0 {
+            r0 *= Rotation3::from_axis_angle(&Vector3::x_axis(), self.shoulder_twist);
+        }
         let t0 = Vector3::new(0.0, 0.0, self.bounce);
         let upper = BoneTransform {
             rotation: r0,
@@ -309,6 +318,7 @@ impl SkeletalMotion {
         ArmPose {
             shoulder_flexion: self.shoulder_flexion.at(t),
             shoulder_abduction: self.shoulder_abduction.at(t),
+            shoulder_twist: 0.0,
             elbow_flexion: self.elbow_flexion.at(t),
             bounce: self.bounce.at(t),
         }
