@@ -18,8 +18,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Instant;
 use weft_proj::{
-    ConicSolver, InextensibilityLayer, QuasistaticLayer, QuasistaticParams, QuasistaticSolver, SocpSettings,
-    ZeroLengthScaling,
+    ConicSolver, InextensibilityLayer, QuasistaticAdjoint, QuasistaticLayer, QuasistaticParams, QuasistaticSolver,
+    SocpSettings, ZeroLengthScaling,
 };
 
 /// A network-like prediction: 15 % stretch along x, 5 % along y, a smooth bump and
@@ -132,6 +132,15 @@ fn bench(c: &mut Criterion) {
         },
     )
     .expect("quasistatic layer");
+    // The previous code path: the forward pass factorises H(r*) for the backward pass.
+    let eager = QuasistaticLayer::new(
+        &rest,
+        QuasistaticParams {
+            adjoint: QuasistaticAdjoint::FactorizeAtSolution,
+            ..QuasistaticParams::default()
+        },
+    )
+    .expect("quasistatic layer");
     let mu = ZeroLengthScaling::Global(0.1);
     let (qsol, qreport) = quasi.forward(&pred, &mu).expect("quasistatic forward");
     eprintln!("quasistatic: {qreport:?}");
@@ -209,6 +218,28 @@ fn bench(c: &mut Criterion) {
     group.bench_function("backward", |b| {
         b.iter(|| quasi.backward(&qsol, black_box(&grad)).expect("backward"))
     });
+    // Same run, the previous path (H(r*) factorised in the forward pass), and a training
+    // example's forward + backward both ways.
+    group.bench_function("forward_factorize_at_solution", |b| {
+        b.iter(|| eager.forward(black_box(&pred), &mu).expect("forward"))
+    });
+    let (esol, _) = eager.forward(&pred, &mu).expect("forward");
+    group.bench_function("backward_factorize_at_solution", |b| {
+        b.iter(|| eager.backward(&esol, black_box(&grad)).expect("backward"))
+    });
+    for (name, layer) in [
+        ("forward_backward_warm_small", &quasi),
+        ("forward_backward_warm_small_factorize_at_solution", &eager),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let (sol, _) = layer
+                    .forward_from(black_box(&pred), &mu, Some(&start_small))
+                    .expect("forward");
+                layer.backward(&sol, black_box(&grad)).expect("backward")
+            })
+        });
+    }
     // The Newton–Krylov forward pass leaves no factor: its backward pass factorises.
     let (ksol, _) = krylov.forward(&pred, &mu).expect("forward");
     group.bench_function("backward_newton_krylov", |b| {

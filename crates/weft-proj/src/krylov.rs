@@ -56,14 +56,36 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// Preconditioned CG for `H x = b` from `x = 0`, to `‖r‖ ≤ rel_tol ‖b‖`; returns the
-/// iterations and whether it stopped at non-positive curvature.
-fn pcg(h: &SymmetricMatrix, m: &BlockJacobi, b: &[f64], x: &mut [f64], rel_tol: f64, max_iter: usize) -> (usize, bool) {
+/// How a [`pcg`] solve ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct CgOutcome {
+    pub iterations: usize,
+    /// It stopped at a direction of non-positive curvature.
+    pub negative_curvature: bool,
+    /// It reached the requested relative residual.
+    pub converged: bool,
+}
+
+/// Preconditioned CG for `H x = b` from `x = 0`, to `‖r‖ ≤ rel_tol ‖b‖`, with
+/// `precondition(r, z)` writing `z = M⁻¹ r` for an SPD `M`.
+pub(crate) fn pcg(
+    h: &SymmetricMatrix,
+    precondition: impl Fn(&[f64], &mut [f64]),
+    b: &[f64],
+    x: &mut [f64],
+    rel_tol: f64,
+    max_iter: usize,
+) -> CgOutcome {
     let n = b.len();
+    let stop = |iterations, negative_curvature, converged| CgOutcome {
+        iterations,
+        negative_curvature,
+        converged,
+    };
     x.iter_mut().for_each(|v| *v = 0.0);
     let mut r = b.to_vec();
     let mut z = vec![0.0; n];
-    m.apply(&r, &mut z);
+    precondition(&r, &mut z);
     let mut p = z.clone();
     let mut hp = vec![0.0; n];
     let mut rz = dot(&r, &z);
@@ -77,7 +99,7 @@ fn pcg(h: &SymmetricMatrix, m: &BlockJacobi, b: &[f64], x: &mut [f64], rel_tol: 
                 // preconditioned gradient (a descent direction, M being SPD).
                 x.copy_from_slice(&z);
             }
-            return (k, true);
+            return stop(k, true, false);
         }
         let alpha = rz / curvature;
         for i in 0..n {
@@ -85,9 +107,9 @@ fn pcg(h: &SymmetricMatrix, m: &BlockJacobi, b: &[f64], x: &mut [f64], rel_tol: 
             r[i] -= alpha * hp[i];
         }
         if dot(&r, &r).sqrt() <= target {
-            return (k + 1, false);
+            return stop(k + 1, false, true);
         }
-        m.apply(&r, &mut z);
+        precondition(&r, &mut z);
         let rz_next = dot(&r, &z);
         let beta = rz_next / rz;
         rz = rz_next;
@@ -95,7 +117,7 @@ fn pcg(h: &SymmetricMatrix, m: &BlockJacobi, b: &[f64], x: &mut [f64], rel_tol: 
             p[i] = z[i] + beta * p[i];
         }
     }
-    (max_iter, false)
+    stop(max_iter, false, false)
 }
 
 /// What [`minimize`] did.
@@ -157,7 +179,7 @@ pub(crate) fn minimize(
         // Floored so CG is never asked for more than round-off.
         let eta = (residual / force_scale).sqrt().clamp(1e-10, 0.5);
         let neg: Vec<f64> = grad.iter().map(|g| -g).collect();
-        let (its, _) = pcg(hessian, &m, &neg, &mut dir, eta, MAX_CG);
+        let its = pcg(hessian, |r, z| m.apply(r, z), &neg, &mut dir, eta, MAX_CG).iterations;
         report.cg_iterations += its;
         let slope = dot(&dir, &grad);
         if !(slope < 0.0) {
@@ -235,8 +257,8 @@ mod tests {
         let b = [1.0, 2.0, 3.0, -1.0, 0.5, 0.0];
         let m = BlockJacobi::new(&h);
         let mut x = [0.0; 6];
-        let (_, negative) = pcg(&h, &m, &b, &mut x, 1e-12, 50);
-        assert!(!negative);
+        let out = pcg(&h, |r, z| m.apply(r, z), &b, &mut x, 1e-12, 50);
+        assert!(!out.negative_curvature && out.converged);
         let mut hx = [0.0; 6];
         h.mul_vec(&x, &mut hx);
         for (a, b) in hx.iter().zip(&b) {
@@ -248,7 +270,7 @@ mod tests {
             neg.add(i, i, -4.0);
         }
         let m = BlockJacobi::new(&neg);
-        let (its, negative) = pcg(&neg, &m, &b, &mut x, 1e-12, 50);
-        assert!(negative && its == 0);
+        let out = pcg(&neg, |r, z| m.apply(r, z), &b, &mut x, 1e-12, 50);
+        assert!(out.negative_curvature && !out.converged && out.iterations == 0);
     }
 }

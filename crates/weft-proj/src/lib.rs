@@ -54,8 +54,8 @@ pub use batch::WarmStarts;
 pub use error::{Error, Result};
 pub use metrics::{StrainSummary, strain_summary};
 pub use quasistatic::{
-    QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport, QuasistaticSolution,
-    QuasistaticSolver, ZeroLengthScaling,
+    QuasistaticAdjoint, QuasistaticGradient, QuasistaticLayer, QuasistaticParams, QuasistaticReport,
+    QuasistaticSolution, QuasistaticSolver, ZeroLengthScaling,
 };
 pub use rest::RestShape;
 pub use socp::{

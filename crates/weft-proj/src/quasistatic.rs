@@ -25,9 +25,21 @@
 //! `H dr* = W dr̂ + k_i (r̂_i − r*_i) dμ_i` with `H` the *true* (unprojected) Hessian at
 //! `r*`. One adjoint solve `H η = ∂E/∂r*` (Eq. 14) then gives
 //! `∂E/∂r̂_i = μ_i k_i η_i` and `∂E/∂μ_i = k_i η_i · (r̂_i − r*_i)` (Eq. 16), whose sum over
-//! vertices is `∂E/∂μ` for a global `μ`. The forward pass factorises `H(r*)` after
-//! convergence and keeps the factor, so the backward pass is one pair of triangular
-//! solves.
+//! vertices is `∂E/∂μ` for a global `μ`. The forward pass keeps Newton's last fresh
+//! factor of the true Hessian — at an iterate a step or more before `r*`, where the
+//! iterates converge quadratically, so it differs from `H(r*)` by `O(‖x − r*‖)` — and the
+//! backward pass solves the adjoint system by conjugate gradients on `H(r*)`
+//! preconditioned with it, to a relative residual of 1e-12 in a few iterations. That
+//! replaces the factorisation at `r*` a forward pass used to make for the backward pass
+//! (a third of a warm forward's cost). Where there is no such factor (a start that took
+//! no true-Hessian step, a last factor that needed a diagonal shift) the forward pass
+//! factorises `H(r*)` itself, and where CG does not converge the backward pass does.
+//!
+//! A saddle `r*` (an indefinite `H(r*)`, e.g. a squeezed sheet that has not buckled) is
+//! refused with [`Error::NotAMinimum`]: by the forward pass when Newton's last factor
+//! needed a shift, else by the backward pass when CG meets non-positive curvature and the
+//! factorisation at `r*` needs a shift. A shifted matrix would give the gradient of
+//! another problem.
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -61,6 +73,23 @@ pub struct QuasistaticParams {
     pub max_iterations: usize,
     /// How Newton's linear systems are solved.
     pub solver: QuasistaticSolver,
+    /// How the backward pass solves the adjoint system (Cholesky solver only).
+    pub adjoint: QuasistaticAdjoint,
+}
+
+/// How the Cholesky path prepares the adjoint solve `H(r*) η = ∂E/∂r*` (Eq. 14).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QuasistaticAdjoint {
+    /// Keep Newton's last factor of the true Hessian (a step or more before `r*`) and
+    /// solve by CG on `H(r*)` preconditioned with it; factorise `H(r*)` only where there
+    /// is no such factor or CG fails. A saddle is then refused by the backward pass
+    /// unless the forward pass already saw it.
+    #[default]
+    NewtonFactor,
+    /// Factorise `H(r*)` in the forward pass (one more factorisation, the behaviour
+    /// before issue 34): every forward pass refuses a saddle itself.
+    FactorizeAtSolution,
 }
 
 /// The linear solver inside the quasistatic layer's Newton iterations.
@@ -68,8 +97,8 @@ pub struct QuasistaticParams {
 #[serde(rename_all = "kebab-case")]
 pub enum QuasistaticSolver {
     /// Sparse Cholesky of every Newton matrix (weft-sim's `NewtonSolver`, factorisations
-    /// reused while they contract the residual); the forward pass also factorises the
-    /// Hessian at `r*` for the backward pass.
+    /// reused while they contract the residual); the backward pass's adjoint solve as
+    /// [`QuasistaticAdjoint`] says.
     #[default]
     Cholesky,
     /// Truncated Newton with block-Jacobi preconditioned conjugate gradients
@@ -88,6 +117,7 @@ impl Default for QuasistaticParams {
             tolerance: 1e-8,
             max_iterations: 100,
             solver: QuasistaticSolver::Cholesky,
+            adjoint: QuasistaticAdjoint::NewtonFactor,
         }
     }
 }
@@ -157,9 +187,31 @@ pub struct QuasistaticSolution {
     positions: Vec<f64>,
     prediction: Vec<f64>,
     mu: Vec<f64>,
-    /// The Cholesky factor of the true Hessian at `r*`, when the forward pass made it.
-    factor: Option<CholeskyFactor>,
+    /// What the backward pass solves the adjoint system with.
+    adjoint: Adjoint,
 }
+
+/// How the backward pass solves the adjoint system `H(r*) η = ∂E/∂r*` (Eq. 14).
+#[derive(Debug, Clone)]
+enum Adjoint {
+    /// The Cholesky factor of the true Hessian at `r*`: one solve.
+    Exact(CholeskyFactor),
+    /// The factor of the true, unshifted Hessian at Newton's last freshly factorised
+    /// iterate, a step or more before `r*`: CG on `H(r*)` preconditioned with it
+    /// ([`ADJOINT_CG_TOLERANCE`]), the exact factorisation only if CG fails.
+    NearbyFactor(CholeskyFactor),
+    /// Nothing (the Newton–Krylov path): factorise `H(r*)` in the backward pass.
+    Factorize,
+}
+
+/// Relative residual `‖g − Hη‖ / ‖g‖` at which the adjoint CG stops: the gradient is
+/// then as exact as the factorised solve's to about `κ(H) · 1e-12`, far below the f32
+/// network that consumes it.
+const ADJOINT_CG_TOLERANCE: f64 = 1e-12;
+/// CG iterations allowed before the adjoint falls back to factorising `H(r*)`: with a
+/// factor from one Newton step away the preconditioned matrix is `I + O(‖x − r*‖)`, and
+/// CG needs a handful.
+const ADJOINT_CG_MAX_ITERATIONS: usize = 20;
 
 impl QuasistaticSolution {
     /// Equilibrium positions `r*`, flat, vertex order of the input.
@@ -335,15 +387,35 @@ impl QuasistaticLayer {
         let anchors = self.anchors(pred, &mu)?;
         let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
         let mut x = start.unwrap_or(pred).to_vec();
-        let (newton, cg_iterations, factor) = match self.params.solver {
+        let (newton, cg_iterations, (adjoint, shifts)) = match self.params.solver {
             QuasistaticSolver::Cholesky => {
-                let (report, factor) = self.with_solver(&terms, |solver| {
+                let (report, adjoint) = self.with_solver(&terms, |solver| {
                     let report = self.minimize(solver, &terms, &mut x)?;
-                    // Eq. 14 needs the true Hessian at r*; factorise it once here for backward.
-                    let factor = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
-                    Ok((report, factor))
+                    // Eq. 14 needs the true Hessian at r*. Newton's last factor of it, a
+                    // step or more before r*, preconditions CG on it in the backward pass;
+                    // without one (a start that needed no true-Hessian step, or a shifted
+                    // or projected last factor) factorise it here, which also tells a
+                    // saddle from a minimum.
+                    let last = solver.take_last_factor();
+                    match last {
+                        Some(f)
+                            if !f.projected
+                                && f.shifts == 0
+                                && self.params.adjoint == QuasistaticAdjoint::NewtonFactor =>
+                        {
+                            Ok((report, Ok(f.factor)))
+                        }
+                        _ => {
+                            let f = solver.factorize_at(&terms, &x, HessianProjection::Never)?;
+                            Ok((report, Err((f.factor, f.shifts))))
+                        }
+                    }
                 })?;
-                (report, 0, Some((factor.factor, factor.shifts)))
+                let adjoint = match adjoint {
+                    Ok(nearby) => (Adjoint::NearbyFactor(nearby), 0),
+                    Err((exact, shifts)) => (Adjoint::Exact(exact), shifts),
+                };
+                (report, 0, adjoint)
             }
             QuasistaticSolver::NewtonKrylov => {
                 let mut hessian = SymmetricMatrix::zeros(self.pattern.clone());
@@ -370,7 +442,7 @@ impl QuasistaticLayer {
                     rejected_steps: 0,
                     fallback: None,
                 };
-                (report, k.cg_iterations, None)
+                (report, k.cg_iterations, (Adjoint::Factorize, 0))
             }
         };
         check_output("quasistatic positions", &x)?;
@@ -395,11 +467,9 @@ impl QuasistaticLayer {
         }
         // The adjoint solve (Eq. 14) needs the true Hessian at r*; an indefinite one means
         // r* is a saddle, and a shifted matrix would give the gradient of another problem.
-        let factor = match factor {
-            Some((_, shifts)) if shifts > 0 => return Err(Error::NotAMinimum { shifts }),
-            Some((f, _)) => Some(f),
-            None => None,
-        };
+        if shifts > 0 {
+            return Err(Error::NotAMinimum { shifts });
+        }
         let report = QuasistaticReport {
             newton,
             cg_iterations,
@@ -410,7 +480,7 @@ impl QuasistaticLayer {
                 positions: x,
                 prediction: pred.to_vec(),
                 mu,
-                factor,
+                adjoint,
             },
             report,
         ))
@@ -477,7 +547,11 @@ impl QuasistaticLayer {
     pub fn backward(&self, solution: &QuasistaticSolution, grad_out: &[f64]) -> Result<QuasistaticGradient> {
         self.rest.check_positions("output gradient", grad_out)?;
         let n = self.num_vertices();
-        if solution.positions.len() != 3 * n || solution.factor.as_ref().is_some_and(|f| f.dim() != 3 * n) {
+        let factor_dim = match &solution.adjoint {
+            Adjoint::Exact(f) | Adjoint::NearbyFactor(f) => f.dim(),
+            Adjoint::Factorize => 3 * n,
+        };
+        if solution.positions.len() != 3 * n || factor_dim != 3 * n {
             return Err(Error::LengthMismatch {
                 what: "forward state",
                 expected: 3 * n,
@@ -485,23 +559,52 @@ impl QuasistaticLayer {
             });
         }
         let mut eta = grad_out.to_vec();
-        match &solution.factor {
-            Some(f) => f.solve_in_place(&mut eta),
-            None => {
-                // The Newton–Krylov forward pass made no factor: factorise the true
-                // Hessian at r* now (Eq. 14), refusing a saddle as the forward pass does.
-                let anchors = self.anchors(&solution.prediction, &solution.mu)?;
-                let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
-                let at_solution = self.with_solver(&terms, |solver| {
-                    solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
-                })?;
-                if at_solution.shifts > 0 {
-                    return Err(Error::NotAMinimum {
-                        shifts: at_solution.shifts,
-                    });
-                }
-                at_solution.factor.solve_in_place(&mut eta);
+        let anchors = self.anchors(&solution.prediction, &solution.mu)?;
+        let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+        let solved = match &solution.adjoint {
+            Adjoint::Exact(f) => {
+                f.solve_in_place(&mut eta);
+                true
             }
+            Adjoint::NearbyFactor(_) if grad_out.iter().all(|g| *g == 0.0) => {
+                eta.fill(0.0);
+                true
+            }
+            Adjoint::NearbyFactor(f) => {
+                let mut h = SymmetricMatrix::zeros(self.pattern.clone());
+                for t in terms {
+                    t.add_hessian(&solution.positions, false, &mut h);
+                }
+                let precondition = |r: &[f64], z: &mut [f64]| {
+                    z.copy_from_slice(r);
+                    f.solve_in_place(z);
+                };
+                let out = crate::krylov::pcg(
+                    &h,
+                    precondition,
+                    grad_out,
+                    &mut eta,
+                    ADJOINT_CG_TOLERANCE,
+                    ADJOINT_CG_MAX_ITERATIONS,
+                );
+                out.converged
+            }
+            Adjoint::Factorize => false,
+        };
+        if !solved {
+            // No factor at r* (the Newton–Krylov path), or CG with the nearby one did
+            // not converge: factorise the true Hessian at r* now (Eq. 14), refusing a
+            // saddle as the forward pass does.
+            let at_solution = self.with_solver(&terms, |solver| {
+                solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
+            })?;
+            if at_solution.shifts > 0 {
+                return Err(Error::NotAMinimum {
+                    shifts: at_solution.shifts,
+                });
+            }
+            eta.copy_from_slice(grad_out);
+            at_solution.factor.solve_in_place(&mut eta);
         }
         let base = self.zero_length_base();
         let pred: Vec<f64> = (0..3 * n).map(|i| solution.mu[i / 3] * base[i / 3] * eta[i]).collect();
@@ -551,5 +654,58 @@ impl QuasistaticLayer {
         grads: &[G],
     ) -> Result<Vec<QuasistaticGradient>> {
         crate::batch::backward_batch(solutions, grads, |s, g| self.backward(s, g))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use weft_testkit::{TestRng, max_norm_rel_error};
+
+    #[test]
+    fn the_adjoint_by_cg_with_newtons_last_factor_matches_the_factorised_one() {
+        // A stretched, noisy prediction of a 9 × 9 sheet: Newton takes true-Hessian steps,
+        // so the forward pass keeps the last factor, and the backward pass through it must
+        // give the gradient the factorisation at r* gives, to the CG tolerance.
+        let rest = weft_mesh::generators::sheet(9, 1.0).unwrap();
+        let layer = QuasistaticLayer::new(&rest, QuasistaticParams::default()).unwrap();
+        let factorizing = QuasistaticLayer::new(
+            &rest,
+            QuasistaticParams {
+                adjoint: QuasistaticAdjoint::FactorizeAtSolution,
+                ..QuasistaticParams::default()
+            },
+        )
+        .unwrap();
+        let mut rng = TestRng::new(5);
+        let pred: Vec<f64> = rest
+            .flat_positions()
+            .iter()
+            .map(|x| 1.15 * x + rng.uniform(-0.01, 0.01))
+            .collect();
+        for mu in [ZeroLengthScaling::Global(0.1), ZeroLengthScaling::Global(1.0)] {
+            let (sol, _) = layer.forward(&pred, &mu).unwrap();
+            assert!(matches!(sol.adjoint, Adjoint::NearbyFactor(_)), "{:?}", sol.adjoint);
+            let g = rng.vec(pred.len(), -1.0, 1.0);
+            let by_cg = layer.backward(&sol, &g).unwrap();
+            let exact = QuasistaticSolution {
+                adjoint: Adjoint::Factorize,
+                ..sol.clone()
+            };
+            let by_factor = layer.backward(&exact, &g).unwrap();
+            // The option that factorises in the forward pass: the same r* and gradient.
+            let (eager, _) = factorizing.forward(&pred, &mu).unwrap();
+            assert!(matches!(eager.adjoint, Adjoint::Exact(_)));
+            assert_eq!(eager.positions, sol.positions);
+            let by_eager = factorizing.backward(&eager, &g).unwrap();
+            assert!(max_norm_rel_error(&by_eager.pred, &by_factor.pred) < 1e-12);
+            let err = max_norm_rel_error(&by_cg.pred, &by_factor.pred);
+            assert!(err < 1e-9, "∂E/∂r̂: CG against the factor at r*: {err:e}");
+            let err_mu = max_norm_rel_error(&by_cg.mu_per_vertex, &by_factor.mu_per_vertex);
+            assert!(err_mu < 1e-8, "∂E/∂μ_i: {err_mu:e}");
+            // A zero output gradient gives zero input gradients.
+            let zero = layer.backward(&sol, &vec![0.0; pred.len()]).unwrap();
+            assert!(zero.pred.iter().chain(&zero.mu_per_vertex).all(|v| *v == 0.0));
+        }
     }
 }

@@ -129,6 +129,9 @@ pub struct Factorized {
     pub shifts: usize,
     /// Numeric factorisations attempted, failed ones included.
     pub numeric: usize,
+    /// Whether the factorised matrix is the per-element PSD projection of the Hessian
+    /// (else the true Hessian, shifted if `shifts > 0`).
+    pub projected: bool,
 }
 
 /// What one minimisation did.
@@ -238,6 +241,9 @@ pub struct NewtonSolver {
     /// The trust region's preconditioner: the projected Hessian, its factor while it
     /// serves, and the radius the last call ended with.
     preconditioner: trust_region::Preconditioner,
+    /// The last matrix the line-search Newton of the last minimisation factorised afresh
+    /// ([`NewtonSolver::take_last_factor`]).
+    last_factor: Option<Factorized>,
 }
 
 impl NewtonSolver {
@@ -269,7 +275,18 @@ impl NewtonSolver {
             trial: vec![0.0; num_dofs],
             last_shift: 0.0,
             preconditioner: trust_region::Preconditioner::new(pattern),
+            last_factor: None,
         })
+    }
+
+    /// The last factorisation the previous [`minimize`](Self::minimize) made afresh
+    /// (line search only; `None` if it factorised nothing, e.g. a start already
+    /// converged), handed over rather than dropped. Its matrix is the Newton matrix at an
+    /// iterate one or more steps before the minimiser: close to the Hessian there, so a
+    /// preconditioner with which CG solves an adjoint system at the minimiser in a few
+    /// iterations instead of a new factorisation.
+    pub fn take_last_factor(&mut self) -> Option<Factorized> {
+        self.last_factor.take()
     }
 
     pub fn fixed(&self) -> &[bool] {
@@ -339,6 +356,7 @@ impl NewtonSolver {
                         factor,
                         shifts: 0,
                         numeric: k + 1,
+                        projected: project,
                     });
                 }
                 Err(weft_linalg::Error::NotPositiveDefinite) if k + 1 < attempts.len() => continue,
@@ -362,6 +380,7 @@ impl NewtonSolver {
             factor,
             shifts,
             numeric: attempts.len() + shifts,
+            projected: *attempts.last().unwrap_or(&false),
         })
     }
 
@@ -510,6 +529,7 @@ impl NewtonSolver {
         settings: &NewtonSettings,
     ) -> Result<NewtonReport> {
         let start = Instant::now();
+        self.last_factor = None;
         let (energy, residual) = self.start(terms, x)?;
         let mut progress = Progress {
             energy,
@@ -596,24 +616,24 @@ impl NewtonSolver {
         settings: &NewtonSettings,
         progress: &mut Progress,
     ) -> Result<()> {
-        let mut held: Option<weft_linalg::CholeskyFactor> = None;
+        // The factor in use (the last fresh one), and whether the next step reuses it.
+        let mut current: Option<Factorized> = None;
+        let mut hold = false;
         while progress.iterate(settings)? {
-            let (factor, fresh) = match held.take() {
-                Some(f) => (f, false),
-                None => {
-                    let Factorized {
-                        factor: f,
-                        shifts,
-                        numeric,
-                    } = self.factorize_at(terms, x, settings.projection)?;
-                    progress.report.regularizations += shifts;
-                    progress.report.factorizations += numeric;
-                    progress.floor = self.residual_floor(x);
-                    progress.report.residual_floor = progress.floor;
-                    (f, true)
-                }
+            let fresh = !hold || current.is_none();
+            if fresh {
+                let f = self.factorize_at(terms, x, settings.projection)?;
+                progress.report.regularizations += f.shifts;
+                progress.report.factorizations += f.numeric;
+                progress.floor = self.residual_floor(x);
+                progress.report.residual_floor = progress.floor;
+                current = Some(f);
+            }
+            hold = false;
+            let Some(factorized) = current.as_ref() else {
+                unreachable!("a factor was just made")
             };
-            let slope = self.direction(&factor, &progress.grad);
+            let slope = self.direction(&factorized.factor, &progress.grad);
             let choice = self.line_search(
                 terms,
                 x,
@@ -636,11 +656,10 @@ impl NewtonSolver {
             }
             if settings.reuse_factorization && full_step {
                 let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };
-                if progress.residual * needed <= previous {
-                    held = Some(factor);
-                }
+                hold = progress.residual * needed <= previous;
             }
         }
+        self.last_factor = current;
         Ok(())
     }
 }
