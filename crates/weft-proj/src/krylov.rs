@@ -83,6 +83,10 @@ pub(crate) fn pcg(
         converged,
     };
     x.iter_mut().for_each(|v| *v = 0.0);
+    if b.iter().all(|v| *v == 0.0) {
+        // x = 0 solves it exactly (the first direction would be zero, not negative).
+        return stop(0, false, true);
+    }
     let mut r = b.to_vec();
     let mut z = vec![0.0; n];
     precondition(&r, &mut z);

@@ -559,52 +559,48 @@ impl QuasistaticLayer {
             });
         }
         let mut eta = grad_out.to_vec();
-        let anchors = self.anchors(&solution.prediction, &solution.mu)?;
-        let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
-        let solved = match &solution.adjoint {
-            Adjoint::Exact(f) => {
-                f.solve_in_place(&mut eta);
-                true
-            }
-            Adjoint::NearbyFactor(_) if grad_out.iter().all(|g| *g == 0.0) => {
-                eta.fill(0.0);
-                true
-            }
-            Adjoint::NearbyFactor(f) => {
-                let mut h = SymmetricMatrix::zeros(self.pattern.clone());
-                for t in terms {
-                    t.add_hessian(&solution.positions, false, &mut h);
+        if let Adjoint::Exact(f) = &solution.adjoint {
+            f.solve_in_place(&mut eta);
+        } else {
+            let anchors = self.anchors(&solution.prediction, &solution.mu)?;
+            let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+            let solved = match &solution.adjoint {
+                Adjoint::NearbyFactor(f) => {
+                    let mut h = SymmetricMatrix::zeros(self.pattern.clone());
+                    for t in terms {
+                        t.add_hessian(&solution.positions, false, &mut h);
+                    }
+                    let precondition = |r: &[f64], z: &mut [f64]| {
+                        z.copy_from_slice(r);
+                        f.solve_in_place(z);
+                    };
+                    let out = crate::krylov::pcg(
+                        &h,
+                        precondition,
+                        grad_out,
+                        &mut eta,
+                        ADJOINT_CG_TOLERANCE,
+                        ADJOINT_CG_MAX_ITERATIONS,
+                    );
+                    out.converged
                 }
-                let precondition = |r: &[f64], z: &mut [f64]| {
-                    z.copy_from_slice(r);
-                    f.solve_in_place(z);
-                };
-                let out = crate::krylov::pcg(
-                    &h,
-                    precondition,
-                    grad_out,
-                    &mut eta,
-                    ADJOINT_CG_TOLERANCE,
-                    ADJOINT_CG_MAX_ITERATIONS,
-                );
-                out.converged
+                _ => false,
+            };
+            if !solved {
+                // No factor at r* (the Newton–Krylov path), or CG with the nearby one did
+                // not converge: factorise the true Hessian at r* now (Eq. 14), refusing a
+                // saddle as the forward pass does.
+                let at_solution = self.with_solver(&terms, |solver| {
+                    solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
+                })?;
+                if at_solution.shifts > 0 {
+                    return Err(Error::NotAMinimum {
+                        shifts: at_solution.shifts,
+                    });
+                }
+                eta.copy_from_slice(grad_out);
+                at_solution.factor.solve_in_place(&mut eta);
             }
-            Adjoint::Factorize => false,
-        };
-        if !solved {
-            // No factor at r* (the Newton–Krylov path), or CG with the nearby one did
-            // not converge: factorise the true Hessian at r* now (Eq. 14), refusing a
-            // saddle as the forward pass does.
-            let at_solution = self.with_solver(&terms, |solver| {
-                solver.factorize_at(&terms, &solution.positions, HessianProjection::Never)
-            })?;
-            if at_solution.shifts > 0 {
-                return Err(Error::NotAMinimum {
-                    shifts: at_solution.shifts,
-                });
-            }
-            eta.copy_from_slice(grad_out);
-            at_solution.factor.solve_in_place(&mut eta);
         }
         let base = self.zero_length_base();
         let pred: Vec<f64> = (0..3 * n).map(|i| solution.mu[i / 3] * base[i / 3] * eta[i]).collect();

@@ -196,7 +196,7 @@ impl DrapeParams {
     /// sleeve with its own weights, blended over ±10 cm about the elbow: bound to the body
     /// 3 cm off the skin, its inner-elbow offsets would cross from 0.5 rad of elbow
     /// flexion. Skinned, it stays unfolded up to 1.0 rad, the scene's range (it checks
-    /// the corners of the range when built; at 1.1 rad the inner elbow crushes). Newton
+    /// both ends of the elbow range when built; at 1.1 rad the inner elbow crushes). Newton
     /// starts after three settle steps of 0.05 s from the guess, which lower the sleeve
     /// onto the arm as a damped fall would instead of in one long Newton step: with them,
     /// starts 2 mm off the guess end on the same equilibrium, without them in others
@@ -358,29 +358,6 @@ fn triangle_frame(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Matri
     Matrix3::from_columns(&[e1, n.cross(&e1), n])
 }
 
-/// The corners of a pose range: flexion and abduction at `±shoulder`, twist at
-/// `±twist`, elbow flexion at `lo` and `hi` (sixteen poses, eight without twist).
-fn range_corners(shoulder: f64, twist: f64, [lo, hi]: [f64; 2]) -> Vec<ArmPose> {
-    let twists = if twist > 0.0 { vec![-twist, twist] } else { vec![0.0] };
-    let mut corners = Vec::new();
-    for shoulder_flexion in [-shoulder, shoulder] {
-        for shoulder_abduction in [-shoulder, shoulder] {
-            for &shoulder_twist in &twists {
-                for elbow_flexion in [lo, hi] {
-                    corners.push(ArmPose {
-                        shoulder_flexion,
-                        shoulder_abduction,
-                        shoulder_twist,
-                        elbow_flexion,
-                        bounce: 0.0,
-                    });
-                }
-            }
-        }
-    }
-    corners
-}
-
 /// The drape scene, built once and solved per pose.
 #[derive(Debug)]
 pub struct Drape {
@@ -499,8 +476,8 @@ impl Drape {
         Ok(drape)
     }
 
-    /// The guess must not fold the sleeve anywhere in the pose range: at each corner of
-    /// the range no triangle may turn over against the body triangle its first vertex is
+    /// The guess must not fold the sleeve anywhere in the pose range: at both ends of
+    /// the elbow range no triangle may turn over against the body triangle its first vertex is
     /// bound to (the sign of its normal along that triangle's normal changes from rest)
     /// or shrink below 0.3 of its rest area. A folded guess (offsets crossing on the
     /// inside of a bent elbow) would start Newton from a self-intersecting sleeve, and
@@ -514,8 +491,13 @@ impl Drape {
         };
         let rest_body = self.body.positions();
         let rest = self.sleeve.positions();
-        let p = &self.params;
-        for pose in range_corners(p.shoulder_range, p.twist_range, p.elbow_flexion) {
+        // Only the elbow matters: flexion, abduction and twist turn both bones, hence the
+        // skinned body and the guess, by one rotation, which leaves every test below as is.
+        for elbow_flexion in self.params.elbow_flexion {
+            let pose = ArmPose {
+                elbow_flexion,
+                ..ArmPose::default()
+            };
             let transforms = pose.bone_transforms(&self.limb.joint_position());
             let body = self.skin(&transforms);
             let guess: Vec<Vector3<f64>> = self
@@ -534,9 +516,8 @@ impl Drape {
                 .count();
             if folded > 0 {
                 return Err(Error::Scene(format!(
-                    "the kinematic guess folds {folded} sleeve triangles at elbow flexion {} rad \
-                     (shoulder flexion {}, abduction {}, twist {} rad); narrow the elbow range or the offset",
-                    pose.elbow_flexion, pose.shoulder_flexion, pose.shoulder_abduction, pose.shoulder_twist
+                    "the kinematic guess folds {folded} sleeve triangles at elbow flexion {elbow_flexion} rad; \
+                     narrow the elbow range or the offset"
                 )));
             }
         }
