@@ -14,6 +14,8 @@ pub enum Error {
         expected: usize,
         got: usize,
     },
+    #[error("the two matrices have different sparsity patterns")]
+    PatternMismatch,
     #[error("non-finite value in {0}")]
     NonFinite(&'static str),
 }

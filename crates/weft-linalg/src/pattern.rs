@@ -22,8 +22,9 @@ pub struct SymmetricPattern {
 #[derive(Debug, Clone)]
 struct VertexBlocks {
     offsets: Vec<usize>,
-    rows: Vec<usize>,
-    slots: Vec<[usize; 3]>,
+    /// `u32`: the product streams these, and no pattern has 2³² entries.
+    rows: Vec<u32>,
+    slots: Vec<[u32; 3]>,
 }
 
 impl SymmetricPattern {
@@ -83,8 +84,11 @@ impl SymmetricPattern {
                 let r = pattern.row_idx()[k];
                 if r % 3 == 0 {
                     let u = r / 3;
-                    let base = |j: usize| pattern.slot(3 * u, c + j).unwrap_or(usize::MAX);
-                    rows.push(u);
+                    let base = |j: usize| {
+                        let slot = pattern.slot(3 * u, c + j).expect("vertex blocks are dense");
+                        u32::try_from(slot).expect("a pattern of fewer than 2³² entries")
+                    };
+                    rows.push(u32::try_from(u).expect("fewer than 2³² vertices"));
                     slots.push([base(0), base(1), base(2)]);
                 }
             }
@@ -108,8 +112,8 @@ impl SymmetricPattern {
         let b = self.blocks.as_ref()?;
         let (ru, cv) = (u.min(v), u.max(v));
         let range = b.offsets[cv]..b.offsets[cv + 1];
-        let k = b.rows[range.clone()].binary_search(&ru).ok()?;
-        let base = b.slots[range.start + k];
+        let k = b.rows[range.clone()].binary_search(&u32::try_from(ru).ok()?).ok()?;
+        let base = b.slots[range.start + k].map(|s| s as usize);
         // Stored upper entry of (3u + i, 3v + j): row 3ru + r in column 3cv + c.
         Some([0, 1, 2].map(|i| {
             [0, 1, 2].map(|j| {
@@ -123,7 +127,11 @@ impl SymmetricPattern {
     pub(crate) fn vertex_graph(&self) -> Option<Graph> {
         let b = self.blocks.as_ref()?;
         let nv = b.offsets.len() - 1;
-        let edges = (0..nv).flat_map(move |v| b.rows[b.offsets[v]..b.offsets[v + 1]].iter().map(move |&u| (u, v)));
+        let edges = (0..nv).flat_map(move |v| {
+            b.rows[b.offsets[v]..b.offsets[v + 1]]
+                .iter()
+                .map(move |&u| (u as usize, v))
+        });
         Some(Graph::from_edges(nv, edges))
     }
 
@@ -142,6 +150,13 @@ impl SymmetricPattern {
     pub fn entries(&self) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
         let (cp, ri) = (self.col_ptr(), self.row_idx());
         (0..self.n).flat_map(move |c| (cp[c]..cp[c + 1]).map(move |k| (k, ri[k], c)))
+    }
+
+    /// Whether `other` stores the same entries in the same slots (the same `Arc`, or
+    /// equal index arrays).
+    pub fn same_structure(&self, other: &SymmetricPattern) -> bool {
+        std::ptr::eq(self, other)
+            || (self.n == other.n && self.col_ptr() == other.col_ptr() && self.row_idx() == other.row_idx())
     }
 
     fn col_ptr(&self) -> &[usize] {
@@ -195,6 +210,16 @@ impl SymmetricMatrix {
         }
     }
 
+    /// `self += other`, slot by slot: for adding a precomputed constant part of a matrix
+    /// (e.g. a quadratic energy's Hessian) instead of assembling it again.
+    pub fn add_matrix(&mut self, other: &SymmetricMatrix) -> Result<()> {
+        if !self.pattern.same_structure(&other.pattern) {
+            return Err(Error::PatternMismatch);
+        }
+        self.values.iter_mut().zip(&other.values).for_each(|(a, b)| *a += b);
+        Ok(())
+    }
+
     /// Adds `v` to the stored slot `slot` (from [`SymmetricPattern::slot`]).
     pub fn add_to_slot(&mut self, slot: usize, v: f64) {
         self.values[slot] += v;
@@ -212,10 +237,11 @@ impl SymmetricMatrix {
         let bases = match &self.pattern.blocks {
             Some(b) => {
                 let range = b.offsets[v]..b.offsets[v + 1];
-                let k = b.rows[range.clone()]
-                    .binary_search(&u)
-                    .unwrap_or_else(|_| panic!("vertex block ({u}, {v}) is not in the pattern"));
-                b.slots[range.start + k]
+                let k = u32::try_from(u)
+                    .ok()
+                    .and_then(|u| b.rows[range.clone()].binary_search(&u).ok())
+                    .unwrap_or_else(|| panic!("vertex block ({u}, {v}) is not in the pattern"));
+                b.slots[range.start + k].map(|s| s as usize)
             }
             None => [0, 1, 2].map(|j| {
                 self.pattern
@@ -248,9 +274,18 @@ impl SymmetricMatrix {
     }
 
     /// `y = A x` using both triangles.
+    ///
+    /// On a pattern of vertex blocks the product runs block by block (one index per
+    /// `3 × 3` block instead of one per entry, the three rows of a block column read as
+    /// one contiguous triple), which is what conjugate gradients spend their time on;
+    /// otherwise entry by entry.
     pub fn mul_vec(&self, x: &[f64], y: &mut [f64]) {
         let n = self.dim();
         assert!(x.len() == n && y.len() == n, "mul_vec dimension mismatch");
+        if let Some(b) = &self.pattern.blocks {
+            self.mul_vec_blocks(b, x, y);
+            return;
+        }
         y.iter_mut().for_each(|v| *v = 0.0);
         let (cp, ri) = (self.pattern.col_ptr(), self.pattern.row_idx());
         for c in 0..n {
@@ -263,6 +298,49 @@ impl SymmetricMatrix {
                 }
             }
         }
+    }
+
+    /// [`mul_vec`](Self::mul_vec) over the vertex-block index: for column vertex `v`, the
+    /// diagonal block `D_v` (upper triangle stored) and every block `B_uv`, `u < v`, whose
+    /// column `j` holds rows `3u..3u+3` at `slots[j]..slots[j]+3`; `y_u += B x_v` and
+    /// `y_v += Bᵀ x_u`.
+    fn mul_vec_blocks(&self, b: &VertexBlocks, x: &[f64], y: &mut [f64]) {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        let a = &self.values;
+        for v in 0..b.offsets.len() - 1 {
+            let xv = [x[3 * v], x[3 * v + 1], x[3 * v + 2]];
+            let mut yv = [0.0; 3];
+            for k in b.offsets[v]..b.offsets[v + 1] {
+                let u = b.rows[k] as usize;
+                let [s0, s1, s2] = b.slots[k].map(|s| s as usize);
+                if u == v {
+                    // Upper triangle: (0,0) | (0,1) (1,1) | (0,2) (1,2) (2,2).
+                    let (d00, d01, d11, d02, d12, d22) = (a[s0], a[s1], a[s1 + 1], a[s2], a[s2 + 1], a[s2 + 2]);
+                    yv[0] += d00 * xv[0] + d01 * xv[1] + d02 * xv[2];
+                    yv[1] += d01 * xv[0] + d11 * xv[1] + d12 * xv[2];
+                    yv[2] += d02 * xv[0] + d12 * xv[1] + d22 * xv[2];
+                } else {
+                    let (c0, c1, c2) = (&a[s0..s0 + 3], &a[s1..s1 + 3], &a[s2..s2 + 3]);
+                    let xu = [x[3 * u], x[3 * u + 1], x[3 * u + 2]];
+                    for i in 0..3 {
+                        y[3 * u + i] += c0[i] * xv[0] + c1[i] * xv[1] + c2[i] * xv[2];
+                    }
+                    yv[0] += c0[0] * xu[0] + c0[1] * xu[1] + c0[2] * xu[2];
+                    yv[1] += c1[0] * xu[0] + c1[1] * xu[1] + c1[2] * xu[2];
+                    yv[2] += c2[0] * xu[0] + c2[1] * xu[1] + c2[2] * xu[2];
+                }
+            }
+            for j in 0..3 {
+                y[3 * v + j] += yv[j];
+            }
+        }
+    }
+
+    /// The `3 × 3` diagonal block of vertex `v` (both triangles), on a pattern of vertex
+    /// blocks; `None` on another pattern.
+    pub fn diagonal_block(&self, v: usize) -> Option<[[f64; 3]; 3]> {
+        let s = self.pattern.block_slots(v, v)?;
+        Some(s.map(|row| row.map(|slot| self.values[slot])))
     }
 
     /// Adds `shift` to every diagonal entry.

@@ -107,6 +107,47 @@ fn vertex_block_assembly_matches_entrywise_assembly() {
 }
 
 #[test]
+fn vertex_block_product_matches_the_dense_product() {
+    // Random values on every stored entry of a vertex-block pattern (pairs given in both
+    // orders, one isolated vertex): the block-by-block product must equal the dense
+    // symmetric matrix's, and diagonal_block must read both triangles.
+    let mut rng = TestRng::new(10);
+    let nv = 7;
+    let pairs = [(0, 1), (3, 1), (2, 3), (0, 3), (6, 2), (4, 6), (1, 6)];
+    let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(nv, pairs));
+    let mut a = SymmetricMatrix::zeros(pattern.clone());
+    a.values_mut().iter_mut().for_each(|v| *v = rng.uniform(-1.0, 1.0));
+    let n = 3 * nv;
+    let dense: Vec<Vec<f64>> = (0..n).map(|r| (0..n).map(|c| a.get(r, c)).collect()).collect();
+    let x = rng.vec(n, -1.0, 1.0);
+    let mut y = vec![f64::NAN; n];
+    a.mul_vec(&x, &mut y);
+    for r in 0..n {
+        let expected: f64 = (0..n).map(|c| dense[r][c] * x[c]).sum();
+        assert!((y[r] - expected).abs() < 1e-14, "row {r}: {} against {expected}", y[r]);
+    }
+    for v in 0..nv {
+        let d = a.diagonal_block(v).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                assert_eq!(d[i][j], dense[3 * v + i][3 * v + j]);
+            }
+        }
+    }
+    // add_matrix adds slot by slot on the same structure (another Arc of an equal
+    // pattern too) and refuses another pattern.
+    let mut twice = SymmetricMatrix::zeros(Arc::new(SymmetricPattern::from_vertex_pairs(nv, pairs)));
+    twice.add_matrix(&a).unwrap();
+    twice.add_matrix(&a).unwrap();
+    assert!(twice.values().iter().zip(a.values()).all(|(t, v)| *t == 2.0 * v));
+    let other = SymmetricMatrix::zeros(Arc::new(SymmetricPattern::from_vertex_pairs(nv, [(0, 1)])));
+    assert!(matches!(twice.add_matrix(&other), Err(Error::PatternMismatch)));
+    // A scalar pattern has no vertex blocks.
+    let scalar = SymmetricMatrix::zeros(Arc::new(SymmetricPattern::new(3, [(0, 1)])));
+    assert!(scalar.diagonal_block(0).is_none());
+}
+
+#[test]
 fn vertex_block_ordering_solves_block_systems() {
     // A chain of 40 vertices with random SPD 3 × 3 couplings, ordered on the vertex graph.
     let mut rng = TestRng::new(9);

@@ -246,6 +246,45 @@ fn bench(c: &mut Criterion) {
         b.iter(|| krylov.backward(&ksol, black_box(&grad)).expect("backward"))
     });
     group.finish();
+
+    // The Hessian product CG spends its time on, on the quasistatic layer's pattern (edges,
+    // bending pairs, axial quads): block by block against entry by entry over the same
+    // stored entries (a copy of the pattern without its vertex-block index).
+    let n = rest.num_vertices();
+    let topology = quasi.rest().topology();
+    let mut pairs: Vec<(usize, usize)> = topology.edges.iter().map(|&[a, b]| (a, b)).collect();
+    for h in &topology.hinges {
+        let q = [h.edge_vertices[0], h.edge_vertices[1], h.opposite[0], h.opposite[1]];
+        for i in 0..4 {
+            for j in i + 1..4 {
+                pairs.push((q[i], q[j]));
+            }
+        }
+    }
+    let blocks = std::sync::Arc::new(weft_linalg::SymmetricPattern::from_vertex_pairs(n, pairs));
+    let entries = std::sync::Arc::new(weft_linalg::SymmetricPattern::new(
+        3 * n,
+        blocks.entries().map(|(_, r, c)| (r, c)),
+    ));
+    let mut by_block = weft_linalg::SymmetricMatrix::zeros(blocks.clone());
+    by_block
+        .values_mut()
+        .iter_mut()
+        .enumerate()
+        .for_each(|(i, v)| *v = (0.7 * i as f64).sin());
+    let mut by_entry = weft_linalg::SymmetricMatrix::zeros(entries);
+    by_entry.add_matrix(&by_block).expect("the same entries");
+    eprintln!("quasistatic Hessian: {} stored entries", blocks.nnz());
+    let x: Vec<f64> = (0..3 * n).map(|i| (0.3 * i as f64).cos()).collect();
+    let mut y = vec![0.0; 3 * n];
+    let mut group = c.benchmark_group("quasistatic");
+    group.bench_function("hessian_product_blocks", |b| {
+        b.iter(|| by_block.mul_vec(black_box(&x), &mut y))
+    });
+    group.bench_function("hessian_product_entries", |b| {
+        b.iter(|| by_entry.mul_vec(black_box(&x), &mut y))
+    });
+    group.finish();
 }
 
 criterion_group!(benches, bench);

@@ -11,8 +11,10 @@
 //! bending springs alone allow near a flat rest state. The energy is quadratic with a
 //! constant positive semi-definite Hessian `k w wᵀ ⊗ I₃`, `w = [1−u, u, −(1−v), −v]`.
 
+use std::sync::Arc;
+
 use nalgebra::Vector3;
-use weft_linalg::SymmetricMatrix;
+use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use weft_sim::Energy;
 use weft_sim::energy::{element_pairs, vertex};
 
@@ -68,6 +70,16 @@ impl AxialSprings {
     }
     pub fn quads(&self) -> &[[usize; 4]] {
         &self.quads
+    }
+
+    /// The constant Hessian `Σ k w wᵀ ⊗ I₃` on `pattern` (which must hold the quads' pairs),
+    /// assembled once so that Newton steps add it slot by slot ([`AxialWithHessian`]):
+    /// two thirds of a step's block assembly are these sixteen blocks per hinge.
+    pub(crate) fn hessian(&self, pattern: Arc<SymmetricPattern>) -> SymmetricMatrix {
+        let mut h = SymmetricMatrix::zeros(pattern);
+        let x = vec![0.0; h.dim()];
+        self.add_hessian(&x, false, &mut h);
+        h
     }
 
     fn gap(&self, s: usize, x: &[f64]) -> Vector3<f64> {
@@ -129,5 +141,85 @@ impl Energy for AxialSprings {
                 }
             }
         }
+    }
+}
+
+/// [`AxialSprings`] with their Hessian precomputed ([`AxialSprings::hessian`]): value and
+/// gradient as the springs', the Hessian added slot by slot where the target matrix has
+/// the precomputed one's structure (assembled block by block otherwise).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AxialWithHessian<'a> {
+    pub springs: &'a AxialSprings,
+    pub hessian: &'a SymmetricMatrix,
+}
+
+impl Energy for AxialWithHessian<'_> {
+    fn name(&self) -> &'static str {
+        self.springs.name()
+    }
+    fn hessian_pairs(&self, pairs: &mut Vec<(usize, usize)>) {
+        self.springs.hessian_pairs(pairs)
+    }
+    fn value(&self, x: &[f64]) -> f64 {
+        self.springs.value(x)
+    }
+    fn add_gradient(&self, x: &[f64], grad: &mut [f64]) {
+        self.springs.add_gradient(x, grad)
+    }
+    fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix) {
+        if hessian.add_matrix(self.hessian).is_err() {
+            self.springs.add_hessian(x, project, hessian);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use weft_testkit::TestRng;
+
+    #[test]
+    fn the_precomputed_hessian_is_the_assembled_one_on_any_equal_pattern() {
+        // The assembled Hessian does not depend on x, so the one
+        // precomputed at x = 0 must equal it at any x — into a matrix over the same Arc,
+        // over another Arc of an equal pattern (Newton's own), and, through the fallback,
+        // over a pattern with more pairs.
+        let mesh = weft_mesh::generators::sheet(6, 1.0).unwrap();
+        let rest = RestShape::new(&mesh).unwrap();
+        let axial = AxialSprings::new(&rest, 0.3).unwrap();
+        let n = rest.num_vertices();
+        let mut pairs = Vec::new();
+        axial.hessian_pairs(&mut pairs);
+        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(n, pairs.iter().copied()));
+        let precomputed = axial.hessian(pattern.clone());
+        let term = AxialWithHessian {
+            springs: &axial,
+            hessian: &precomputed,
+        };
+        let mut rng = TestRng::new(4);
+        let x = rng.vec(3 * n, -0.5, 0.5);
+        let mut extra = pairs.clone();
+        extra.push((0, n - 1));
+        for pattern in [
+            pattern.clone(),
+            Arc::new(SymmetricPattern::from_vertex_pairs(n, pairs.iter().copied())),
+            Arc::new(SymmetricPattern::from_vertex_pairs(n, extra)),
+        ] {
+            let mut assembled = SymmetricMatrix::zeros(pattern.clone());
+            axial.add_hessian(&x, true, &mut assembled);
+            let mut added = SymmetricMatrix::zeros(pattern);
+            added.values_mut().iter_mut().for_each(|v| *v = 1.0);
+            term.add_hessian(&x, true, &mut added);
+            for (a, b) in assembled.values().iter().zip(added.values()) {
+                assert!((a + 1.0 - b).abs() < 1e-15, "{a} + 1 against {b}");
+            }
+            assert!(assembled.values().iter().any(|v| *v != 0.0));
+        }
+        // Value and gradient are the springs' own.
+        assert_eq!(term.value(&x), axial.value(&x));
+        let (mut g1, mut g2) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+        term.add_gradient(&x, &mut g1);
+        axial.add_gradient(&x, &mut g2);
+        assert_eq!(g1, g2);
     }
 }

@@ -31,7 +31,10 @@ impl BlockJacobi {
         let n = h.dim() / 3;
         let inv = (0..n)
             .map(|v| {
-                let b = Matrix3::from_fn(|r, c| h.get(3 * v + r, 3 * v + c));
+                let b = match h.diagonal_block(v) {
+                    Some(d) => Matrix3::from_fn(|r, c| d[r][c]),
+                    None => Matrix3::from_fn(|r, c| h.get(3 * v + r, 3 * v + c)),
+                };
                 b.try_inverse().unwrap_or_else(|| {
                     // A singular block (no stiffness at the vertex): scale by its diagonal.
                     Matrix3::from_diagonal(&Vector3::from_fn(|i, _| {

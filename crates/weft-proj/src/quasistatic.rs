@@ -50,7 +50,7 @@ use weft_mesh::TriMesh;
 use weft_sim::energies::{Springs, ZeroLengthSprings};
 use weft_sim::{Energy, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 
-use crate::axial::AxialSprings;
+use crate::axial::{AxialSprings, AxialWithHessian};
 use crate::error::{Error, Result, check_finite, check_len, check_output};
 use crate::rest::RestShape;
 
@@ -245,8 +245,10 @@ pub struct QuasistaticLayer {
     newton: NewtonSettings,
     /// Newton solvers (pattern and symbolic Cholesky built) idle between calls.
     pool: Mutex<Vec<NewtonSolver>>,
-    /// The Hessian pattern of all terms, for the Newton–Krylov path.
+    /// The Hessian pattern of all terms, for the Newton–Krylov path and the adjoint.
     pattern: Arc<SymmetricPattern>,
+    /// The axial springs' constant Hessian on `pattern`.
+    axial_hessian: SymmetricMatrix,
 }
 
 impl QuasistaticLayer {
@@ -314,6 +316,7 @@ impl QuasistaticLayer {
             reuse_factorization: true,
             ..NewtonSettings::default()
         };
+        let axial_hessian = axial.hessian(pattern.clone());
         Ok(Self {
             rest,
             params,
@@ -323,6 +326,7 @@ impl QuasistaticLayer {
             newton,
             pool: Mutex::new(Vec::new()),
             pattern,
+            axial_hessian,
         })
     }
 
@@ -338,6 +342,13 @@ impl QuasistaticLayer {
     /// Counts of (edge, bending, axial) springs.
     pub fn spring_counts(&self) -> (usize, usize, usize) {
         (self.edge.pairs().len(), self.bending.pairs().len(), self.axial.len())
+    }
+
+    fn axial_with_hessian(&self) -> AxialWithHessian<'_> {
+        AxialWithHessian {
+            springs: &self.axial,
+            hessian: &self.axial_hessian,
+        }
     }
 
     /// Zero-length spring base stiffness `k_i = k_Z m_i / m̄` (N/m) per vertex.
@@ -385,7 +396,8 @@ impl QuasistaticLayer {
         let n = self.num_vertices();
         let mu = mu.per_vertex(n)?;
         let anchors = self.anchors(pred, &mu)?;
-        let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+        let axial = self.axial_with_hessian();
+        let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &axial, &anchors];
         let mut x = start.unwrap_or(pred).to_vec();
         let (newton, cg_iterations, (adjoint, shifts)) = match self.params.solver {
             QuasistaticSolver::Cholesky => {
@@ -563,7 +575,8 @@ impl QuasistaticLayer {
             f.solve_in_place(&mut eta);
         } else {
             let anchors = self.anchors(&solution.prediction, &solution.mu)?;
-            let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &self.axial, &anchors];
+            let axial = self.axial_with_hessian();
+            let terms: [&dyn Energy; 4] = [&self.edge, &self.bending, &axial, &anchors];
             let solved = match &solution.adjoint {
                 Adjoint::NearbyFactor(f) => {
                     let mut h = SymmetricMatrix::zeros(self.pattern.clone());

@@ -2,7 +2,7 @@
 //! after Liu et al. 2013 / Choi & Ko 2002) and the edge and bending springs of the
 //! quasistatic projection layer (Geng et al. §5).
 
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use weft_linalg::SymmetricMatrix;
 use weft_mesh::{Topology, TriMesh};
 
@@ -162,15 +162,19 @@ impl Energy for Springs {
         }
     }
     fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix) {
+        // The local Hessian is [[K, −K], [−K, K]] with K symmetric: three vertex blocks,
+        // no 6 × 6 to build and scatter.
         for s in 0..self.pairs.len() {
             let [a, b] = self.pairs[s];
+            if a == b {
+                continue; // a spring from a vertex to itself: constant energy
+            }
             let k = self.block(s, x, project);
-            let mut local = SMatrix::<f64, 6, 6>::zeros();
-            local.fixed_view_mut::<3, 3>(0, 0).copy_from(&k);
-            local.fixed_view_mut::<3, 3>(3, 3).copy_from(&k);
-            local.fixed_view_mut::<3, 3>(0, 3).copy_from(&-k);
-            local.fixed_view_mut::<3, 3>(3, 0).copy_from(&-k);
-            crate::energy::scatter_hessian(&[a, b], &local, hessian);
+            let block: [[f64; 3]; 3] = k.into();
+            hessian.add_vertex_block(a, a, &block);
+            hessian.add_vertex_block(b, b, &block);
+            let neg = block.map(|row| row.map(|v| -v));
+            hessian.add_vertex_block(a.min(b), a.max(b), &neg);
         }
     }
 }
