@@ -11,7 +11,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::{Conj, MatMut, Par, Side, Spec};
 
 use crate::ordering;
-use crate::two_domain::{self, Domain, TwoDomain, TwoDomainFactor};
+use crate::two_domain::{self, Domain, FactorValues, TwoDomain, TwoDomainFactor};
 use crate::{Error, Result, SymmetricMatrix, SymmetricPattern};
 
 fn single_threaded() {
@@ -75,7 +75,7 @@ enum FactorKind {
     },
     Single {
         domain: Arc<Domain>,
-        values: Vec<f64>,
+        values: FactorValues,
     },
     TwoDomain(TwoDomainFactor),
 }

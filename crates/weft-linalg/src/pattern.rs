@@ -159,6 +159,12 @@ impl SymmetricPattern {
             || (self.n == other.n && self.col_ptr() == other.col_ptr() && self.row_idx() == other.row_idx())
     }
 
+    /// The slot of diagonal entry `(c, c)`: the last of column `c`, whose rows are sorted
+    /// and at most `c` (the diagonal is always stored).
+    fn diagonal_slot(&self, c: usize) -> usize {
+        self.col_ptr()[c + 1] - 1
+    }
+
     fn col_ptr(&self) -> &[usize] {
         self.symbolic.col_ptr()
     }
@@ -345,9 +351,27 @@ impl SymmetricMatrix {
 
     /// Adds `shift` to every diagonal entry.
     pub fn add_diagonal(&mut self, shift: f64) {
-        for i in 0..self.dim() {
-            self.add(i, i, shift);
+        for c in 0..self.dim() {
+            let s = self.pattern.diagonal_slot(c);
+            self.values[s] += shift;
         }
+    }
+
+    /// The diagonal entries `A_ii`, in order.
+    pub fn diagonal(&self) -> impl Iterator<Item = f64> + '_ {
+        (0..self.dim()).map(|c| self.values[self.pattern.diagonal_slot(c)])
+    }
+
+    /// Copies `other`'s values, which must be over the same pattern (the same `Arc`).
+    ///
+    /// # Panics
+    /// If the patterns differ: that is a bug in the caller.
+    pub fn copy_values_from(&mut self, other: &SymmetricMatrix) {
+        assert!(
+            Arc::ptr_eq(&self.pattern, &other.pattern),
+            "copy_values_from: another pattern"
+        );
+        self.values.copy_from_slice(&other.values);
     }
 
     /// Dirichlet elimination: zeroes every row and column of a DOF with `fixed[i]` and

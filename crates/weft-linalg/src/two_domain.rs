@@ -20,7 +20,7 @@
 //! both backward substitutions in parallel — each thread streaming half of the factor,
 //! which is what bounds a solve (memory bandwidth, and it does scale to two cores).
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltParams, LltRegularization};
@@ -74,6 +74,97 @@ pub(crate) struct Domain {
     /// The slot in `A` of each local stored entry (the domain's values are gathered).
     gather: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
+    /// Numeric buffers of dropped factors and faer's scratch, reused.
+    buffers: Arc<Buffers>,
+}
+
+/// Buffers a domain's numeric factorisations reuse: the values of dropped factors (a
+/// factor's [`FactorValues`] returns them on drop) and faer's scratch. A factor of a
+/// paper-size cloth matrix is 10–20 MB; allocating it afresh for each factorisation
+/// costs a page fault per 4 KiB page when the allocator has returned the memory to the
+/// system, and Newton factorises several times a step. faer zero-fills the values
+/// itself, so a reused buffer gives the same factor bit for bit.
+pub(crate) struct Buffers {
+    len: usize,
+    values: Mutex<Vec<Vec<f64>>>,
+    scratch: Mutex<Vec<MemBuffer>>,
+}
+
+impl std::fmt::Debug for Buffers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Buffers")
+            .field("len", &self.len)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Dropped factors' buffers kept per domain, at most (more are freed): enough for the
+/// factor Newton holds, the one it is making and a few in flight on other threads.
+const KEPT_BUFFERS: usize = 4;
+
+impl Buffers {
+    fn new(len: usize) -> Arc<Self> {
+        Arc::new(Self {
+            len,
+            values: Mutex::new(Vec::new()),
+            scratch: Mutex::new(Vec::new()),
+        })
+    }
+
+    fn take_values(self: &Arc<Self>) -> FactorValues {
+        let kept = self.values.lock().ok().and_then(|mut v| v.pop());
+        FactorValues {
+            values: kept.unwrap_or_else(|| vec![0.0; self.len]),
+            buffers: self.clone(),
+        }
+    }
+
+    fn with_scratch<T>(&self, bytes: faer::dyn_stack::StackReq, f: impl FnOnce(&mut MemStack) -> T) -> T {
+        let kept = self.scratch.lock().ok().and_then(|mut v| v.pop());
+        let mut mem = kept.unwrap_or_else(|| MemBuffer::new(bytes));
+        let out = f(MemStack::new(&mut mem));
+        if let Ok(mut v) = self.scratch.lock() {
+            if v.len() < KEPT_BUFFERS {
+                v.push(mem);
+            }
+        }
+        out
+    }
+}
+
+/// A domain factor's numeric values, returned to the domain's [`Buffers`] when dropped.
+#[derive(Debug)]
+pub(crate) struct FactorValues {
+    values: Vec<f64>,
+    buffers: Arc<Buffers>,
+}
+
+impl Clone for FactorValues {
+    fn clone(&self) -> Self {
+        let mut copy = self.buffers.take_values();
+        copy.values.copy_from_slice(&self.values);
+        copy
+    }
+}
+
+impl Drop for FactorValues {
+    fn drop(&mut self) {
+        let values = std::mem::take(&mut self.values);
+        if values.len() == self.buffers.len {
+            if let Ok(mut v) = self.buffers.values.lock() {
+                if v.len() < KEPT_BUFFERS {
+                    v.push(values);
+                }
+            }
+        }
+    }
+}
+
+impl std::ops::Deref for FactorValues {
+    type Target = [f64];
+    fn deref(&self) -> &[f64] {
+        &self.values
+    }
 }
 
 /// The symbolic part: domains, their symbolic factors and the separator.
@@ -91,7 +182,7 @@ pub(crate) struct TwoDomain {
 #[derive(Debug, Clone)]
 pub(crate) struct TwoDomainFactor {
     structure: Arc<TwoDomain>,
-    values: [Vec<f64>; 2],
+    values: [FactorValues; 2],
     schur: Arc<faer::linalg::solvers::Llt<f64>>,
 }
 
@@ -173,6 +264,7 @@ impl Domain {
             interior: 3 * interior.len(),
             local,
             gather,
+            buffers: Buffers::new(symbolic.len_val()),
             symbolic,
         })
     }
@@ -181,28 +273,30 @@ impl Domain {
         self.symbolic.len_val()
     }
 
-    /// The numeric factor of the domain's matrix.
-    pub(crate) fn factorize_numeric(&self, a: &SymmetricMatrix) -> Result<Vec<f64>> {
+    /// The numeric factor of the domain's matrix, in a reused buffer where one is free.
+    pub(crate) fn factorize_numeric(&self, a: &SymmetricMatrix) -> Result<FactorValues> {
         let local_values: Vec<f64> = self.gather.iter().map(|&g| a.values[g]).collect();
-        let mut values = vec![0.0; self.symbolic.len_val()];
+        let mut values = self.buffers.take_values();
         let params: Spec<LltParams, f64> = Default::default();
-        let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, params));
-        self.symbolic
-            .factorize_numeric_llt::<f64>(
-                &mut values,
-                SparseColMatRef::new(self.local.as_ref(), &local_values),
-                Side::Upper,
-                LltRegularization::default(),
-                Par::Seq,
-                MemStack::new(&mut mem),
-                params,
-            )
+        let scratch = self.symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, params);
+        self.buffers
+            .with_scratch(scratch, |stack| {
+                self.symbolic.factorize_numeric_llt::<f64>(
+                    &mut values.values,
+                    SparseColMatRef::new(self.local.as_ref(), &local_values),
+                    Side::Upper,
+                    LltRegularization::default(),
+                    Par::Seq,
+                    stack,
+                    params,
+                )
+            })
             .map_err(|_| Error::NotPositiveDefinite)?;
         Ok(values)
     }
 
     /// The numeric factor of `Mᵢ` and its dense trailing block `L̃ᵢ` (lower triangular).
-    fn factorize(&self, a: &SymmetricMatrix) -> Result<(Vec<f64>, Mat<f64>)> {
+    fn factorize(&self, a: &SymmetricMatrix) -> Result<(FactorValues, Mat<f64>)> {
         let values = self.factorize_numeric(a)?;
         let s = self.dofs.len() - self.interior;
         let mut trailing = Mat::<f64>::zeros(s, s);

@@ -204,11 +204,14 @@ fn shifted_factor(
     last_shift: f64,
 ) -> Result<(weft_linalg::CholeskyFactor, usize, f64)> {
     let n = matrix.dim();
-    let mean_diag = (0..n).map(|i| matrix.get(i, i).abs()).sum::<f64>() / n as f64;
+    let mean_diag = matrix.diagonal().map(f64::abs).sum::<f64>() / n as f64;
     let floor = 1e-8 * mean_diag.max(1e-12);
     let mut shift = floor.max(0.25 * last_shift);
+    let mut shifted = matrix.clone();
     for attempt in 1..=SHIFT_ATTEMPTS {
-        let mut shifted = matrix.clone();
+        if attempt > 1 {
+            shifted.copy_values_from(matrix);
+        }
         shifted.add_diagonal(shift);
         if let Ok(f) = cholesky.factorize(&shifted) {
             return Ok((f, attempt, shift));
@@ -316,7 +319,13 @@ impl NewtonSolver {
     /// (inertia `m/Δt²`) and coordinates far from the origin all raise it.
     fn residual_floor(&self, x: &[f64]) -> f64 {
         let free = || (0..x.len()).filter(|&i| !self.fixed[i]);
-        let h_max = weft_linalg::max_abs(free().map(|i| self.hessian.get(i, i)));
+        let h_max = weft_linalg::max_abs(
+            self.hessian
+                .diagonal()
+                .zip(&self.fixed)
+                .filter(|(_, f)| !**f)
+                .map(|(h, _)| h),
+        );
         let x_max = weft_linalg::max_abs(free().map(|i| x[i]));
         ROUNDOFF_FLOOR_FACTOR * f64::EPSILON * h_max * x_max
     }
