@@ -70,12 +70,17 @@ pub(crate) struct Domain {
     dofs: Vec<usize>,
     /// Local DOFs `0..interior` are the interior; the rest are the separator's.
     interior: usize,
+    /// The domain matrix's structure, lower triangle (what faer's numeric factorisation
+    /// reads without transposing).
     local: SymbolicSparseColMat<usize>,
     /// The slot in `A` of each local stored entry (the domain's values are gathered).
     gather: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
     /// Numeric buffers of dropped factors and faer's scratch, reused.
     buffers: Arc<Buffers>,
+    /// The scratch a numeric factorisation needs (computed once: faer walks the
+    /// supernodes to size it).
+    scratch: faer::dyn_stack::StackReq,
 }
 
 /// Buffers a domain's numeric factorisations reuse: the values of dropped factors (a
@@ -98,9 +103,11 @@ impl std::fmt::Debug for Buffers {
     }
 }
 
-/// Dropped factors' buffers kept per domain, at most (more are freed): enough for the
-/// factor Newton holds, the one it is making and a few in flight on other threads.
-const KEPT_BUFFERS: usize = 4;
+/// Bytes of dropped factors' values kept per domain, at most (more are freed), and the
+/// most buffers kept whatever their size: enough for the factors a training batch holds
+/// between its forward and backward passes (one per example) at paper size.
+const KEPT_BYTES: usize = 256 << 20;
+const KEPT_BUFFERS: usize = 16;
 
 impl Buffers {
     fn new(len: usize) -> Arc<Self> {
@@ -124,7 +131,7 @@ impl Buffers {
         let mut mem = kept.unwrap_or_else(|| MemBuffer::new(bytes));
         let out = f(MemStack::new(&mut mem));
         if let Ok(mut v) = self.scratch.lock() {
-            if v.len() < KEPT_BUFFERS {
+            if v.len() < 2 {
                 v.push(mem);
             }
         }
@@ -151,8 +158,9 @@ impl Drop for FactorValues {
     fn drop(&mut self) {
         let values = std::mem::take(&mut self.values);
         if values.len() == self.buffers.len {
+            let limit = (KEPT_BYTES / (8 * self.buffers.len).max(1)).clamp(2, KEPT_BUFFERS);
             if let Ok(mut v) = self.buffers.values.lock() {
-                if v.len() < KEPT_BUFFERS {
+                if v.len() < limit {
                     v.push(values);
                 }
             }
@@ -207,49 +215,69 @@ impl Domain {
         for (i, &v) in vertices.iter().enumerate() {
             local_vertex[v] = i;
         }
-        // The local upper pattern, column by column: for local vertex `lv`, its coupled
-        // local vertices `lu < lv` (all three DOF rows each), then its own block's upper
-        // part; each entry's global slot is recorded alongside.
+        // The local pattern, column by column, with each entry's global slot. faer's
+        // symbolic analysis in the identity order reads an upper triangle; its supernodal
+        // numeric factorisation reads the lower one (handed the upper, it transposes it on
+        // every factorisation), so the domain keeps the lower triangle for the numeric
+        // work. Column `3lv + j` of local vertex `lv`: upper — the coupled local vertices
+        // `lu < lv` (three DOF rows each), then its own block's upper part; lower — its
+        // own block's lower part, then the coupled `lu > lv` (`block_slots` reads either
+        // triangle).
         let n = 3 * vertices.len();
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        col_ptr.push(0);
-        let mut row_idx = Vec::new();
-        let mut gather = Vec::new();
-        let mut rows = Vec::new();
         let missing = || Error::Setup("vertex block missing from the pattern".into());
-        for (lv, &gv) in vertices.iter().enumerate() {
-            rows.clear();
-            rows.extend(
-                graph
-                    .neighbours(gv)
+        let build = |lower: bool| -> Result<(Vec<usize>, Vec<usize>, Vec<usize>)> {
+            let mut col_ptr = Vec::with_capacity(n + 1);
+            col_ptr.push(0);
+            let mut row_idx = Vec::new();
+            let mut gather = Vec::new();
+            let mut rows = Vec::new();
+            for (lv, &gv) in vertices.iter().enumerate() {
+                rows.clear();
+                rows.extend(
+                    graph
+                        .neighbours(gv)
+                        .iter()
+                        .map(|&u| local_vertex[u])
+                        .filter(|&lu| lu != usize::MAX && if lower { lu > lv } else { lu < lv }),
+                );
+                rows.sort_unstable();
+                let blocks = rows
                     .iter()
-                    .map(|&u| local_vertex[u])
-                    .filter(|&lu| lu < lv),
-            );
-            rows.sort_unstable();
-            let blocks = rows
-                .iter()
-                .map(|&lu| pattern.block_slots(vertices[lu], gv).ok_or_else(missing))
-                .collect::<Result<Vec<_>>>()?;
-            let own = pattern.block_slots(gv, gv).ok_or_else(missing)?;
-            for j in 0..3 {
-                for (&lu, block) in rows.iter().zip(&blocks) {
-                    for (i, slots) in block.iter().enumerate() {
-                        row_idx.push(3 * lu + i);
-                        gather.push(slots[j]);
+                    .map(|&lu| pattern.block_slots(vertices[lu], gv).ok_or_else(missing))
+                    .collect::<Result<Vec<_>>>()?;
+                let own = pattern.block_slots(gv, gv).ok_or_else(missing)?;
+                for j in 0..3 {
+                    let coupled = |row_idx: &mut Vec<usize>, gather: &mut Vec<usize>| {
+                        for (&lu, block) in rows.iter().zip(&blocks) {
+                            for (i, slots) in block.iter().enumerate() {
+                                row_idx.push(3 * lu + i);
+                                gather.push(slots[j]);
+                            }
+                        }
+                    };
+                    let own_rows = if lower { j..3 } else { 0..j + 1 };
+                    if !lower {
+                        coupled(&mut row_idx, &mut gather);
                     }
+                    for i in own_rows {
+                        row_idx.push(3 * lv + i);
+                        gather.push(own[i][j]);
+                    }
+                    if lower {
+                        coupled(&mut row_idx, &mut gather);
+                    }
+                    col_ptr.push(row_idx.len());
                 }
-                for (i, slots) in own.iter().enumerate().take(j + 1) {
-                    row_idx.push(3 * lv + i);
-                    gather.push(slots[j]);
-                }
-                col_ptr.push(row_idx.len());
             }
-        }
+            Ok((col_ptr, row_idx, gather))
+        };
+        let (upper_ptr, upper_rows, _) = build(false)?;
+        let (col_ptr, row_idx, gather) = build(true)?;
         let dofs: Vec<usize> = vertices.iter().flat_map(|&v| [3 * v, 3 * v + 1, 3 * v + 2]).collect();
+        let upper = SymbolicSparseColMat::new_checked(n, n, upper_ptr, None, upper_rows);
         let local = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         let symbolic = factorize_symbolic_cholesky(
-            local.as_ref(),
+            upper.as_ref(),
             Side::Upper,
             SymmetricOrdering::Identity,
             CholeskySymbolicParams {
@@ -265,6 +293,7 @@ impl Domain {
             local,
             gather,
             buffers: Buffers::new(symbolic.len_val()),
+            scratch: symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
             symbolic,
         })
     }
@@ -278,13 +307,12 @@ impl Domain {
         let local_values: Vec<f64> = self.gather.iter().map(|&g| a.values[g]).collect();
         let mut values = self.buffers.take_values();
         let params: Spec<LltParams, f64> = Default::default();
-        let scratch = self.symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, params);
         self.buffers
-            .with_scratch(scratch, |stack| {
+            .with_scratch(self.scratch, |stack| {
                 self.symbolic.factorize_numeric_llt::<f64>(
                     &mut values.values,
                     SparseColMatRef::new(self.local.as_ref(), &local_values),
-                    Side::Upper,
+                    Side::Lower,
                     LltRegularization::default(),
                     Par::Seq,
                     stack,
