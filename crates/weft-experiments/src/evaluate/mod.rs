@@ -165,6 +165,11 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             eprintln!("{name}: taken from the published {}", published.display());
             imported.push(name);
         }
+        // Peer points (report::peers) measured for the published report stay with it.
+        if dest.join("peers").exists() && !out.join("peers").exists() {
+            copy_tree(&dest.join("peers"), &out.join("peers"))?;
+            eprintln!("peers: taken from the published {}", dest.join("peers").display());
+        }
     }
     // The report covers every experiment cached in OUT at this size.
     let mut outputs = Vec::new();
@@ -201,7 +206,7 @@ fn publish(
         .map(|o| o.experiment.as_str())
         .filter(|e| !ran.contains(e) && !imported.contains(e))
         .collect();
-    for sub in ["plots", "renders", "experiments"] {
+    for sub in ["plots", "renders", "experiments", "peers"] {
         let _ = std::fs::remove_dir_all(dest.join(sub));
     }
     std::fs::create_dir_all(dest)?;
@@ -210,8 +215,8 @@ fn publish(
     }
     // The experiments' outputs travel with the report, so any later publication can
     // rebuild it whole (the large predictions stay behind).
-    for sub in ["plots", "renders", "experiments"] {
-        // An evaluation without renders (or plots) has no such directory.
+    for sub in ["plots", "renders", "experiments", "peers"] {
+        // An evaluation without renders (or plots, or peers) has no such directory.
         if out.join(sub).exists() {
             copy_tree(&out.join(sub), &dest.join(sub))?;
         }

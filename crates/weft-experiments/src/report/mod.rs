@@ -3,6 +3,7 @@
 //! outputs. Also the check CI runs on a report (`cargo xtask check-report`).
 
 pub mod html;
+pub mod peers;
 pub mod plots;
 pub mod summary;
 
@@ -47,6 +48,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
     let records: Vec<Record> = outputs.iter().flat_map(|o| o.records.iter().cloned()).collect();
     crate::records::validate(&records)?;
     write_json(&out.join("results.json"), &records)?;
+    let peer_files = peers::read(out)?;
     let plot_dir = out.join("plots");
     std::fs::create_dir_all(&plot_dir)?;
     let mut charts = Vec::new();
@@ -71,9 +73,24 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
                         method: r.method.clone(),
                         time_ratio: r.seconds_per_frame? / r.ground_truth_seconds_per_frame?,
                         error: r.value,
+                        peer: false,
                     })
                 })
                 .collect();
+            let mut points = points;
+            for f in peer_files
+                .iter()
+                .filter(|f| f.experiment == o.experiment && f.scene == scene)
+            {
+                for (method, time_ratio, error) in f.pareto(metric)? {
+                    points.push(ParetoPoint {
+                        method,
+                        time_ratio,
+                        error,
+                        peer: true,
+                    });
+                }
+            }
             let stem = format!("plots/pareto-{}-{}", o.experiment, slug(scene));
             let title = format!("{} / {scene}: speed against accuracy", o.experiment);
             plots::pareto(&out.join(&stem), &title, label, &points)?;
@@ -121,6 +138,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
                 method: p.label,
                 time_ratio: p.time_ratio,
                 error: p.error,
+                peer: false,
             })
             .collect();
         if points.is_empty() {
@@ -133,7 +151,7 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
     let tables = paper::tables(outputs);
     write_text(
         &out.join("tables.md"),
-        &tables_markdown(size, outputs, &claims, &tables, wall_seconds),
+        &(tables_markdown(size, outputs, &claims, &tables, wall_seconds) + &peers::markdown(&peer_files)),
     )?;
     let page = html::page(
         out,
@@ -251,6 +269,7 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
     }
     let records: Vec<Record> = serde_json::from_str(&text).context("results.json records do not parse")?;
     crate::records::validate(&records)?;
+    peers::read(dir)?;
     for f in ["tables.md", "index.html"] {
         let t = std::fs::read_to_string(dir.join(f)).with_context(|| format!("reading {f}"))?;
         ensure!(t.len() > 100, "{f} is nearly empty");

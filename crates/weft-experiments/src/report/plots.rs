@@ -16,6 +16,9 @@ pub struct ParetoPoint {
     /// Time per frame over the ground truth's, same run.
     pub time_ratio: f64,
     pub error: f64,
+    /// Measured by a peer's own tools outside the evaluation (`report::peers`): drawn as a
+    /// triangle, its time ratio taken to weft's ground truth in the peer's run.
+    pub peer: bool,
 }
 
 const SIZE: (u32, u32) = (760, 520);
@@ -113,6 +116,8 @@ where
     // A zero error (a method identical to the reference) sits at the axis floor.
     let (ylo, yhi) = log_range(points.iter().map(|p| p.error));
     let (xlo, xhi) = log_range(points.iter().map(|p| p.time_ratio));
+    // Room on the right for the legend (upper right), so that it hides no point.
+    let xhi = xhi * (xhi / xlo).powf(0.6);
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
@@ -140,11 +145,19 @@ where
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.mix(0.4)));
     for (i, p) in points.iter().enumerate() {
         let c = palette(i);
-        chart
-            .draw_series(std::iter::once(Circle::new(clamp(p), 6, c.filled())))
-            .map_err(crate::Error::plot)?
-            .label(p.method.clone())
-            .legend(move |(x, y)| Circle::new((x + 9, y), 5, c.filled()));
+        if p.peer {
+            chart
+                .draw_series(std::iter::once(TriangleMarker::new(clamp(p), 8, c.filled())))
+                .map_err(crate::Error::plot)?
+                .label(p.method.clone())
+                .legend(move |(x, y)| TriangleMarker::new((x + 9, y), 6, c.filled()));
+        } else {
+            chart
+                .draw_series(std::iter::once(Circle::new(clamp(p), 6, c.filled())))
+                .map_err(crate::Error::plot)?
+                .label(p.method.clone())
+                .legend(move |(x, y)| Circle::new((x + 9, y), 5, c.filled()));
+        }
     }
     finish(&root, &mut chart, SeriesLabelPosition::UpperRight)
 }
@@ -395,6 +408,7 @@ mod tests {
             method: m.into(),
             time_ratio: t,
             error: e,
+            peer: false,
         };
         let points = vec![
             p("a", 1.0, 1.0),

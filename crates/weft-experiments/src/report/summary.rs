@@ -399,14 +399,21 @@ fn drape_claim(records: &[Record]) -> Claim {
         Some(sd) => format!("{:.3} ± {:.3}", r.value, sd.value),
         None => format!("{:.3}", r.value),
     };
+    let learned = if mu.is_empty() {
+        "learned μ not measured (no `learned-mu-from-*` rows)".to_string()
+    } else {
+        format!(
+            "learned μ {} (largest / smallest {:.2})",
+            mu.iter().map(|m| format!("{m:.3}")).collect::<Vec<_>>().join(", "),
+            mu_ratio
+        )
+    };
     claim.ours = format!(
-        "{scene}: {} mm (`{}`) against {} mm; stretching error cut {:.1}×; learned μ {} (largest / smallest {:.2})",
+        "{scene}: {} mm (`{}`) against {} mm; stretching error cut {:.1}×; {learned}",
         with_sd(best.0),
         best.0.method,
         with_sd(net),
         best.1,
-        mu.iter().map(|m| format!("{m:.3}")).collect::<Vec<_>>().join(", "),
-        mu_ratio
     );
     claim.verdict = if best.2 && mu_agrees {
         Verdict::Reproduced
