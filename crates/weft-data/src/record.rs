@@ -32,8 +32,8 @@ pub struct FrameStats {
     pub kinetic_energy_j: Option<f64>,
     /// Cloth only: Newton's numeric factorisations (every attempt: the unprojected one,
     /// the projected second attempt of `when-indefinite`, each diagonally shifted one),
-    /// conjugate-gradient iterations and rejected trust-region steps, and the strategy of
-    /// a retried step (docs/CLOTH.md).
+    /// conjugate-gradient iterations and rejected trust-region steps, the strategy of a
+    /// retried step (docs/CLOTH.md), and per iteration the residual and the diagonal shift.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub newton_detail: Option<NewtonDetail>,
 }
@@ -45,6 +45,11 @@ pub struct NewtonDetail {
     pub cg_iterations: usize,
     pub rejected_steps: usize,
     pub fallback: Option<String>,
+    /// The residual force after each iteration (N).
+    pub residual_history: Vec<f64>,
+    /// The diagonal shift each line-search iteration stepped with (N/m; 0: none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub shift_history: Vec<f64>,
 }
 
 /// Every frame of a run, frame 0 being the initial (rest or settled) state.
@@ -213,6 +218,8 @@ impl Recorder {
                         cg_iterations: f.report.newton.cg_iterations,
                         rejected_steps: f.report.newton.rejected_steps,
                         fallback: f.report.newton.fallback.map(|h| format!("{h:?}")),
+                        residual_history: f.report.newton.residual_history.clone(),
+                        shift_history: f.report.newton.shift_history.clone(),
                     }),
                 }
             }

@@ -449,6 +449,7 @@ impl QuasistaticLayer {
                     factorizations: 0,
                     time: started.elapsed(),
                     residual_history: k.residual_history,
+                    shift_history: Vec::new(),
                     residual_floor: 0.0,
                     cg_iterations: k.cg_iterations,
                     rejected_steps: 0,
@@ -541,6 +542,8 @@ impl QuasistaticLayer {
         let second = solver.minimize(terms, x, &fine)?;
         let mut history = first.residual_history;
         history.extend(&second.residual_history);
+        let mut shifts = first.shift_history;
+        shifts.extend(&second.shift_history);
         Ok(weft_sim::NewtonReport {
             iterations: first.iterations + second.iterations,
             initial_residual: first.initial_residual,
@@ -549,6 +552,7 @@ impl QuasistaticLayer {
             factorizations: first.factorizations + second.factorizations,
             time: first.time + second.time,
             residual_history: history,
+            shift_history: shifts,
             cg_iterations: first.cg_iterations + second.cg_iterations,
             rejected_steps: first.rejected_steps + second.rejected_steps,
             ..second

@@ -53,6 +53,11 @@ fn newton_converges_quadratically_near_the_solution() {
         .any(|w| w[0] < 1e-2 && w[0] > 1e-9 && w[1] < 10.0 * w[0] * w[0]);
     assert!(quadratic, "no quadratic step in residual history {h:?}");
     assert!(report.iterations <= 10, "{} iterations", report.iterations);
+    // The noisy start compresses a few springs (the first step is shifted); near the
+    // solution every spring is stretched and the steps are unshifted Newton steps.
+    let shifts = &report.shift_history;
+    assert_eq!(shifts.len(), report.iterations);
+    assert!(shifts[shifts.len() / 2..].iter().all(|t| *t == 0.0), "{shifts:?}");
 }
 
 #[test]
@@ -81,6 +86,7 @@ fn every_numeric_factorisation_attempt_is_counted() {
     let never = solver.factorize_at(&terms, &x, HessianProjection::Never).unwrap();
     assert!(never.shifts > 0);
     assert_eq!(never.numeric, 1 + never.shifts);
+    assert!(never.shift > 0.0, "the shift found is reported");
     // Stretched instead, every attempt succeeds at once.
     let stretched: Vec<f64> = m.flat_positions().iter().map(|v| 1.1 * v).collect();
     for projection in [
@@ -89,7 +95,7 @@ fn every_numeric_factorisation_attempt_is_counted() {
         HessianProjection::Never,
     ] {
         let f = solver.factorize_at(&terms, &stretched, projection).unwrap();
-        assert_eq!((f.numeric, f.shifts), (1, 0), "{projection:?}");
+        assert_eq!((f.numeric, f.shifts, f.shift), (1, 0, 0.0), "{projection:?}");
     }
 }
 
@@ -119,6 +125,12 @@ fn reused_factorisations_reach_the_same_minimiser_with_fewer_factorisations() {
     assert_eq!(
         plain_report.factorizations,
         plain_report.iterations + plain_report.regularizations
+    );
+    // One shift per iteration in the history: the shifted iterations' τ, 0 elsewhere.
+    assert_eq!(plain_report.shift_history.len(), plain_report.iterations);
+    assert_eq!(
+        plain_report.shift_history.iter().filter(|t| **t > 0.0).count() > 0,
+        plain_report.regularizations > 0
     );
     let fresh = reused_report.factorizations - reused_report.regularizations;
     assert!(

@@ -127,6 +127,8 @@ pub struct Factorized {
     pub factor: weft_linalg::CholeskyFactor,
     /// Diagonally shifted attempts it needed (0: the matrix factorised as assembled).
     pub shifts: usize,
+    /// The shift `τ` of the matrix factorised (0 when `shifts` is 0).
+    pub shift: f64,
     /// Numeric factorisations attempted, failed ones included.
     pub numeric: usize,
     /// Whether the factorised matrix is the per-element PSD projection of the Hessian
@@ -158,6 +160,11 @@ pub struct NewtonReport {
     /// Residual after each iteration (N), for convergence studies.
     #[serde(skip)]
     pub residual_history: Vec<f64>,
+    /// The diagonal shift `τ` of the matrix each line-search iteration stepped with (N/m;
+    /// 0 where the matrix factorised as assembled or was projected), beside
+    /// [`NewtonReport::residual_history`]: where a global shift holds Newton back.
+    #[serde(skip)]
+    pub shift_history: Vec<f64>,
     /// The round-off floor of the residual force at the last factorisation (N); the
     /// tolerance applied is the larger of this and the requested one.
     pub residual_floor: f64,
@@ -187,6 +194,7 @@ impl NewtonReport {
             factorizations: 0,
             time: Duration::ZERO,
             residual_history: Vec::new(),
+            shift_history: Vec::new(),
             residual_floor: 0.0,
             cg_iterations: 0,
             rejected_steps: 0,
@@ -364,6 +372,7 @@ impl NewtonSolver {
                     return Ok(Factorized {
                         factor,
                         shifts: 0,
+                        shift: 0.0,
                         numeric: k + 1,
                         projected: project,
                     });
@@ -388,6 +397,7 @@ impl NewtonSolver {
         Ok(Factorized {
             factor,
             shifts,
+            shift,
             numeric: attempts.len() + shifts,
             projected: *attempts.last().unwrap_or(&false),
         })
@@ -642,6 +652,10 @@ impl NewtonSolver {
             let Some(factorized) = current.as_ref() else {
                 unreachable!("a factor was just made")
             };
+            progress
+                .report
+                .shift_history
+                .push(if factorized.shifts > 0 { factorized.shift } else { 0.0 });
             let slope = self.direction(&factorized.factor, &progress.grad);
             let choice = self.line_search(
                 terms,
