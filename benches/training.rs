@@ -4,7 +4,9 @@
 //!   Adam step, batch 1 — on the 1410-vertex `limb` surface (the standard dataset's) and the
 //!   6890-vertex one (SMPL's vertex count), widths 32-64-128-64-32;
 //! - one embedding stage-1 step on the 4225-vertex sheet (`sheet-ms` at standard size): a
-//!   batch of 8 windows through the encoder, decoder, ACAP⁻¹ and `L_phys`, backward, Adam.
+//!   batch of 8 windows through the encoder, decoder, ACAP⁻¹ and `L_phys`, backward, Adam;
+//!   and, for both models, the forward pass and loss alone and with the backward pass, so
+//!   the rows split a step into forward, backward and Adam.
 //!
 //! The frames are synthetic (a skin swinging a few millimetres, the tissue lagging it): the
 //! cost does not depend on their values. The anchor a user compares against — the same
@@ -136,6 +138,23 @@ fn embedding(c: &mut Criterion) {
         };
         group.bench_function(format!("stage-1 step, 8 windows ({name})"), |b| {
             b.iter(|| step(&mut stage, &mut adams, &[0; 8]))
+        });
+        // Where the step goes: the losses alone, then with the backward pass (the rest of
+        // the step is Adam over 9.8 M parameters).
+        let at = BatchAt {
+            epoch: 0,
+            batch: 0,
+            batches: 1,
+        };
+        let loss = |stage: &mut EmbedStage<'_>| match stage.batch_loss(&[0; 8], at).unwrap() {
+            BatchLoss::Loss { loss, .. } => loss,
+            BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
+        };
+        group.bench_function(format!("forward and loss, 8 windows ({name})"), |b| {
+            b.iter(|| loss(&mut stage))
+        });
+        group.bench_function(format!("forward, loss and backward, 8 windows ({name})"), |b| {
+            b.iter(|| loss(&mut stage).backward().unwrap())
         });
     }
     group.finish();

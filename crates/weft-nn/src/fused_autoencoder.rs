@@ -7,8 +7,10 @@
 //! on the 4225-vertex sheet the autoencoder's backward pass took about 180 ms of a 250 ms
 //! training step (docs/BENCHMARKS.md), for a network of a few MFLOP per frame. Here one
 //! graph convolution `C(x)_i = [x_i | mean_{j∈N¹(i)} x_j] · [M; M_N] + b` is one pass over
-//! the rows (a vertex's 9 channels and its neighbours' mean, then 18 × 9 products in
-//! registers), and the fully connected layers are single matrix products (faer).
+//! the rows gathering each vertex's 9 channels and its neighbours' mean, then one small
+//! product `[512, 18] · [18, 9]` per block of rows (its backward: `[18, 512] · [512, 9]`
+//! for the weights, `[512, 9] · [9, 18]` for the operand), and the fully connected layers
+//! are single matrix products (faer).
 //!
 //! Each op takes three arguments: the small parameters flattened (`θ`: the convolutions'
 //! `[M; M_N]` and biases and the fully connected layer's bias), the fully connected
@@ -156,52 +158,20 @@ fn view_mut(data: &mut [f32], rows: usize, cols: usize) -> MatMut<'_, f32> {
 
 /// One graph convolution on the rows of `h` (`[R, C]`, blocks of `V` rows): writes the
 /// operand `a = [h | mean h]` (`[R, 2C]`) and the pre-activation `a · W + b` (`[R, C]`).
+///
+/// Each task gathers its rows' operands, then multiplies them by `W` as one small
+/// matrix product (`[512, 18] · [18, 9]`, faer's vectorised kernels): a row at a time,
+/// the 18 × 9 product ran as scalar code (nine channels do not fill an 8-lane vector
+/// evenly) and was most of the forward pass.
 fn conv_forward(graph: &MeshGraph, theta: &[f32], h: &[f32], a: &mut [f32], pre: &mut [f32]) {
     let (w, b) = theta.split_at(2 * C * C);
+    let v = graph.num_vertices();
     a.par_chunks_mut(2 * C * ROWS_PER_TASK)
         .zip(pre.par_chunks_mut(C * ROWS_PER_TASK))
         .enumerate()
         .for_each(|(task, (a, pre))| {
-            pulp::Arch::new().dispatch(ConvRows {
-                graph,
-                w,
-                b,
-                h,
-                first: task * ROWS_PER_TASK,
-                a,
-                pre,
-            })
-        });
-}
-
-/// Rows `first..` of [`conv_forward`], compiled for the CPU's widest vectors.
-struct ConvRows<'a> {
-    graph: &'a MeshGraph,
-    w: &'a [f32],
-    b: &'a [f32],
-    h: &'a [f32],
-    first: usize,
-    a: &'a mut [f32],
-    pre: &'a mut [f32],
-}
-
-impl pulp::WithSimd for ConvRows<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        let Self {
-            graph,
-            w,
-            b,
-            h,
-            first,
-            a,
-            pre,
-        } = self;
-        let v = graph.num_vertices();
-        {
-            for (r, (ar, pr)) in a.chunks_exact_mut(2 * C).zip(pre.chunks_exact_mut(C)).enumerate() {
+            let first = task * ROWS_PER_TASK;
+            for (r, ar) in a.chunks_exact_mut(2 * C).enumerate() {
                 let row = first + r;
                 let base = row - row % v;
                 let (nb, inv) = graph.neighbors(row % v);
@@ -215,15 +185,18 @@ impl pulp::WithSimd for ConvRows<'_> {
                     }
                 }
                 mean.iter_mut().for_each(|m| *m *= inv);
-                pr.copy_from_slice(b);
-                for (d, &ad) in ar.iter().enumerate() {
-                    for (p, wk) in pr.iter_mut().zip(&w[d * C..(d + 1) * C]) {
-                        *p += ad * wk;
-                    }
-                }
             }
-        }
-    }
+            for pr in pre.chunks_exact_mut(C) {
+                pr.copy_from_slice(b);
+            }
+            let rows = pre.len() / C;
+            gemm(
+                view_mut(pre, rows, C),
+                Accum::Add,
+                view(a, rows, 2 * C),
+                view(w, 2 * C, C),
+            );
+        });
 }
 
 /// The backward pass of [`conv_forward`] from `dpre` (`[R, C]`): `∂L/∂[M; M_N]` and
@@ -239,17 +212,23 @@ fn conv_backward(
 ) {
     let v = graph.num_vertices();
     let w = &theta[..2 * C * C];
+    // Per task `aᵀ · ∂L/∂pre` as one small product (f32 over its 512 rows), summed over
+    // the tasks in f64.
     let sums = a
         .par_chunks(2 * C * ROWS_PER_TASK)
         .zip(dpre.par_chunks(C * ROWS_PER_TASK))
         .map(|(a, dp)| {
-            let mut s = vec![0.0f64; CONV_PARAMS];
-            for (ar, dr) in a.chunks_exact(2 * C).zip(dp.chunks_exact(C)) {
-                for (d, &ad) in ar.iter().enumerate() {
-                    for (acc, g) in s[d * C..(d + 1) * C].iter_mut().zip(dr) {
-                        *acc += f64::from(ad * g);
-                    }
-                }
+            let rows = dp.len() / C;
+            let mut sw = vec![0.0f32; 2 * C * C];
+            gemm(
+                view_mut(&mut sw, 2 * C, C),
+                Accum::Replace,
+                view(a, rows, 2 * C).transpose(),
+                view(dp, rows, C),
+            );
+            let mut s: Vec<f64> = sw.iter().map(|&x| f64::from(x)).collect();
+            s.resize(CONV_PARAMS, 0.0);
+            for dr in dp.chunks_exact(C) {
                 for (acc, g) in s[2 * C * C..].iter_mut().zip(dr) {
                     *acc += f64::from(*g);
                 }
@@ -271,14 +250,18 @@ fn conv_backward(
     let rows = dpre.len() / C;
     let mut da = vec![0.0f32; rows * 2 * C];
     da.par_chunks_mut(2 * C * ROWS_PER_TASK)
+        .zip(dpre.par_chunks(C * ROWS_PER_TASK))
         .enumerate()
-        .for_each(|(task, da)| {
+        .for_each(|(task, (da, dp))| {
+            let n = dp.len() / C;
+            gemm(
+                view_mut(da, n, 2 * C),
+                Accum::Replace,
+                view(dp, n, C),
+                view(w, 2 * C, C).transpose(),
+            );
             for (r, dar) in da.chunks_exact_mut(2 * C).enumerate() {
                 let row = task * ROWS_PER_TASK + r;
-                let dr = &dpre[row * C..(row + 1) * C];
-                for (d, x) in dar.iter_mut().enumerate() {
-                    *x = w[d * C..(d + 1) * C].iter().zip(dr).map(|(wk, g)| wk * g).sum();
-                }
                 let (_, inv) = graph.neighbors(row % v);
                 dar[C..].iter_mut().for_each(|x| *x *= inv);
             }

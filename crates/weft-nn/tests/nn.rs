@@ -886,9 +886,12 @@ fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
     // A sheet whose boundary vertices have fewer neighbours, a batch of three, random
     // weights with non-zero biases (so every leaky ReLU sees both signs), and a loss that
     // weighs every output differently: the encoder's and decoder's outputs and the
-    // gradients of every parameter and of both inputs agree with candle's autograd.
-    let mesh = weft_mesh::generators::sheet(6, 1.0).unwrap();
+    // gradients of every parameter and of both inputs agree with candle's autograd. 196
+    // vertices × 3 frames = 588 rows: two of the kernels' 512-row tasks, the second
+    // partial, so the per-task products and their sum over tasks are both exercised.
+    let mesh = weft_mesh::generators::sheet(14, 1.0).unwrap();
     let v = mesh.num_vertices();
+    assert!(3 * v > 512 && 3 * v < 1024);
     let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
     let mut params = Params::new(&cpu(), 8);
     let config = AutoencoderConfig {
