@@ -26,17 +26,25 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 const STEPS: usize = 20;
 
+/// The loss tensor of `model` on `batch`, as the trainer's first batch of an epoch (a
+/// macro so the bench need not name candle's tensor type: only weft-nn depends on candle).
+macro_rules! loss_on {
+    ($model:expr, $batch:expr) => {{
+        let at = BatchAt {
+            epoch: 0,
+            batch: 0,
+            batches: 1,
+        };
+        match $model.batch_loss($batch, at).unwrap() {
+            BatchLoss::Loss { loss, .. } => loss,
+            BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
+        }
+    }};
+}
+
 /// One training step of `model` on `batch`: loss, backward, Adam on every group.
 fn step(model: &mut dyn Trainable, adams: &mut [Adam], batch: &[usize]) {
-    let at = BatchAt {
-        epoch: 0,
-        batch: 0,
-        batches: 1,
-    };
-    let BatchLoss::Loss { loss, .. } = model.batch_loss(batch, at).unwrap() else {
-        panic!("the batch was skipped");
-    };
-    let grads = loss.backward().unwrap();
+    let grads = loss_on!(model, batch).backward().unwrap();
     for (g, adam) in model.groups().iter().zip(adams.iter_mut()) {
         adam.step(g.params, &grads).unwrap();
     }
@@ -80,15 +88,7 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
     };
     let mut group = c.benchmark_group(format!("training-altconv-{vertices}"));
     group.sample_size(10);
-    let at = BatchAt {
-        epoch: 0,
-        batch: 0,
-        batches: 1,
-    };
-    let loss = |model: &mut AltConvTraining<'_>| match model.batch_loss(&[0], at).unwrap() {
-        BatchLoss::Loss { loss, .. } => loss,
-        BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
-    };
+    let loss = |model: &mut AltConvTraining<'_>| loss_on!(model, &[0]);
     for (name, path) in [
         ("fused", TrainingPath::new(Kernels::Fused)),
         ("candle autograd", TrainingPath::new(Kernels::Autograd)),
@@ -141,15 +141,7 @@ fn embedding(c: &mut Criterion) {
         });
         // Where the step goes: the losses alone, then with the backward pass (the rest of
         // the step is Adam over 9.8 M parameters).
-        let at = BatchAt {
-            epoch: 0,
-            batch: 0,
-            batches: 1,
-        };
-        let loss = |stage: &mut EmbedStage<'_>| match stage.batch_loss(&[0; 8], at).unwrap() {
-            BatchLoss::Loss { loss, .. } => loss,
-            BatchLoss::Skipped { .. } => panic!("the batch was skipped"),
-        };
+        let loss = |stage: &mut EmbedStage<'_>| loss_on!(stage, &[0; 8]);
         group.bench_function(format!("forward and loss, 8 windows ({name})"), |b| {
             b.iter(|| loss(&mut stage))
         });
