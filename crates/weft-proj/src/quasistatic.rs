@@ -454,6 +454,7 @@ impl QuasistaticLayer {
                     cg_iterations: k.cg_iterations,
                     rejected_steps: 0,
                     fallback: None,
+                    exact_from_iteration: None,
                 };
                 (report, k.cg_iterations, (Adjoint::Factorize, 0))
             }

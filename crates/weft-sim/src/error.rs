@@ -48,6 +48,11 @@ pub enum Error {
          anchor at least three non-collinear nodes"
     )]
     UnderConstrained { free_rigid_modes: usize },
+    #[error(
+        "the garment came off the body: vertex {vertex} ended {distance:.3} m from its kinematic guess, more than \
+         {limit:.3} m (half the garment's length)"
+    )]
+    GarmentOffBody { vertex: usize, distance: f64, limit: f64 },
     #[error("scene error: {0}")]
     Scene(String),
 }

@@ -610,6 +610,47 @@ fn full_size_mass_spring_ball_converges_through_its_buckling_frame() {
 }
 
 #[test]
+fn projected_newton_switches_to_the_exact_hessian_when_its_residual_keeps_rising() {
+    // The same buckling frame as above: projected Newton crawls out of it (over 100
+    // iterations) while its residual rises and falls. With `exact_hessian_after_rises` it
+    // hands the minimisation to the shifted exact Hessian after the first two rises in a
+    // row, converges, and the report names the iteration of the switch. (What the switch
+    // saves is measured on the drape scenes, docs/DRAPE.md; on this chaotic frame both
+    // paths take about a hundred iterations.)
+    let run = |switch: Option<usize>| -> Vec<weft_sim::NewtonReport> {
+        let mut scene = ClothScene::builtin("ball-ms", false).unwrap();
+        scene.hessian = Some(HessianProjection::WhenIndefinite);
+        let mut sim = ClothSimulation::new(scene, None).unwrap();
+        sim.integrator_mut().settings.exact_hessian_after_rises = switch;
+        let tolerance = sim.integrator().settings.tolerance;
+        (0..2)
+            .map(|_| {
+                let f = sim.step().unwrap();
+                assert!(f.report.newton.residual <= tolerance);
+                f.report.newton
+            })
+            .collect()
+    };
+    let projected = run(None);
+    let switched = run(Some(2));
+    assert!(projected[1].iterations > 100, "frame 2 no longer buckles");
+    assert_eq!(projected[1].exact_from_iteration, None);
+    assert!(switched[1].exact_from_iteration.is_some(), "frame 2 switches");
+    for report in &switched {
+        let Some(at) = report.exact_from_iteration else {
+            continue;
+        };
+        // Residual after iteration k (0: the start); the two iterations before the
+        // switch raised it.
+        let r: Vec<f64> = std::iter::once(report.initial_residual)
+            .chain(report.residual_history.iter().copied())
+            .collect();
+        let j = at - 1;
+        assert!(r[j] > r[j - 1] && r[j - 1] > r[j - 2], "{:?}", &r[..at]);
+    }
+}
+
+#[test]
 fn newton_residual_reports_a_nan_entry_as_infinite() {
     // Regression: the max-norm folded with f64::max, which drops NaN, so a NaN residual
     // read as converged.

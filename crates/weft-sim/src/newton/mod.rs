@@ -54,6 +54,18 @@ pub struct NewtonSettings {
     /// into a scene file only when off.
     #[serde(skip_serializing_if = "is_true")]
     pub retry_other_strategy: bool,
+    /// With [`HessianProjection::WhenIndefinite`] and the line search: after this many
+    /// consecutive projected-Hessian iterations in which the residual force **rose**, the
+    /// rest of the minimisation steps with the shifted exact Hessian
+    /// ([`HessianProjection::Never`]). A rising residual while the energy falls is the
+    /// iterate sliding down a direction of negative curvature that the projected matrix
+    /// has clamped to zero: projected Newton then takes gradient-sized steps along it
+    /// (dozens to hundreds of iterations), while the shifted exact Hessian follows it
+    /// (docs/CLOTH.md, "Definiteness"). The report records the iteration
+    /// ([`NewtonReport::exact_from_iteration`]). `None` (the default) never switches;
+    /// written into a scene file only when set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exact_hessian_after_rises: Option<usize>,
 }
 
 fn is_true(v: &bool) -> bool {
@@ -117,6 +129,7 @@ impl Default for NewtonSettings {
             reuse_factorization: false,
             globalization: Globalization::LineSearch,
             retry_other_strategy: true,
+            exact_hessian_after_rises: None,
         }
     }
 }
@@ -179,6 +192,10 @@ pub struct NewtonReport {
     /// retry's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fallback: Option<HessianProjection>,
+    /// The first iteration that stepped with the shifted exact Hessian after the switch of
+    /// [`NewtonSettings::exact_hessian_after_rises`] (1-based), if it switched.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exact_from_iteration: Option<usize>,
 }
 
 impl NewtonReport {
@@ -199,6 +216,7 @@ impl NewtonReport {
             cg_iterations: 0,
             rejected_steps: 0,
             fallback: None,
+            exact_from_iteration: None,
         }
     }
 }
@@ -638,10 +656,14 @@ impl NewtonSolver {
         // The factor in use (the last fresh one), and whether the next step reuses it.
         let mut current: Option<Factorized> = None;
         let mut hold = false;
+        // The projection in use, and the run of projected iterations whose residual rose
+        // (`NewtonSettings::exact_hessian_after_rises`).
+        let mut projection = settings.projection;
+        let mut rises = 0;
         while progress.iterate(settings)? {
             let fresh = !hold || current.is_none();
             if fresh {
-                let f = self.factorize_at(terms, x, settings.projection)?;
+                let f = self.factorize_at(terms, x, projection)?;
                 progress.report.regularizations += f.shifts;
                 progress.report.factorizations += f.numeric;
                 progress.floor = self.residual_floor(x);
@@ -674,8 +696,21 @@ impl NewtonSolver {
             };
             progress.energy = trial_energy;
             let previous = progress.residual;
+            let projected = factorized.projected;
             if self.take_step(terms, x, settings, progress)? {
                 break;
+            }
+            if let Some(limit) = settings.exact_hessian_after_rises {
+                if projection == HessianProjection::WhenIndefinite && projected {
+                    rises = if progress.residual > previous { rises + 1 } else { 0 };
+                    if rises >= limit {
+                        projection = HessianProjection::Never;
+                        progress.report.exact_from_iteration = Some(progress.report.iterations + 1);
+                        // The held factor is the projected one: the next step factorises.
+                        hold = false;
+                        continue;
+                    }
+                }
             }
             if settings.reuse_factorization && full_step {
                 let needed = if fresh { REUSE_AFTER_FRESH } else { REUSE_AFTER_REUSED };

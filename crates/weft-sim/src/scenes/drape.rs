@@ -107,6 +107,14 @@ pub struct DrapeParams {
     /// keeps the guess unfolded over the scene's range (docs/DRAPE.md).
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub skinned_guess_half_width: f64,
+    /// Newton (settle steps and equilibrium) switches from the projected to the shifted
+    /// exact Hessian after this many consecutive projected iterations in which the
+    /// residual rose ([`NewtonSettings::exact_hessian_after_rises`]); 0 never switches,
+    /// as the datasets made before it did. Both sleeves use 2: fewer iterations, fewer
+    /// poses that do not converge, and the same equilibria where both converge
+    /// (docs/DRAPE.md, "Leaving the saddles").
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub exact_hessian_after_rises: usize,
 }
 
 fn default_shoulder_range() -> f64 {
@@ -168,6 +176,7 @@ impl DrapeParams {
             settle_steps: 0,
             settle_time_step: 0.0,
             skinned_guess_half_width: 0.0,
+            exact_hessian_after_rises: 2,
         }
     }
     /// A 16 × 12 = 192-vertex sleeve on the quick limb, for tests.
@@ -623,6 +632,8 @@ impl Drape {
             // record it), not retried with another strategy: the published datasets
             // were made so.
             retry_other_strategy: false,
+            exact_hessian_after_rises: (self.params.exact_hessian_after_rises > 0)
+                .then_some(self.params.exact_hessian_after_rises),
             ..NewtonSettings::default()
         };
         let mut truth = guess.clone();
@@ -642,6 +653,7 @@ impl Drape {
         }
         let settle_iterations = self.settle(&terms, &mut truth, &settings)?;
         let report = solver.minimize(&terms, &mut truth, &settings)?;
+        self.check_on_arm(&guess, &truth)?;
         Ok(DrapeExample {
             pose: *pose,
             guess,
@@ -649,6 +661,24 @@ impl Drape {
             report,
             settle_iterations,
         })
+    }
+
+    /// Rejects an equilibrium in which the sleeve has come off the arm: a vertex farther
+    /// from its kinematic guess than half the sleeve's length. On a raised arm the loose
+    /// sleeve has such equilibria — slid down and turned inside out over the sewn seam,
+    /// hanging from the shoulder (vertices 0.86 m from the guess, where a sleeve on the
+    /// arm stays within 0.09 m; docs/DRAPE.md) — which are not a garment on the body.
+    fn check_on_arm(&self, guess: &[f64], truth: &[f64]) -> Result<()> {
+        let limit = OFF_ARM_FRACTION * (self.params.sleeve_end - self.params.sleeve_start);
+        let (vertex, distance) = farthest_from(guess, truth);
+        if distance > limit {
+            return Err(Error::GarmentOffBody {
+                vertex,
+                distance,
+                limit,
+            });
+        }
+        Ok(())
     }
 
     /// The damped release of [`DrapeParams::settle_steps`]: returns the Newton
@@ -680,5 +710,51 @@ impl Drape {
             }
         }
         Ok(iterations)
+    }
+}
+
+/// A sleeve vertex farther than this fraction of the sleeve's length from its kinematic
+/// guess means the sleeve has come off the arm ([`Drape::solve`] rejects the pose).
+pub const OFF_ARM_FRACTION: f64 = 0.5;
+
+/// The vertex of `b` farthest from its place in `a` (flat, m) and that distance.
+fn farthest_from(a: &[f64], b: &[f64]) -> (usize, f64) {
+    a.chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
+        .enumerate()
+        .fold((0, 0.0), |best, (v, d)| if d > best.1 { (v, d) } else { best })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sleeve_off_the_arm_is_rejected_and_one_on_it_is_not() {
+        let drape = Drape::new(DrapeParams::loose_quick()).unwrap();
+        let pose = ArmPose::default();
+        let transforms = pose.bone_transforms(&drape.limb.joint_position());
+        let posed = drape.skin(&transforms);
+        let guess = drape.guess_on(&transforms, &posed);
+        let length = drape.params.sleeve_end - drape.params.sleeve_start;
+        let mut truth = guess.clone();
+        // A fold 0.4 of the sleeve's length deep is still a drape on the arm.
+        truth[3 * 7 + 2] -= 0.4 * length;
+        drape.check_on_arm(&guess, &truth).unwrap();
+        // Vertex 11 hanging 0.6 of it below its place is off the arm.
+        truth[3 * 11 + 2] -= 0.6 * length;
+        match drape.check_on_arm(&guess, &truth) {
+            Err(Error::GarmentOffBody {
+                vertex,
+                distance,
+                limit,
+            }) => {
+                assert_eq!(vertex, 11);
+                assert!((distance - 0.6 * length).abs() < 1e-12, "{distance}");
+                assert!((limit - OFF_ARM_FRACTION * length).abs() < 1e-15, "{limit}");
+            }
+            other => panic!("expected GarmentOffBody, got {other:?}"),
+        }
     }
 }
