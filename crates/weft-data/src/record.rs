@@ -50,6 +50,10 @@ pub struct NewtonDetail {
     /// The diagonal shift each line-search iteration stepped with (N/m; 0: none).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub shift_history: Vec<f64>,
+    /// The first iteration on the shifted exact Hessian after a projected solve's switch
+    /// (`NewtonSettings::exact_hessian_after_rises`), if it switched.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exact_from_iteration: Option<usize>,
 }
 
 /// Every frame of a run, frame 0 being the initial (rest or settled) state.
@@ -220,6 +224,7 @@ impl Recorder {
                         fallback: f.report.newton.fallback.map(|h| format!("{h:?}")),
                         residual_history: f.report.newton.residual_history.clone(),
                         shift_history: f.report.newton.shift_history.clone(),
+                        exact_from_iteration: f.report.newton.exact_from_iteration,
                     }),
                 }
             }

@@ -461,6 +461,14 @@ fn scene_toml_round_trips_and_rejects_unknown_fields() {
     let negative = text.replacen("dt = 0.02", "dt = -0.02", 1);
     assert!(ClothScene::from_toml(&negative).is_err());
     assert!(ClothScene::builtin("no-such-scene", false).is_err());
+    // The Newton switch is a scene key: written only when set, read back, applied.
+    assert!(!text.contains("exact_hessian_after_rises"));
+    let mut switched = ClothScene::builtin("sheet-fem", true).unwrap();
+    switched.exact_hessian_after_rises = Some(2);
+    let back = ClothScene::from_toml(&switched.to_toml().unwrap()).unwrap();
+    assert_eq!(back, switched);
+    let sim = ClothSimulation::new(back, None).unwrap();
+    assert_eq!(sim.integrator().settings.exact_hessian_after_rises, Some(2));
 }
 
 #[test]

@@ -189,6 +189,11 @@ pub struct ClothScene {
     /// [`crate::newton::Globalization`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub globalization: Option<Globalization>,
+    /// Switch a projected Newton solve to the shifted exact Hessian after this many
+    /// consecutive iterations whose residual rose
+    /// ([`crate::newton::NewtonSettings::exact_hessian_after_rises`]); omitted, never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact_hessian_after_rises: Option<usize>,
 }
 
 fn one() -> f64 {
@@ -311,6 +316,7 @@ impl ClothScene {
             symmetry_breaking: default_symmetry_breaking(),
             hessian: None,
             globalization: None,
+            exact_hessian_after_rises: None,
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -598,6 +604,7 @@ impl ClothSimulation {
         integrator.settings.tolerance = scene.relative_tolerance * max_weight.max(1e-12);
         integrator.settings.max_iterations = scene.max_newton_iterations;
         integrator.settings.globalization = scene.globalization.unwrap_or_default();
+        integrator.settings.exact_hessian_after_rises = scene.exact_hessian_after_rises;
         integrator.settings.projection = scene.hessian.unwrap_or(match scene.model {
             ClothModel::MassSpring { .. } => HessianProjection::Never,
             ClothModel::Fem { .. } => HessianProjection::WhenIndefinite,
