@@ -528,7 +528,15 @@ mod tests {
         for (name, size, want) in [drape::NAME, drape::LOOSE].into_iter().flat_map(|name| {
             [
                 (name, Size::Quick, (16, 4, 4)),
-                (name, Size::Standard, (1000, 200, 200)),
+                (
+                    name,
+                    Size::Standard,
+                    if name == drape::LOOSE {
+                        (600, 100, 100)
+                    } else {
+                        (1000, 200, 200)
+                    },
+                ),
                 (name, Size::Paper, (8000, 200, 200)),
             ]
         }) {
