@@ -131,11 +131,7 @@ fn embedding(c: &mut Criterion) {
         };
         let model = EmbedModel::new(config.clone(), &data).unwrap();
         let mut adams = vec![Adam::new(&model.autoencoder_params, config.adam).unwrap()];
-        let mut stage = EmbedStage {
-            model: &model,
-            data: &data,
-            stage: 1,
-        };
+        let mut stage = EmbedStage::new(&model, &data, 1);
         group.bench_function(format!("stage-1 step, 8 windows ({name})"), |b| {
             b.iter(|| step(&mut stage, &mut adams, &[0; 8]))
         });

@@ -556,23 +556,26 @@ impl EmbedModel {
     /// The losses of `stage` on `batch`, with λ_ephys = `ephys` (see
     /// [`EmbedTrainingConfig::ephys_weight`]); the other weights are the configuration's.
     pub fn losses(&self, data: &EmbedData, batch: &[FrameRef], stage: u8, ephys: f64) -> Result<(Tensor, LossTerms)> {
+        self.losses_with(data, batch, stage, ephys, None)
+    }
+
+    /// [`EmbedModel::losses`], with stage 2's frozen codes and predecessor positions
+    /// read from `frozen` instead of recomputed (the same values: the autoencoder does
+    /// not change in stage 2).
+    fn losses_with(
+        &self,
+        data: &EmbedData,
+        batch: &[FrameRef],
+        stage: u8,
+        ephys: f64,
+        frozen: Option<&FrozenAutoencoder>,
+    ) -> Result<(Tensor, LossTerms)> {
         let device = self.autoencoder_params.device();
         let w = LossWeights {
             ephys,
             ..self.config.weights
         };
-        let prev = |k: usize| -> Vec<FrameRef> {
-            batch
-                .iter()
-                .map(|f| FrameRef {
-                    sequence: f.sequence,
-                    frame: f.frame - k,
-                })
-                .collect()
-        };
-        let (b1, b2) = (prev(1), prev(2));
-        let x = data.feature_batch(batch, device)?;
-        let z = self.autoencoder.encode(&x)?;
+        let (b1, b2) = (predecessors(batch, 1), predecessors(batch, 2));
         let scalar = |t: &Tensor| -> Result<f64> { Ok(t.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?) };
         let mut terms = LossTerms::default();
         let mut total = Tensor::zeros((), candle_core::DType::F32, device)?;
@@ -586,6 +589,8 @@ impl EmbedModel {
         let lphys = data.lphys_op();
         let phys_scale = data.phys_scale(self.config.phys_scale);
         if stage == 1 || stage == 3 {
+            let x = data.feature_batch(batch, device)?;
+            let z = self.autoencoder.encode(&x)?;
             // The predecessors' codes feed the latent step (stage 3) and L_ephys; the
             // baseline in stage 1 needs neither.
             let predecessors = if stage == 3 || w.ephys != 0.0 {
@@ -620,23 +625,111 @@ impl EmbedModel {
             }
         } else {
             // Stage 2: the autoencoder is frozen (its codes are detached).
-            let z = z.detach();
-            let z1 = self.autoencoder.encode(&data.feature_batch(&b1, device)?)?.detach();
-            let z2 = self.autoencoder.encode(&data.feature_batch(&b2, device)?)?.detach();
+            let code = |frames: &[FrameRef]| -> Result<Tensor> {
+                match frozen {
+                    Some(f) => f.codes(frames),
+                    None => Ok(self.autoencoder.encode(&data.feature_batch(frames, device)?)?.detach()),
+                }
+            };
+            let (z, z1, z2) = (code(batch)?, code(&b1)?, code(&b2)?);
             let q = data.control_batch(batch, device)?;
             let predicted = self.simulator.step(&z2, &z1, &q)?;
             let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
             add(sim, w.sim, &mut terms.sim)?;
             if w.mphys != 0.0 {
                 let p = self.positions(data, batch, &predicted)?;
-                let p1 = self.positions(data, &b1, &z1)?;
-                let p2 = self.positions(data, &b2, &z2)?;
+                // The predecessors' positions carry no gradient to the simulator.
+                let decoded = |frames: &[FrameRef], z: &Tensor| -> Result<Tensor> {
+                    match frozen.and_then(|f| f.positions(frames)) {
+                        Some(p) => p,
+                        None => self.positions(data, frames, z),
+                    }
+                };
+                let (p1, p2) = (decoded(&b1, &z1)?, decoded(&b2, &z2)?);
                 let mphys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
                 add(mphys, w.mphys, &mut terms.mphys)?;
             }
         }
         terms.total = scalar(&total)?;
         Ok((total, terms))
+    }
+}
+
+/// The windows' frames `k` steps back.
+fn predecessors(batch: &[FrameRef], k: usize) -> Vec<FrameRef> {
+    batch
+        .iter()
+        .map(|f| FrameRef {
+            sequence: f.sequence,
+            frame: f.frame - k,
+        })
+        .collect()
+}
+
+/// Stage 2's autoencoder, evaluated once for every frame the stage reads: the codes
+/// `E(x)` and, when `L_mphys` is on, the positions `ACAP⁻¹ ∘ D ∘ E(x)` (the predecessors'
+/// in `L_mphys`). Stage 2 trains the latent simulator only, so these are constants of the
+/// stage; recomputing them per batch was most of a stage-2 step.
+#[derive(Debug)]
+struct FrozenAutoencoder {
+    codes: std::collections::HashMap<(usize, usize), Tensor>,
+    positions: std::collections::HashMap<(usize, usize), Tensor>,
+}
+
+impl FrozenAutoencoder {
+    /// Evaluates `model`'s autoencoder on every frame of `windows` and its two predecessors,
+    /// in batches of the configuration's size.
+    fn new(model: &EmbedModel, data: &EmbedData, windows: &[FrameRef]) -> Result<Self> {
+        let mut frames: Vec<FrameRef> = windows
+            .iter()
+            .flat_map(|f| {
+                (0..3).map(move |k| FrameRef {
+                    sequence: f.sequence,
+                    frame: f.frame - k,
+                })
+            })
+            .collect();
+        frames.sort_by_key(|f| (f.sequence, f.frame));
+        frames.dedup();
+        let device = model.autoencoder_params.device();
+        let mut codes = std::collections::HashMap::new();
+        let mut positions = std::collections::HashMap::new();
+        for chunk in frames.chunks(model.config.batch.max(1)) {
+            let z = model.autoencoder.encode(&data.feature_batch(chunk, device)?)?.detach();
+            let p = if model.config.weights.mphys != 0.0 {
+                Some(model.positions(data, chunk, &z)?.detach())
+            } else {
+                None
+            };
+            for (i, f) in chunk.iter().enumerate() {
+                codes.insert((f.sequence, f.frame), z.get(i)?);
+                if let Some(p) = &p {
+                    positions.insert((f.sequence, f.frame), p.get(i)?);
+                }
+            }
+        }
+        Ok(Self { codes, positions })
+    }
+
+    fn lookup(map: &std::collections::HashMap<(usize, usize), Tensor>, frames: &[FrameRef]) -> Option<Result<Tensor>> {
+        let rows: Option<Vec<&Tensor>> = frames.iter().map(|f| map.get(&(f.sequence, f.frame))).collect();
+        rows.map(|rows| Ok(Tensor::stack(&rows, 0)?))
+    }
+
+    /// `[B, latent]` codes of `frames`.
+    fn codes(&self, frames: &[FrameRef]) -> Result<Tensor> {
+        Self::lookup(&self.codes, frames).unwrap_or_else(|| {
+            Err(Error::InvalidParameter {
+                name: "frozen codes",
+                value: format!("{frames:?}"),
+                reason: "a frame outside the stage's windows",
+            })
+        })
+    }
+
+    /// `[B, V, 3]` decoded positions of `frames`, if `L_mphys` is on and all were evaluated.
+    fn positions(&self, frames: &[FrameRef]) -> Option<Result<Tensor>> {
+        Self::lookup(&self.positions, frames)
     }
 }
 
@@ -649,6 +742,36 @@ pub struct EmbedStage<'a> {
     pub data: &'a EmbedData,
     /// 1, 2 or 3.
     pub stage: u8,
+    /// Stage 2's frozen autoencoder outputs, evaluated on first use.
+    frozen: Option<FrozenAutoencoder>,
+}
+
+impl<'a> EmbedStage<'a> {
+    pub fn new(model: &'a EmbedModel, data: &'a EmbedData, stage: u8) -> Self {
+        Self {
+            model,
+            data,
+            stage,
+            frozen: None,
+        }
+    }
+
+    /// The stage's losses on `frames`; stage 2 reads the frozen autoencoder's outputs,
+    /// evaluated once on every training and validation window.
+    fn losses(&mut self, frames: &[FrameRef], ephys: f64) -> Result<(Tensor, LossTerms)> {
+        if self.stage == 2 && self.frozen.is_none() {
+            let windows: Vec<FrameRef> = self
+                .data
+                .train_windows
+                .iter()
+                .chain(&self.data.validation_windows)
+                .copied()
+                .collect();
+            self.frozen = Some(FrozenAutoencoder::new(self.model, self.data, &windows)?);
+        }
+        let frozen = if self.stage == 2 { self.frozen.as_ref() } else { None };
+        self.model.losses_with(self.data, frames, self.stage, ephys, frozen)
+    }
 }
 
 impl crate::trainer::Trainable for EmbedStage<'_> {
@@ -670,7 +793,7 @@ impl crate::trainer::Trainable for EmbedStage<'_> {
             .model
             .config
             .ephys_weight(progress, at.batch as f64 / at.batches as f64);
-        let (loss, t) = self.model.losses(self.data, &frames, self.stage, ephys)?;
+        let (loss, t) = self.losses(&frames, ephys)?;
         Ok(crate::trainer::BatchLoss::Loss {
             loss,
             terms: vec![
@@ -684,7 +807,8 @@ impl crate::trainer::Trainable for EmbedStage<'_> {
     }
 
     fn validation_score(&mut self) -> Result<f64> {
-        let windows = &self.data.validation_windows;
+        let data = self.data;
+        let windows = &data.validation_windows;
         if windows.is_empty() {
             return Err(Error::InvalidParameter {
                 name: "validation split",
@@ -693,10 +817,9 @@ impl crate::trainer::Trainable for EmbedStage<'_> {
             });
         }
         let mut sum = 0.0;
+        let ephys = self.model.config.weights.ephys;
         for chunk in windows.chunks(self.model.config.batch.max(1)) {
-            let (_, t) = self
-                .model
-                .losses(self.data, chunk, self.stage, self.model.config.weights.ephys)?;
+            let (_, t) = self.losses(chunk, ephys)?;
             sum += t.total * chunk.len() as f64;
         }
         Ok(sum / windows.len() as f64)
@@ -766,7 +889,7 @@ pub fn train_stages(
             crate::trainer::TrainingState::read(&run)?
         } else {
             let trainer = crate::trainer::Trainer::new(format!("{label} stage {stage}"), config);
-            trainer.run(&run, &mut EmbedStage { model, data, stage }, observer)?
+            trainer.run(&run, &mut EmbedStage::new(model, data, stage), observer)?
         };
         out.push((stage, state));
     }

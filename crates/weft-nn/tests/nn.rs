@@ -1077,3 +1077,85 @@ fn the_published_nnwarp_models_load_and_correct_nothing_at_rest() {
         );
     }
 }
+
+/// Stage 2 reads the frozen autoencoder's codes and predecessor positions from a cache
+/// built once per stage; its losses, every term, and the latent simulator's gradients equal
+/// the uncached computation's (`EmbedModel::losses`), on windows taken out of order.
+#[test]
+fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_gradients() {
+    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let config = EmbedTrainingConfig {
+        autoencoder: AutoencoderConfig {
+            conv_layers: 1,
+            latent: 8,
+        },
+        latent_hidden: vec![16],
+        ..EmbedTrainingConfig::default()
+    };
+    assert!(config.weights.mphys != 0.0 && config.weights.sim != 0.0);
+    let model = EmbedModel::new(config, &data).unwrap();
+    let n = data.train_windows.len();
+    assert!(n >= 6, "{n} training windows");
+    let batch: Vec<usize> = vec![n - 1, 0, n / 2, 2];
+    let frames: Vec<_> = batch.iter().map(|&i| data.train_windows[i]).collect();
+    let sim_grads = |loss: &Tensor| -> Vec<Tensor> {
+        let grads = loss.backward().unwrap();
+        model
+            .simulator_params
+            .vars()
+            .values()
+            .map(|v| grads.get(v.as_tensor()).unwrap().clone())
+            .collect()
+    };
+    let (want, want_terms) = model.losses(&data, &frames, 2, model.config.weights.ephys).unwrap();
+    let want_grads = sim_grads(&want);
+    let mut stage = EmbedStage::new(&model, &data, 2);
+    let at = BatchAt {
+        epoch: 0,
+        batch: 0,
+        batches: 1,
+    };
+    let BatchLoss::Loss { loss, terms } = stage.batch_loss(&batch, at).unwrap() else {
+        panic!("stage 2 skipped a batch")
+    };
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-5 * b.abs().max(1e-12);
+    let got = loss.to_scalar::<f32>().unwrap() as f64;
+    assert!(close(got, want_terms.total), "{got} vs {}", want_terms.total);
+    for (name, value) in terms {
+        let reference = match name {
+            "sim" => want_terms.sim,
+            "mphys" => want_terms.mphys,
+            _ => continue,
+        };
+        assert!(
+            reference > 0.0 && close(value, reference),
+            "{name}: {value} vs {reference}"
+        );
+    }
+    for (g, w) in sim_grads(&loss).iter().zip(&want_grads) {
+        assert!(
+            relative_gap(g, w) < 1e-5,
+            "simulator gradient off by {}",
+            relative_gap(g, w)
+        );
+    }
+    // The validation score reads the same cache.
+    let windows = &data.validation_windows;
+    let mut sum = 0.0;
+    for chunk in windows.chunks(model.config.batch) {
+        sum += model
+            .losses(&data, chunk, 2, model.config.weights.ephys)
+            .unwrap()
+            .1
+            .total
+            * chunk.len() as f64;
+    }
+    let score = stage.validation_score().unwrap();
+    assert!(
+        close(score, sum / windows.len() as f64),
+        "{score} vs {}",
+        sum / windows.len() as f64
+    );
+}
