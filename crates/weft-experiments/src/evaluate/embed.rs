@@ -19,10 +19,11 @@ use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
 use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
 use weft_nn::rollout::LatentRollout;
+use weft_nn::trainer::{Decay, Schedule, TrainingState};
 
 use super::context::EvalContext;
 use crate::paper::{Table, format_ms, paper_cell as cell};
-use crate::records::{Curve, ExperimentOutput, Scatter, Timing, mean_sd};
+use crate::records::{Curve, ExperimentOutput, LinePlot, Scatter, Series, Timing, mean_sd};
 use weft_data::Size;
 use weft_data::files::{Array, write_safetensors};
 
@@ -90,10 +91,11 @@ fn score_cells(paper: Option<(f64, f64, f64)>, s: &Scores) -> [String; 3] {
     ]
 }
 
-/// The training configuration of each evaluation size. `paper` keeps the defaults
-/// (epochs 30, 30, 10); `standard` is budgeted to 10, 10, 5 epochs so its 22 models train
-/// in about two hours on two cores (about 20 s per epoch at 4225 vertices, docs/EMBEDDING.md);
-/// `quick` also shrinks the networks.
+/// The training configuration of each evaluation size. `standard` and `paper` train for
+/// the paper's schedule (epochs 30, 30, 10), each stage stopping early once its validation
+/// loss has not improved for [`EARLY_STOPPING_PATIENCE`] epochs (issue 31: "train to
+/// convergence"); the learning-rate schedule is then chosen on validation
+/// ([`schedule_candidates`]). `quick` shrinks the networks and trains a fixed budget.
 fn training_config(size: Size) -> EmbedTrainingConfig {
     let mut c = EmbedTrainingConfig::default();
     match size {
@@ -104,10 +106,44 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
             c.epochs = [20, 20, 5];
             c.adam.learning_rate = 2e-3;
         }
-        Size::Standard => c.epochs = [10, 10, 5],
-        Size::Paper => {}
+        Size::Standard | Size::Paper => {
+            c.schedule.early_stopping_patience = Some(EARLY_STOPPING_PATIENCE);
+        }
     }
     c
+}
+
+/// Epochs without a better validation loss after which a stage stops (standard and paper
+/// sizes): the validation loss has flattened.
+const EARLY_STOPPING_PATIENCE: usize = 5;
+
+/// The learning-rate schedules tried, by name, beside the configuration's constant rate
+/// (Tan et al.'s): halving the rate whenever the validation loss has not improved for two
+/// epochs. The first scene's `no-pb` model (first seed) is trained under each, and the one
+/// with the lowest validation M_rms is used by every model of the experiment. Quick runs
+/// keep the configuration's.
+fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'static str, Schedule)> {
+    let constant = config.schedule;
+    if size == Size::Quick {
+        return vec![("constant", constant)];
+    }
+    let plateau = Schedule {
+        decay: Decay::ReduceOnPlateau {
+            factor: 0.5,
+            patience: 2,
+        },
+        ..constant
+    };
+    vec![("constant", constant), ("halve-on-plateau", plateau)]
+}
+
+/// The schedule to keep from `(name, validation scores)` candidates: the lowest validation
+/// M_rms (ties: the first).
+fn choose_schedule(candidates: &[(&'static str, ValidationScores)]) -> Option<&'static str> {
+    candidates
+        .iter()
+        .min_by(|a, b| a.1.m_rms.total_cmp(&b.1.m_rms))
+        .map(|(n, _)| *n)
 }
 
 /// Seeds per model: one at quick size (CI), three otherwise.
@@ -485,6 +521,39 @@ fn pca_long_rollout(scene: &str, data: &EmbedData, sim: &PcaSimulator) -> crate:
 /// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
 /// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
 /// ground truth shows how the error grows with the number of frames N.
+/// The learning curves of `models` (method, model directory): each stage's validation loss
+/// after every epoch (0: the stage's starting weights). Each stage has its own objective,
+/// so the stages are separate lines.
+fn learning_curves(scene: &str, models: &[(&str, &Path)]) -> LinePlot {
+    let mut series = Vec::new();
+    for (method, dir) in models {
+        for stage in 1..=3u8 {
+            let Ok(state) = TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage)) else {
+                continue;
+            };
+            let (mut x, mut y) = (vec![0.0], vec![state.initial_validation]);
+            for h in &state.history {
+                x.push(h.epoch as f64);
+                y.push(h.validation);
+            }
+            series.push(Series {
+                label: format!("{method}, stage {stage}"),
+                x,
+                y,
+            });
+        }
+    }
+    let log_y = series.iter().all(|s| s.y.iter().all(|v| *v > 0.0));
+    LinePlot {
+        name: format!("{scene}-learning-curves"),
+        title: format!("embed / {scene}: validation loss per epoch (first seed)"),
+        x_label: "epoch of the stage".into(),
+        y_label: "validation loss of the stage (each stage its own objective)".into(),
+        log_y,
+        series,
+    }
+}
+
 fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> crate::Result<Curve> {
     let seq = &data.dataset.sequences[0];
     let mut rollout = rollout_from(data, model, [0, 1].map(|frame| FrameRef { sequence: 0, frame }))?;
@@ -660,7 +729,7 @@ fn ik_table(rows: &[IkRow], settings: IkSettings) -> Table {
 pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("embed", ctx.size);
     let root = ctx.out.join("embed");
-    let config = training_config(ctx.size);
+    let mut config = training_config(ctx.size);
     std::fs::create_dir_all(&root)?;
     let config_path = root.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
@@ -686,6 +755,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut table_2: Vec<(String, Scores)> = Vec::new();
     let mut table_4: Vec<(String, &str, Scores)> = Vec::new();
     let mut ik_rows: Vec<IkRow> = Vec::new();
+    let mut schedule_rows: Vec<Vec<String>> = Vec::new();
     for &scene in scenes() {
         let data_dir = root.join("data").join(scene);
         let stopped =
@@ -732,6 +802,51 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         };
         let models = root.join("models").join(scene);
         let seed_dir = |method: &str, seed: u64| models.join(method).join(format!("seed-{seed}"));
+        // The learning-rate schedule, on the first scene's validation windows: `no-pb`'s
+        // first seed under each candidate; every model of the experiment uses the choice.
+        let schedules = schedule_candidates(ctx.size, &config);
+        if scene == scenes()[0] && schedules.len() > 1 {
+            let mut scored = Vec::new();
+            for (name, schedule) in &schedules {
+                let dir = models.join("schedule-study").join(name);
+                let c = EmbedTrainingConfig {
+                    schedule: *schedule,
+                    ..with_seed(&method_config(&config, true), seeds[0])
+                };
+                train(ctx, &data, &c, &dir)?;
+                let v = validation_scores(&data, &EmbedModel::load(&dir, &data, 3)?)?;
+                let epochs: Vec<String> = (1..=3u8)
+                    .map(|stage| {
+                        TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage))
+                            .map_or("—".into(), |t| format!("{} (kept {})", t.epochs_done, t.best_epoch))
+                    })
+                    .collect();
+                schedule_rows.push(vec![
+                    (*name).to_string(),
+                    format!("{:.3}", v.m_rms),
+                    format!("{:.4e}", v.m_phys),
+                    epochs.join(" / "),
+                ]);
+                scored.push((*name, v));
+            }
+            let chosen = choose_schedule(&scored).context("no learning-rate schedule candidate")?;
+            for row in &mut schedule_rows {
+                row.push(if row[0] == chosen {
+                    "chosen".into()
+                } else {
+                    String::new()
+                });
+            }
+            config.schedule = schedules
+                .iter()
+                .find(|(n, _)| *n == chosen)
+                .map(|(_, s)| *s)
+                .context("the chosen schedule")?;
+            std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
+            out.notes.push(format!(
+                "embed: learning-rate schedule `{chosen}` chosen on `{scene}`'s validation windows (the schedule table)"
+            ));
+        }
         // `no-pb`, every seed; its first seed is the baseline the λ_ephys choice compares to.
         let mut baseline_dirs = Vec::new();
         for &seed in &seeds {
@@ -776,6 +891,10 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             row.push(format!("{chosen}"));
             ephys_rows.push((grid.clone(), row));
         }
+        out.lines.push(learning_curves(
+            scene,
+            &[("ours", &ours_dirs[0]), ("no-pb", &baseline_dirs[0])],
+        ));
         let mut ndcg: Vec<(&str, f64)> = Vec::new();
         for (method, dirs) in [("ours", &ours_dirs), ("no-pb", &baseline_dirs)] {
             let mut scores = Vec::new();
@@ -925,6 +1044,28 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             ),
             header,
             rows: ephys_rows.into_iter().map(|(_, r)| r).collect(),
+        });
+    }
+    if !schedule_rows.is_empty() {
+        out.tables.push(Table {
+            title: "Tan et al. learning-rate schedule chosen on the validation windows".into(),
+            caption: format!(
+                "`no-pb`, first seed, on `{}`: validation M_rms (mm) and M_phys (N²) after training under each \
+                 schedule (every stage stops once its validation loss has not improved for {EARLY_STOPPING_PATIENCE} \
+                 epochs), and the epochs each stage trained (the kept epoch in brackets). The schedule with the lowest \
+                 validation M_rms trains every model; the test split plays no part.",
+                scenes()[0]
+            ),
+            header: [
+                "schedule",
+                "validation M_rms (mm)",
+                "validation M_phys (N²)",
+                "epochs, stages 1 / 2 / 3",
+                "chosen",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: schedule_rows,
         });
     }
     out.tables.push(tan_table_2(&table_2));
@@ -1135,6 +1276,57 @@ mod tests {
             (a - b).abs() > 1e-3 * a,
             "the poison reaches the test scores: {a} vs {b}"
         );
+    }
+
+    /// Beyond the quick size every stage stops once flat and two schedules compete; the
+    /// choice is the lowest validation M_rms, and the candidates differ only in the decay.
+    #[test]
+    fn the_schedule_is_chosen_on_validation_m_rms_and_training_stops_once_flat() {
+        let quick = training_config(Size::Quick);
+        assert_eq!(schedule_candidates(Size::Quick, &quick).len(), 1);
+        let standard = training_config(Size::Standard);
+        assert_eq!(standard.epochs, [30, 30, 10]);
+        assert_eq!(standard.schedule.early_stopping_patience, Some(EARLY_STOPPING_PATIENCE));
+        let candidates = schedule_candidates(Size::Standard, &standard);
+        assert_eq!(candidates[0].1, standard.schedule);
+        assert!(matches!(candidates[1].1.decay, Decay::ReduceOnPlateau { .. }));
+        assert_eq!(
+            candidates[1].1.early_stopping_patience,
+            standard.schedule.early_stopping_patience
+        );
+        let v = |m_rms, m_phys| ValidationScores { m_rms, m_phys };
+        assert_eq!(
+            choose_schedule(&[("constant", v(9.0, 1.0)), ("halve-on-plateau", v(8.5, 50.0))]),
+            Some("halve-on-plateau")
+        );
+        assert_eq!(
+            choose_schedule(&[("constant", v(8.0, 99.0)), ("halve-on-plateau", v(8.5, 1.0))]),
+            Some("constant")
+        );
+        assert_eq!(choose_schedule(&[]), None);
+    }
+
+    /// The learning curves read each stage's training state: one line per method and stage,
+    /// starting at the stage's initial validation loss, the epochs in order.
+    #[test]
+    fn learning_curves_have_a_line_per_trained_stage_from_its_starting_weights() {
+        let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
+        let dir = std::env::temp_dir().join(format!("weft-embed-curves-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = EmbedTrainingConfig {
+            epochs: [2, 0, 1],
+            ..training_config(Size::Quick)
+        };
+        weft_nn::embed_training::train_model(&dir, &data, &config, &[1, 2, 3], &mut weft_nn::trainer::Silent).unwrap();
+        let plot = learning_curves("sheet-ms", &[("ours", &dir)]);
+        let labels: Vec<&str> = plot.series.iter().map(|s| s.label.as_str()).collect();
+        assert_eq!(labels, ["ours, stage 1", "ours, stage 3"]);
+        let first = TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, 1)).unwrap();
+        assert_eq!(plot.series[0].x, [0.0, 1.0, 2.0]);
+        assert_eq!(plot.series[0].y[0], first.initial_validation);
+        assert_eq!(plot.series[0].y[2], first.history[1].validation);
+        assert_eq!(plot.series[1].x, [0.0, 1.0]);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
