@@ -76,8 +76,9 @@ def read_obj(path):
     return np.array(v, dtype=np.float64), np.array(f, dtype=np.int64)
 
 
-def scene_toml(base, dt, frames, relative_tolerance):
-    """weft's resolved scene file with the step, frame count and tolerance replaced."""
+def scene_toml(base, dt, frames, relative_tolerance, budget=None):
+    """weft's resolved scene file with the step, frame count and tolerance replaced; with a
+    budget, inexact steps: that many Newton iterations per step on projected Hessians."""
     out, seen = [], set()
     for line in base.splitlines():
         key = line.split("=")[0].strip()
@@ -87,6 +88,10 @@ def scene_toml(base, dt, frames, relative_tolerance):
             line, _ = f"frames = {frames}", seen.add(key)
         elif key == "relative_tolerance":
             line, _ = f"relative_tolerance = {relative_tolerance!r}", seen.add(key)
+            if budget is not None:
+                line += f'\nhessian = "always"\nnewton_budget = {budget}'
+        elif key in ("hessian", "newton_budget") and budget is not None:
+            continue
         out.append(line)
     if seen != {"dt", "frames", "relative_tolerance"}:
         sys.exit(f"scene file lacks {sorted({'dt', 'frames', 'relative_tolerance'} - seen)}")
@@ -285,8 +290,9 @@ def main():
     ap.add_argument("--vbd", nargs="*", default=["1x1", "2x100"],
                     help="ITERATIONSxSUBSTEPS settings of Newton's VBD solver")
     ap.add_argument("--weft", nargs="*", default=[],
-                    help="further weft settings, STEPSxTOLERANCE: implicit Euler with STEPS steps per frame and Newton "
-                         "tolerance TOLERANCE x the heaviest vertex's weight (the scene's own, 1x1e-3, always runs)")
+                    help="further weft settings, STEPSxTOLERANCE[:bBUDGET]: implicit Euler with STEPS steps per frame and "
+                         "Newton tolerance TOLERANCE x the heaviest vertex's weight (the scene's own, 1x1e-3, always "
+                         "runs); with :bBUDGET, inexact steps of at most BUDGET Newton iterations on projected Hessians")
     ap.add_argument("--reuse-reference", action="store_true", help="keep OUT/reference if it is there")
     args = ap.parse_args()
     n = args.frames
@@ -361,23 +367,28 @@ def main():
                    "newton_iterations_per_frame": weft_stats["mean_newton_iterations"]})
     print(f"weft implicit Euler: {1000 * points[-1]['seconds_per_frame']:.1f} ms/frame, M_rms {err:.3f} mm", flush=True)
     for spec in args.weft:
-        steps, tol = spec.split("x")
+        spec_main, _, budget = spec.partition(":b")
+        steps, tol = spec_main.split("x")
         steps, tol = int(steps), float(tol)
-        d = os.path.join(args.out, f"weft-{steps}x{tol:g}")
+        budget = int(budget) if budget else None
+        tag = f"{steps}x{tol:g}" + (f"-budget-{budget}" if budget else "")
+        d = os.path.join(args.out, f"weft-{tag}")
         os.makedirs(d, exist_ok=True)
         toml = os.path.join(d, "scene-in.toml")
         with open(toml, "w") as fh:
-            fh.write(scene_toml(base, FRAME_DT / steps, steps * n, tol))
+            fh.write(scene_toml(base, FRAME_DT / steps, steps * n, tol, budget))
         stats, frames_ = run_weft(args.xtask, toml, steps * n, d)
         if stats["error"]:
             print(f"weft {spec}: stopped ({stats['error']})", flush=True)
             continue
         err, mx = score(frames_["positions"][::steps], reference)
         secs = sum(f["seconds"] for f in stats["per_frame"]) / n
-        method = f"weft-implicit-euler-{steps}x{tol:g}"
+        method = f"weft-implicit-euler-{tag}"
         runs[method] = frames_["positions"][::steps]
+        setting = f"dt {FRAME_DT / steps:g} s, " + (
+            f"{budget} projected Newton iteration(s) per step" if budget else f"Newton {tol:g} x weight")
         points.append({"method": method, "solver": "weft",
-                       "setting": f"dt {FRAME_DT / steps:g} s, Newton {tol:g} x weight", "seconds_per_frame": secs,
+                       "setting": setting, "seconds_per_frame": secs,
                        "threads": 2, "errors": {"m-rms": err, "max-error": mx},
                        "newton_iterations_per_frame": stats["mean_newton_iterations"] * steps})
         print(f"weft {spec}: {1000 * secs:.1f} ms/frame, M_rms {err:.3f} mm", flush=True)

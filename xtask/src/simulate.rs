@@ -41,6 +41,14 @@ pub struct SimulateArgs {
     /// Cloth scenes only: Newton's globalisation, overriding the scene's.
     #[arg(long, value_parser = ["line-search", "trust-region"])]
     pub globalization: Option<String>,
+    /// Cloth scenes only: how Newton makes the Hessian positive definite, overriding the scene's
+    #[arg(long, value_parser = ["always", "when-indefinite", "never"])]
+    pub hessian: Option<String>,
+    /// Cloth scenes only: inexact steps, at most this many Newton iterations per time step, the
+    /// last iterate accepted (with `--hessian always`, one per step is Baraff & Witkin's
+    /// linearised implicit Euler); docs/CLOTH.md, "Inexact steps"
+    #[arg(long)]
+    pub newton_budget: Option<usize>,
 }
 
 #[derive(Serialize)]
@@ -75,6 +83,19 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
             c.globalization = Some(serde_json::from_value(serde_json::Value::String(g.into()))?);
         }
         _ => anyhow::bail!("--globalization applies to cloth scenes only"),
+    }
+    match (&mut loaded.scene, args.hessian.as_deref(), args.newton_budget) {
+        (_, None, None) => {}
+        (AnyScene::Cloth(c), hessian, budget) => {
+            if let Some(h) = hessian {
+                c.hessian = Some(serde_json::from_value(serde_json::Value::String(h.into()))?);
+            }
+            if budget.is_some() {
+                c.newton_budget = budget;
+            }
+            c.validate()?;
+        }
+        _ => anyhow::bail!("--hessian and --newton-budget apply to cloth scenes only"),
     }
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

@@ -54,6 +54,10 @@ pub struct NewtonDetail {
     /// (`NewtonSettings::exact_hessian_after_rises`), if it switched.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exact_from_iteration: Option<usize>,
+    /// The step ended at the scene's `newton_budget` above the tolerance (an inexact
+    /// step, accepted).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub stopped_at_budget: bool,
 }
 
 /// Every frame of a run, frame 0 being the initial (rest or settled) state.
@@ -225,6 +229,7 @@ impl Recorder {
                         residual_history: f.report.newton.residual_history.clone(),
                         shift_history: f.report.newton.shift_history.clone(),
                         exact_from_iteration: f.report.newton.exact_from_iteration,
+                        stopped_at_budget: f.report.newton.stopped_at_budget,
                     }),
                 }
             }

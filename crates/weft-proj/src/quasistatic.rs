@@ -455,6 +455,7 @@ impl QuasistaticLayer {
                     rejected_steps: 0,
                     fallback: None,
                     exact_from_iteration: None,
+                    stopped_at_budget: false,
                 };
                 (report, k.cg_iterations, (Adjoint::Factorize, 0))
             }

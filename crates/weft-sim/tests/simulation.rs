@@ -61,6 +61,52 @@ fn newton_converges_quadratically_near_the_solution() {
 }
 
 #[test]
+fn an_iteration_budget_accepts_the_last_iterate_with_a_lower_energy() {
+    // The noisy pinned sheet needs several Newton iterations. With a budget of k, the
+    // solve stops after exactly k, says so, and its iterate is the k-th of the unbudgeted
+    // solve (the same steps) with the energy lowered at every one; a budget the solve
+    // does not reach changes nothing.
+    let (springs, start, fixed) = pinned_stretched_sheet(3, 0.05);
+    let terms: [&dyn Energy; 1] = [&springs];
+    let settings = NewtonSettings {
+        tolerance: 1e-10,
+        projection: HessianProjection::Always,
+        ..Default::default()
+    };
+    let solve = |budget: Option<usize>| {
+        let mut solver = NewtonSolver::new(start.len(), &terms, fixed.clone()).unwrap();
+        let mut x = start.clone();
+        let report = solver
+            .minimize(
+                &terms,
+                &mut x,
+                &NewtonSettings {
+                    iteration_budget: budget,
+                    ..settings
+                },
+            )
+            .unwrap();
+        (x, report)
+    };
+    let (full_x, full) = solve(None);
+    assert!(full.iterations >= 4, "{} iterations", full.iterations);
+    assert!(!full.stopped_at_budget);
+    let mut energy = springs.value(&start);
+    for k in 1..full.iterations {
+        let (x, report) = solve(Some(k));
+        assert_eq!(report.iterations, k);
+        assert!(report.stopped_at_budget);
+        assert!(report.residual > settings.tolerance);
+        assert_eq!(report.residual, full.residual_history[k - 1]);
+        assert!(springs.value(&x) < energy, "iteration {k} did not lower the energy");
+        energy = springs.value(&x);
+    }
+    let (x, report) = solve(Some(full.iterations));
+    assert!(!report.stopped_at_budget);
+    assert_eq!(x, full_x);
+}
+
+#[test]
 fn every_numeric_factorisation_attempt_is_counted() {
     // A sheet pinned at 90 % of its size: every spring is compressed, so the exact
     // Hessian is indefinite (out-of-plane stiffness k(1 − L/l) < 0).
@@ -469,6 +515,24 @@ fn scene_toml_round_trips_and_rejects_unknown_fields() {
     assert_eq!(back, switched);
     let sim = ClothSimulation::new(back, None).unwrap();
     assert_eq!(sim.integrator().settings.exact_hessian_after_rises, Some(2));
+    // So is the iteration budget of inexact steps; 0 and more than the iteration cap are
+    // typed errors naming it.
+    assert!(!text.contains("newton_budget"));
+    let mut inexact = ClothScene::builtin("sheet-ms", true).unwrap();
+    inexact.newton_budget = Some(1);
+    let back = ClothScene::from_toml(&inexact.to_toml().unwrap()).unwrap();
+    assert_eq!(back, inexact);
+    let mut sim = ClothSimulation::new(back, None).unwrap();
+    assert_eq!(sim.integrator().settings.iteration_budget, Some(1));
+    let frame = sim.step().unwrap();
+    assert_eq!(frame.report.newton.iterations, 1);
+    for budget in [0, inexact.max_newton_iterations + 1] {
+        inexact.newton_budget = Some(budget);
+        let e = ClothScene::from_toml(&inexact.to_toml().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("newton_budget"), "{e}");
+    }
 }
 
 #[test]

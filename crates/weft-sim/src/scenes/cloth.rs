@@ -194,6 +194,12 @@ pub struct ClothScene {
     /// ([`crate::newton::NewtonSettings::exact_hessian_after_rises`]); omitted, never.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact_hessian_after_rises: Option<usize>,
+    /// Inexact steps: Newton iterations per time step, the last iterate accepted whatever
+    /// its residual ([`crate::newton::NewtonSettings::iteration_budget`]; best with
+    /// `hessian = "always"`, one factorisation per iteration); omitted, every step is
+    /// solved to the tolerance. A speed–accuracy setting, not the ground truth's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub newton_budget: Option<usize>,
 }
 
 fn one() -> f64 {
@@ -317,6 +323,7 @@ impl ClothScene {
             hessian: None,
             globalization: None,
             exact_hessian_after_rises: None,
+            newton_budget: None,
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -397,6 +404,18 @@ impl ClothScene {
         }
         if self.frames == 0 {
             return Err(Error::Scene("frames must be at least 1".into()));
+        }
+        if self.newton_budget == Some(0) {
+            return Err(Error::Scene(
+                "newton_budget must be at least 1 (omit it to solve every step to the tolerance)".into(),
+            ));
+        }
+        if self.newton_budget.is_some_and(|b| b > self.max_newton_iterations) {
+            return Err(Error::Scene(format!(
+                "newton_budget {} exceeds max_newton_iterations {}",
+                self.newton_budget.unwrap_or(0),
+                self.max_newton_iterations
+            )));
         }
         if self.program.is_empty() {
             return Err(Error::Scene(
@@ -605,6 +624,7 @@ impl ClothSimulation {
         integrator.settings.max_iterations = scene.max_newton_iterations;
         integrator.settings.globalization = scene.globalization.unwrap_or_default();
         integrator.settings.exact_hessian_after_rises = scene.exact_hessian_after_rises;
+        integrator.settings.iteration_budget = scene.newton_budget;
         integrator.settings.projection = scene.hessian.unwrap_or(match scene.model {
             ClothModel::MassSpring { .. } => HessianProjection::Never,
             ClothModel::Fem { .. } => HessianProjection::WhenIndefinite,
