@@ -680,15 +680,7 @@ impl FrozenAutoencoder {
     /// Evaluates `model`'s autoencoder on every frame of `windows` and its two predecessors,
     /// in batches of the configuration's size.
     fn new(model: &EmbedModel, data: &EmbedData, windows: &[FrameRef]) -> Result<Self> {
-        let mut frames: Vec<FrameRef> = windows
-            .iter()
-            .flat_map(|f| {
-                (0..3).map(move |k| FrameRef {
-                    sequence: f.sequence,
-                    frame: f.frame - k,
-                })
-            })
-            .collect();
+        let mut frames: Vec<FrameRef> = (0..3).flat_map(|k| predecessors(windows, k)).collect();
         frames.sort_by_key(|f| (f.sequence, f.frame));
         frames.dedup();
         let device = model.autoencoder_params.device();
