@@ -12,7 +12,9 @@ Every method's frames are scored against one reference computed in this run: wef
 Euler at a quarter of the frame time (0.005 s) with the Newton tolerance at 1e-6 of the
 heaviest vertex's weight (the reference of the evaluation's `sim` experiment). The error is
 M_rms (1000 x the per-coordinate RMS of the position difference in metres, over every vertex
-and every frame 1..N: mm) and the largest vertex distance (mm). Time is wall time per 0.02 s
+and every frame 1..N: mm), the same over frames 1..15 alone (after about frame 15 the sheet's
+folds swing one of two ways, and which way a run takes then dominates the whole window's
+error), and the largest vertex distance (mm). Time is wall time per 0.02 s
 frame of the stepping alone: weft's from its own per-frame report (its solver threads: both
 cores), Newton's around the substep loop after a warm-up that compiles the kernels (Warp's
 CPU backend runs one thread).
@@ -22,7 +24,8 @@ masses and gravity it builds must make weft's first frame an implicit-Euler equi
 weft's own tolerance, and the analytic grasp program must reproduce weft's recorded controls.
 
     python3 benches/python/cloth_vs_newton.py --xtask target/release/xtask --frames 60 \
-        --out out/cloth-vs-newton [--json out/evaluate-standard/peers/cloth-vs-newton.json]
+        --out out/cloth-vs-newton [--json out/evaluate-standard/peers/cloth-vs-newton.json] \
+        [--weft 1x1e-3:b2 1x1e-3:b4f1 ...]
 
 Needs numpy, `newton==1.8.0` and `warp-lang==1.19.0` (docs/BENCHMARKS.md has the command
 that made the committed figures). The frames and the reference go to --out; the points to
@@ -76,9 +79,10 @@ def read_obj(path):
     return np.array(v, dtype=np.float64), np.array(f, dtype=np.int64)
 
 
-def scene_toml(base, dt, frames, relative_tolerance, budget=None):
+def scene_toml(base, dt, frames, relative_tolerance, budget=None, factorizations=None):
     """weft's resolved scene file with the step, frame count and tolerance replaced; with a
-    budget, inexact steps: that many Newton iterations per step on projected Hessians."""
+    budget, inexact steps: that many Newton iterations per step on projected Hessians, of
+    which at most `factorizations` factorise (the others reuse the last factor)."""
     out, seen = [], set()
     for line in base.splitlines():
         key = line.split("=")[0].strip()
@@ -90,7 +94,9 @@ def scene_toml(base, dt, frames, relative_tolerance, budget=None):
             line, _ = f"relative_tolerance = {relative_tolerance!r}", seen.add(key)
             if budget is not None:
                 line += f'\nhessian = "always"\nnewton_budget = {budget}'
-        elif key in ("hessian", "newton_budget") and budget is not None:
+                if factorizations is not None:
+                    line += f"\nnewton_factorizations = {factorizations}"
+        elif key in ("hessian", "newton_budget", "newton_factorizations") and budget is not None:
             continue
         out.append(line)
     if seen != {"dt", "frames", "relative_tolerance"}:
@@ -292,7 +298,11 @@ def main():
     ap.add_argument("--weft", nargs="*", default=[],
                     help="further weft settings, STEPSxTOLERANCE[:bBUDGET]: implicit Euler with STEPS steps per frame and "
                          "Newton tolerance TOLERANCE x the heaviest vertex's weight (the scene's own, 1x1e-3, always "
-                         "runs); with :bBUDGET, inexact steps of at most BUDGET Newton iterations on projected Hessians")
+                         "runs); with :bBUDGET, inexact steps of at most BUDGET Newton iterations on projected Hessians, "
+                         "and with :bBUDGETfF at most F of them factorising (chord steps with the last factor after)")
+    ap.add_argument("--early-frames", type=int, default=15,
+                    help="also score frames 1..EARLY alone (m-rms-frames-1-EARLY): after about frame 15 the sheet's "
+                         "folds swing one of two ways, and which way a run takes dominates the whole window's error")
     ap.add_argument("--reuse-reference", action="store_true", help="keep OUT/reference if it is there")
     args = ap.parse_args()
     n = args.frames
@@ -368,15 +378,18 @@ def main():
     print(f"weft implicit Euler: {1000 * points[-1]['seconds_per_frame']:.1f} ms/frame, M_rms {err:.3f} mm", flush=True)
     for spec in args.weft:
         spec_main, _, budget = spec.partition(":b")
+        budget, _, factorizations = budget.partition("f")
         steps, tol = spec_main.split("x")
         steps, tol = int(steps), float(tol)
         budget = int(budget) if budget else None
-        tag = f"{steps}x{tol:g}" + (f"-budget-{budget}" if budget else "")
+        factorizations = int(factorizations) if factorizations and budget else None
+        tag = f"{steps}x{tol:g}" + (f"-budget-{budget}" if budget else "") + (
+            f"-factorizations-{factorizations}" if factorizations else "")
         d = os.path.join(args.out, f"weft-{tag}")
         os.makedirs(d, exist_ok=True)
         toml = os.path.join(d, "scene-in.toml")
         with open(toml, "w") as fh:
-            fh.write(scene_toml(base, FRAME_DT / steps, steps * n, tol, budget))
+            fh.write(scene_toml(base, FRAME_DT / steps, steps * n, tol, budget, factorizations))
         stats, frames_ = run_weft(args.xtask, toml, steps * n, d)
         if stats["error"]:
             print(f"weft {spec}: stopped ({stats['error']})", flush=True)
@@ -386,7 +399,8 @@ def main():
         method = f"weft-implicit-euler-{tag}"
         runs[method] = frames_["positions"][::steps]
         setting = f"dt {FRAME_DT / steps:g} s, " + (
-            f"{budget} projected Newton iteration(s) per step" if budget else f"Newton {tol:g} x weight")
+            f"{budget} projected Newton iteration(s) per step" if budget else f"Newton {tol:g} x weight") + (
+            f", {factorizations} factorisation(s) (chord steps after)" if factorizations else "")
         points.append({"method": method, "solver": "weft",
                        "setting": setting, "seconds_per_frame": secs,
                        "threads": 2, "errors": {"m-rms": err, "max-error": mx},
@@ -417,6 +431,10 @@ def main():
         finest = max(finest, key=lambda m: int(m.rsplit("-", 1)[1]))
         for p in points:
             p["errors"]["m-rms-vs-" + finest] = score(runs[p["method"]], runs[finest])[0]
+    # The early window: before the folds' swing (docs/BENCHMARKS.md, "Chord steps").
+    early = min(args.early_frames, n)
+    for p in points:
+        p["errors"][f"m-rms-frames-1-{early}"] = score(runs[p["method"]][: early + 1], reference[: early + 1])[0]
     doc = {
         "experiment": "sim", "scene": "sheet-ms", "frames": n, "frame_dt_s": FRAME_DT,
         "reference": "weft implicit Euler at dt 0.005 s, Newton tolerance 1e-6 x the heaviest vertex's weight "

@@ -49,6 +49,11 @@ pub struct SimulateArgs {
     /// linearised implicit Euler); docs/CLOTH.md, "Inexact steps"
     #[arg(long)]
     pub newton_budget: Option<usize>,
+    /// Cloth scenes only: at most this many numeric factorisations per time step; later
+    /// iterations reuse the last factor (chord steps; with `--newton-budget`, inexact steps of
+    /// one factorisation and a few solves); docs/CLOTH.md, "Inexact steps"
+    #[arg(long)]
+    pub newton_factorizations: Option<usize>,
 }
 
 #[derive(Serialize)]
@@ -84,18 +89,26 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
         }
         _ => anyhow::bail!("--globalization applies to cloth scenes only"),
     }
-    match (&mut loaded.scene, args.hessian.as_deref(), args.newton_budget) {
-        (_, None, None) => {}
-        (AnyScene::Cloth(c), hessian, budget) => {
+    match (
+        &mut loaded.scene,
+        args.hessian.as_deref(),
+        args.newton_budget,
+        args.newton_factorizations,
+    ) {
+        (_, None, None, None) => {}
+        (AnyScene::Cloth(c), hessian, budget, factorizations) => {
             if let Some(h) = hessian {
                 c.hessian = Some(serde_json::from_value(serde_json::Value::String(h.into()))?);
             }
             if budget.is_some() {
                 c.newton_budget = budget;
             }
+            if factorizations.is_some() {
+                c.newton_factorizations = factorizations;
+            }
             c.validate()?;
         }
-        _ => anyhow::bail!("--hessian and --newton-budget apply to cloth scenes only"),
+        _ => anyhow::bail!("--hessian, --newton-budget and --newton-factorizations apply to cloth scenes only"),
     }
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

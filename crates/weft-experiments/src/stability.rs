@@ -162,8 +162,25 @@ fn cell(
     c
 }
 
-/// Cloth of either model: `steps` implicit-Euler steps of a violently grasped sheet.
-fn cloth_run(model: &str, n: usize, k: f64, dt: f64, steps: usize, tol_factor: f64) -> crate::Result<Run> {
+/// Inexact steps of a cloth run (docs/CLOTH.md, "Inexact steps"): Newton iterations per
+/// step on projected Hessians, and how many of them may factorise (`None`: all).
+#[derive(Debug, Clone, Copy)]
+struct Inexact {
+    iterations: usize,
+    factorizations: Option<usize>,
+}
+
+/// Cloth of either model: `steps` implicit-Euler steps of a violently grasped sheet,
+/// solved to the tolerance or, with `inexact`, by a fixed number of iterations.
+fn cloth_run(
+    model: &str,
+    n: usize,
+    k: f64,
+    dt: f64,
+    steps: usize,
+    inexact: Option<Inexact>,
+    tol_factor: f64,
+) -> crate::Result<Run> {
     let mut s = ClothScene::builtin(if model == "fem" { "sheet-fem" } else { "sheet-ms" }, false)?;
     s.mesh = MeshSpec::Sheet { n, size: 1.0 };
     s.model = match model {
@@ -187,6 +204,11 @@ fn cloth_run(model: &str, n: usize, k: f64, dt: f64, steps: usize, tol_factor: f
     s.dt = dt;
     s.frames = steps;
     s.relative_tolerance *= tol_factor;
+    if let Some(inexact) = inexact {
+        s.hessian = Some(HessianProjection::Always);
+        s.newton_budget = Some(inexact.iterations);
+        s.newton_factorizations = inexact.factorizations;
+    }
     let mut sim = ClothSimulation::new(s, None)?;
     // A diagonal shift is a clamp only where it is a fallback: with `Never` (mass-spring
     // cloth's default) shifting the exact Hessian is the strategy itself.
@@ -365,10 +387,48 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
                                 format!("k = {}", tag(k)),
                                 format!("Δt = {}", tag(dt)),
                             ),
-                            |f| cloth_run(model, n, k, dt, steps, f),
+                            |f| cloth_run(model, n, k, dt, steps, None, f),
                         )
                     }));
                 }
+            }
+        }
+    }
+    // Inexact steps on the mass-spring sheet of the middle resolution: one projected
+    // iteration per step (Baraff & Witkin), and four chord iterations on one
+    // factorisation. Stopping at the budget is their design, not a clamp.
+    let n = ns[ns.len() / 2];
+    for (variant, inexact) in [
+        (
+            "inexact",
+            Inexact {
+                iterations: 1,
+                factorizations: None,
+            },
+        ),
+        (
+            "chord",
+            Inexact {
+                iterations: 4,
+                factorizations: Some(1),
+            },
+        ),
+    ] {
+        for &k in &ks {
+            for &dt in &dts {
+                let family = format!("cloth-mass-spring-{variant}-n{n}");
+                jobs.push(Box::new(move || {
+                    cell(
+                        &family,
+                        format!("k-{}-dt-{}", tag(k), tag(dt)),
+                        (
+                            format!("{n}×{n}, {} iteration(s) per step", inexact.iterations),
+                            format!("k = {}", tag(k)),
+                            format!("Δt = {}", tag(dt)),
+                        ),
+                        |f| cloth_run("mass-spring", n, k, dt, steps, Some(inexact), f),
+                    )
+                }));
             }
         }
     }

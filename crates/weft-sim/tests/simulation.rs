@@ -107,6 +107,71 @@ fn an_iteration_budget_accepts_the_last_iterate_with_a_lower_energy() {
 }
 
 #[test]
+fn a_factorisation_budget_makes_chord_steps_that_lower_the_energy_and_converge() {
+    // The noisy pinned sheet with one factorisation allowed: the first iteration is the
+    // unbudgeted solve's first (same factor, same step); every later one solves with that
+    // factor, so it differs from Newton's, lowers the energy all the same, and the
+    // iteration still reaches the minimiser — in more iterations (linear convergence)
+    // and exactly one factorisation. Two allowed: the first two iterations are Newton's.
+    let (springs, start, fixed) = pinned_stretched_sheet(3, 0.05);
+    let terms: [&dyn Energy; 1] = [&springs];
+    let settings = NewtonSettings {
+        tolerance: 1e-8,
+        projection: HessianProjection::Always,
+        max_iterations: 500,
+        ..Default::default()
+    };
+    let solve = |factorizations: Option<usize>, budget: Option<usize>| {
+        let mut solver = NewtonSolver::new(start.len(), &terms, fixed.clone()).unwrap();
+        let mut x = start.clone();
+        let report = solver
+            .minimize(
+                &terms,
+                &mut x,
+                &NewtonSettings {
+                    factorization_budget: factorizations,
+                    iteration_budget: budget,
+                    ..settings
+                },
+            )
+            .unwrap();
+        (x, report)
+    };
+    let (newton_x, newton) = solve(None, None);
+    let (chord_x, chord) = solve(Some(1), None);
+    assert_eq!(chord.factorizations, 1, "{chord:?}");
+    assert!(newton.factorizations > 1);
+    assert!(
+        chord.iterations > newton.iterations,
+        "chord {} vs Newton {} iterations",
+        chord.iterations,
+        newton.iterations
+    );
+    assert_eq!(chord.residual_history[0], newton.residual_history[0]);
+    assert_ne!(chord.residual_history[1], newton.residual_history[1]);
+    let gap = newton_x
+        .iter()
+        .zip(&chord_x)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(gap < 1e-6, "chord and Newton minimisers differ by {gap} m");
+    let mut energy = springs.value(&start);
+    for k in 1..=4 {
+        let (x, report) = solve(Some(1), Some(k));
+        assert_eq!((report.iterations, report.factorizations), (k, 1));
+        assert!(
+            springs.value(&x) < energy,
+            "chord iteration {k} did not lower the energy"
+        );
+        energy = springs.value(&x);
+    }
+    let (_, two) = solve(Some(2), Some(3));
+    assert_eq!(two.factorizations, 2);
+    assert_eq!(two.residual_history[..2], newton.residual_history[..2]);
+    assert_ne!(two.residual_history[2], newton.residual_history[2]);
+}
+
+#[test]
 fn every_numeric_factorisation_attempt_is_counted() {
     // A sheet pinned at 90 % of its size: every spring is compressed, so the exact
     // Hessian is indefinite (out-of-plane stiffness k(1 − L/l) < 0).
@@ -533,6 +598,32 @@ fn scene_toml_round_trips_and_rejects_unknown_fields() {
             .to_string();
         assert!(e.contains("newton_budget"), "{e}");
     }
+    // And the factorisation budget: a scene key written only when set, read back,
+    // applied (one factorisation for two iterations); 0, and the trust region, which keeps
+    // its factor by its own rule, are typed errors naming it.
+    assert!(!text.contains("newton_factorizations"));
+    let mut chord = ClothScene::builtin("sheet-ms", true).unwrap();
+    chord.hessian = Some(HessianProjection::Always);
+    chord.newton_budget = Some(2);
+    chord.newton_factorizations = Some(1);
+    let back = ClothScene::from_toml(&chord.to_toml().unwrap()).unwrap();
+    assert_eq!(back, chord);
+    let mut sim = ClothSimulation::new(back, None).unwrap();
+    assert_eq!(sim.integrator().settings.factorization_budget, Some(1));
+    let frame = sim.step().unwrap();
+    assert_eq!(frame.report.newton.iterations, 2);
+    assert_eq!(frame.report.newton.factorizations, 1);
+    chord.newton_factorizations = Some(0);
+    let e = ClothScene::from_toml(&chord.to_toml().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("newton_factorizations"), "{e}");
+    chord.newton_factorizations = Some(1);
+    chord.globalization = Some(Globalization::TrustRegion);
+    let e = ClothScene::from_toml(&chord.to_toml().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("newton_factorizations"), "{e}");
 }
 
 #[test]

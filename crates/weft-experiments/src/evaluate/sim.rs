@@ -173,6 +173,15 @@ fn cloth(
         s.newton_budget = Some(budget);
         variants.push((format!("newton-budget-{budget}"), s));
     }
+    // Chord steps: that many iterations per step with one factorisation, the later ones
+    // solving with its factor (docs/CLOTH.md, "Chord steps").
+    for budget in [2, 4, 6] {
+        let mut s = base.clone();
+        s.hessian = Some(weft_sim::HessianProjection::Always);
+        s.newton_budget = Some(budget);
+        s.newton_factorizations = Some(1);
+        variants.push((format!("newton-chord-{budget}"), s));
+    }
     if resolutions {
         if let MeshSpec::Sheet { n, size } = base.mesh {
             for (tag, div) in [("resolution-half", 2), ("resolution-quarter", 4)] {

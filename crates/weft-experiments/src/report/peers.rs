@@ -152,10 +152,20 @@ pub fn markdown(files: &[PeerFile]) -> String {
     s.push_str("\n## Peers measured outside the evaluation\n\n");
     for f in files {
         let base = f.baseline_seconds().unwrap_or(f64::NAN);
+        // Further error metrics the file gives (a second reference, a window), as columns.
+        let extra: Vec<&str> = f
+            .points
+            .iter()
+            .flat_map(|p| p.errors.keys())
+            .map(String::as_str)
+            .filter(|m| !matches!(*m, "m-rms" | "max-error"))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
         s.push_str(&format!(
             "`{}` / {}: {} frames of {} s, errors against {}; times from one run of `{}` ({}), ratio to `{}` in that \
              run.\n\n| method | solver | setting | threads | ms per frame | time ratio | M_rms (mm) | max error (mm) \
-             |\n|---|---|---|---|---|---|---|---|\n",
+             |{}\n|---|---|---|---|---|---|---|---|{}\n",
             f.experiment,
             f.scene,
             f.frames,
@@ -167,7 +177,9 @@ pub fn markdown(files: &[PeerFile]) -> String {
                 .map(|(k, v)| format!("{k} {v}"))
                 .collect::<Vec<_>>()
                 .join(", "),
-            f.baseline
+            f.baseline,
+            extra.iter().map(|m| format!(" `{m}` (mm) |")).collect::<String>(),
+            "---|".repeat(extra.len())
         ));
         let e = |p: &PeerPoint, m: &str| match p.errors.get(m) {
             Some(Some(v)) => format!("{v:.3}"),
@@ -176,7 +188,7 @@ pub fn markdown(files: &[PeerFile]) -> String {
         };
         for p in &f.points {
             s.push_str(&format!(
-                "| {} | {} | {} | {} | {:.1} | {:.3} | {} | {} |\n",
+                "| {} | {} | {} | {} | {:.1} | {:.3} | {} | {} |{}\n",
                 p.method,
                 p.solver,
                 p.setting,
@@ -184,7 +196,8 @@ pub fn markdown(files: &[PeerFile]) -> String {
                 1e3 * p.seconds_per_frame,
                 p.seconds_per_frame / base,
                 e(p, "m-rms"),
-                e(p, "max-error")
+                e(p, "max-error"),
+                extra.iter().map(|m| format!(" {} |", e(p, m))).collect::<String>()
             ));
         }
         s.push('\n');
@@ -234,6 +247,13 @@ mod tests {
             md.contains("| peer-b | peer |  | 1 | 250.0 | 0.125 | diverged | — |"),
             "{md}"
         );
+        // A further metric one point gives becomes a column, a dash where a point lacks it.
+        let mut f = file();
+        f.points[1].errors.insert("m-rms-frames-1-2".into(), Some(0.5));
+        let md = markdown(&[f]);
+        assert!(md.contains("| max error (mm) | `m-rms-frames-1-2` (mm) |"), "{md}");
+        assert!(md.contains("| 3.000 | — | 0.500 |"), "{md}");
+        assert!(md.contains("| diverged | — | — |"), "{md}");
     }
 
     #[test]

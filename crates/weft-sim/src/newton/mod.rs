@@ -76,6 +76,18 @@ pub struct NewtonSettings {
     /// iterates to the tolerance; written into a scene file only when set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub iteration_budget: Option<usize>,
+    /// With the line search: at most this many fresh numeric factorisations per
+    /// minimisation; once they are spent, every further iteration solves with the last
+    /// factor (chord steps, Ortega & Rheinboldt's simplified Newton). A kept factor is
+    /// of a positive definite matrix, so its direction is still one of descent and the
+    /// line search still lowers the energy at every step, but convergence is linear,
+    /// not quadratic. Paired with [`Self::iteration_budget`] it makes inexact steps that
+    /// cost one factorisation and a few solves (docs/CLOTH.md, "Inexact steps"). A
+    /// switch to the exact Hessian ([`Self::exact_hessian_after_rises`]) after the budget
+    /// is spent keeps the factor. Not used by the trust region. `None` (the default):
+    /// no limit; written into a scene file only when set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub factorization_budget: Option<usize>,
 }
 
 fn is_true(v: &bool) -> bool {
@@ -141,6 +153,7 @@ impl Default for NewtonSettings {
             retry_other_strategy: true,
             exact_hessian_after_rises: None,
             iteration_budget: None,
+            factorization_budget: None,
         }
     }
 }
@@ -676,9 +689,13 @@ impl NewtonSolver {
         // (`NewtonSettings::exact_hessian_after_rises`).
         let mut projection = settings.projection;
         let mut rises = 0;
+        // Fresh factorisations made so far (`NewtonSettings::factorization_budget`).
+        let mut fresh_factors = 0;
         while progress.iterate(settings)? {
-            let fresh = !hold || current.is_none();
+            let budget_spent = settings.factorization_budget.is_some_and(|b| fresh_factors >= b);
+            let fresh = current.is_none() || !(hold || budget_spent);
             if fresh {
+                fresh_factors += 1;
                 let f = self.factorize_at(terms, x, projection)?;
                 progress.report.regularizations += f.shifts;
                 progress.report.factorizations += f.numeric;

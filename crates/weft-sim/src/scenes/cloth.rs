@@ -200,6 +200,12 @@ pub struct ClothScene {
     /// solved to the tolerance. A speed–accuracy setting, not the ground truth's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub newton_budget: Option<usize>,
+    /// Numeric factorisations per time step, at most; later iterations reuse the last
+    /// factor (chord steps, [`crate::newton::NewtonSettings::factorization_budget`]).
+    /// With `newton_budget`, inexact steps of one factorisation and a few solves; not
+    /// with the trust region. Omitted, every iteration may factorise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub newton_factorizations: Option<usize>,
 }
 
 fn one() -> f64 {
@@ -324,6 +330,7 @@ impl ClothScene {
             globalization: None,
             exact_hessian_after_rises: None,
             newton_budget: None,
+            newton_factorizations: None,
             max_newton_iterations: default_max_iter(),
         };
         let mut s = match name {
@@ -416,6 +423,17 @@ impl ClothScene {
                 self.newton_budget.unwrap_or(0),
                 self.max_newton_iterations
             )));
+        }
+        if self.newton_factorizations == Some(0) {
+            return Err(Error::Scene(
+                "newton_factorizations must be at least 1 (omit it to factorise at every iteration)".into(),
+            ));
+        }
+        if self.newton_factorizations.is_some() && self.globalization == Some(Globalization::TrustRegion) {
+            return Err(Error::Scene(
+                "newton_factorizations applies to the line search; the trust region keeps its factor by its own rule"
+                    .into(),
+            ));
         }
         if self.program.is_empty() {
             return Err(Error::Scene(
@@ -625,6 +643,7 @@ impl ClothSimulation {
         integrator.settings.globalization = scene.globalization.unwrap_or_default();
         integrator.settings.exact_hessian_after_rises = scene.exact_hessian_after_rises;
         integrator.settings.iteration_budget = scene.newton_budget;
+        integrator.settings.factorization_budget = scene.newton_factorizations;
         integrator.settings.projection = scene.hessian.unwrap_or(match scene.model {
             ClothModel::MassSpring { .. } => HessianProjection::Never,
             ClothModel::Fem { .. } => HessianProjection::WhenIndefinite,
