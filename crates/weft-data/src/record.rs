@@ -323,10 +323,34 @@ impl Recording {
 
     /// Mean solver seconds per frame.
     pub fn seconds_per_frame(&self) -> f64 {
-        self.per_frame.iter().map(|f| f.seconds).sum::<f64>() / self.per_frame.len().max(1) as f64
+        // A fold from +0: an empty `sum::<f64>()` is −0, printed "-0.0" for a run stopped at frame 1.
+        self.per_frame.iter().fold(0.0, |a, f| a + f.seconds) / self.per_frame.len().max(1) as f64
     }
 
     pub fn mean_newton_iterations(&self) -> f64 {
-        self.per_frame.iter().map(|f| f.newton_iterations as f64).sum::<f64>() / self.per_frame.len().max(1) as f64
+        self.per_frame.iter().fold(0.0, |a, f| a + f.newton_iterations as f64) / self.per_frame.len().max(1) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_recording_without_frames_has_zero_means_not_minus_zero() {
+        let r = Recording {
+            scene: "s".into(),
+            vertices: 1,
+            arrays: Vec::new(),
+            labels: None,
+            per_frame: Vec::new(),
+            error: Some("stopped at frame 1".into()),
+            total_seconds: 1.0,
+            metadata: HashMap::new(),
+        };
+        for v in [r.seconds_per_frame(), r.mean_newton_iterations()] {
+            assert_eq!(v, 0.0);
+            assert!(v.is_sign_positive(), "{v} prints as {v:.1}");
+        }
     }
 }
