@@ -18,9 +18,10 @@
 //! its storage), and the input. Each call's op keeps its forward pass's tape (the layers'
 //! operands and pre-activations, a few MB) for its own backward pass.
 //!
-//! The matrix products run on one thread: with a batch of a few frames they are
-//! memory-bound, and the parallel GEMM's worker threads, which keep spinning after a
-//! product, slowed the row passes that follow on a 2-core machine.
+//! faer's parallel GEMM is not used: its worker threads, which keep spinning after a
+//! product, slowed the row passes that follow on a 2-core machine. The small products run
+//! on one thread; the fully connected layers' products, memory-bound with a batch of a few
+//! frames, are split by output columns over rayon's threads (`gemm_wide`).
 //!
 //! The backward pass of the neighbour mean is its transpose: with `g_i = ∂L/∂mean_i`,
 //! `∂L/∂x_j = Σ_{i : j ∈ N¹(i)} g_i / |N¹(i)| = Σ_{i ∈ N¹(j)} g_i / |N¹(i)|` (the 1-ring
@@ -92,6 +93,33 @@ fn with_values<R>(t: &Tensor, f: impl FnOnce(&[f32]) -> R) -> candle_core::Resul
 /// `out (accum) a · b`, on one thread (see the module's notes).
 fn gemm(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<'_, f32>) {
     faer::linalg::matmul::matmul(out, accum, a, b, 1.0, Par::Seq);
+}
+
+/// Output columns below which [`gemm_split`] does not split a product further.
+const MIN_SPLIT_COLUMNS: usize = 32;
+
+/// [`gemm`] with the columns of `out` and `b` split in halves, up to `depth` times, the
+/// halves multiplied on rayon's threads. The fully connected layers' products stream
+/// a 4.9 M-value weight matrix for a few rows of `a`: bound by memory, which two cores
+/// stream faster than one. Each piece is still one sequential faer product, so no
+/// parallel-GEMM worker is left spinning (the module's notes).
+fn gemm_split(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<'_, f32>, depth: u32) {
+    let n = out.ncols();
+    if depth == 0 || n < 2 * MIN_SPLIT_COLUMNS {
+        return gemm(out, accum, a, b);
+    }
+    let (o1, o2) = out.split_at_col_mut(n / 2);
+    let (b1, b2) = b.split_at_col(n / 2);
+    rayon::join(
+        || gemm_split(o1, accum, a, b1, depth - 1),
+        || gemm_split(o2, accum, a, b2, depth - 1),
+    );
+}
+
+/// [`gemm_split`] into as many pieces as rayon has threads (a power of two above).
+fn gemm_wide(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<'_, f32>) {
+    let depth = rayon::current_num_threads().next_power_of_two().trailing_zeros();
+    gemm_split(out, accum, a, b, depth);
 }
 
 /// `out = aᵀ c` for row-major `a` `[B, m]` and `c` `[B, n]` with few rows `B` (a weight
@@ -392,7 +420,7 @@ impl EncoderOp {
         let width = self.graph.num_vertices() * C;
         let b = x.len() / width;
         let mut z: Vec<f32> = (0..b).flat_map(|_| theta[conv_len..].iter().copied()).collect();
-        gemm(
+        gemm_wide(
             view_mut(&mut z, b, self.latent),
             Accum::Add,
             view(h, b, width),
@@ -451,7 +479,7 @@ impl CustomOp3 for EncoderOp {
         outer_sum(h, &dz, width, self.latent, &mut d_w);
         let mut dh = vec![0.0f32; b * width];
         with_values(w_fc_t, |w_fc| {
-            gemm(
+            gemm_wide(
                 view_mut(&mut dh, b, width),
                 Accum::Replace,
                 view(&dz, b, self.latent),
@@ -498,7 +526,7 @@ impl DecoderOp {
         let width = self.graph.num_vertices() * C;
         let b = z.len() / self.latent;
         let mut u_pre: Vec<f32> = (0..b).flat_map(|_| theta[..width].iter().copied()).collect();
-        gemm(
+        gemm_wide(
             view_mut(&mut u_pre, b, width),
             Accum::Add,
             view(z, b, self.latent),
@@ -567,7 +595,7 @@ impl CustomOp3 for DecoderOp {
         outer_sum(&z, &du_pre, self.latent, width, &mut d_w);
         let mut dz = vec![0.0f32; b * self.latent];
         with_values(w_fc_t, |w_fc| {
-            gemm(
+            gemm_wide(
                 view_mut(&mut dz, b, self.latent),
                 Accum::Replace,
                 view(&du_pre, b, width),
@@ -580,5 +608,58 @@ impl CustomOp3 for DecoderOp {
             Some(Tensor::from_vec(d_w, w_fc_t.shape(), dev)?),
             Some(Tensor::from_vec(dz, z_t.shape(), dev)?),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_product_split_by_columns_equals_the_whole_product() {
+        // Odd column counts (uneven halves), splits down to the minimum width, `b` both
+        // row-major and transposed (the layers' forward and backward products), and both
+        // accumulation modes.
+        let mut state = 7u32;
+        let mut next = move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        for (rows, inner, cols, depth) in [(3, 37, 131, 3), (2, 300, 70, 1), (1, 128, 1001, 4), (4, 9, 63, 2)] {
+            let a: Vec<f32> = (0..rows * inner).map(|_| next()).collect();
+            let b: Vec<f32> = (0..inner * cols).map(|_| next()).collect();
+            let bt: Vec<f32> = (0..inner * cols).map(|_| next()).collect();
+            let start: Vec<f32> = (0..rows * cols).map(|_| next()).collect();
+            for (transposed, accum) in [(false, Accum::Add), (true, Accum::Replace)] {
+                let rhs = |data| {
+                    if transposed {
+                        view(data, cols, inner).transpose()
+                    } else {
+                        view(data, inner, cols)
+                    }
+                };
+                let source = if transposed { &bt } else { &b };
+                let (mut whole, mut split) = (start.clone(), start.clone());
+                gemm(
+                    view_mut(&mut whole, rows, cols),
+                    accum,
+                    view(&a, rows, inner),
+                    rhs(source),
+                );
+                gemm_split(
+                    view_mut(&mut split, rows, cols),
+                    accum,
+                    view(&a, rows, inner),
+                    rhs(source),
+                    depth,
+                );
+                let scale = whole.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+                let gap = whole.iter().zip(&split).fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+                assert!(
+                    gap <= 1e-6 * scale,
+                    "{rows}×{inner}·{inner}×{cols} depth {depth}: gap {gap}"
+                );
+            }
+        }
     }
 }
