@@ -33,6 +33,19 @@ fn pinned_stretched_sheet(seed: u64, noise: f64) -> (Springs, Vec<f64>, Vec<bool
     (springs, x, fixed)
 }
 
+/// A fresh solver's minimisation of `terms` from `start`: the minimiser and the report.
+fn minimize_from(
+    terms: &[&dyn Energy],
+    start: &[f64],
+    fixed: &[bool],
+    settings: &NewtonSettings,
+) -> (Vec<f64>, weft_sim::NewtonReport) {
+    let mut solver = NewtonSolver::new(start.len(), terms, fixed.to_vec()).unwrap();
+    let mut x = start.to_vec();
+    let report = solver.minimize(terms, &mut x, settings).unwrap();
+    (x, report)
+}
+
 #[test]
 fn newton_converges_quadratically_near_the_solution() {
     // A sheet pinned on its boundary at 110 % of its size: every spring is in tension,
@@ -74,19 +87,15 @@ fn an_iteration_budget_accepts_the_last_iterate_with_a_lower_energy() {
         ..Default::default()
     };
     let solve = |budget: Option<usize>| {
-        let mut solver = NewtonSolver::new(start.len(), &terms, fixed.clone()).unwrap();
-        let mut x = start.clone();
-        let report = solver
-            .minimize(
-                &terms,
-                &mut x,
-                &NewtonSettings {
-                    iteration_budget: budget,
-                    ..settings
-                },
-            )
-            .unwrap();
-        (x, report)
+        minimize_from(
+            &terms,
+            &start,
+            &fixed,
+            &NewtonSettings {
+                iteration_budget: budget,
+                ..settings
+            },
+        )
     };
     let (full_x, full) = solve(None);
     assert!(full.iterations >= 4, "{} iterations", full.iterations);
@@ -122,20 +131,16 @@ fn a_factorisation_budget_makes_chord_steps_that_lower_the_energy_and_converge()
         ..Default::default()
     };
     let solve = |factorizations: Option<usize>, budget: Option<usize>| {
-        let mut solver = NewtonSolver::new(start.len(), &terms, fixed.clone()).unwrap();
-        let mut x = start.clone();
-        let report = solver
-            .minimize(
-                &terms,
-                &mut x,
-                &NewtonSettings {
-                    factorization_budget: factorizations,
-                    iteration_budget: budget,
-                    ..settings
-                },
-            )
-            .unwrap();
-        (x, report)
+        minimize_from(
+            &terms,
+            &start,
+            &fixed,
+            &NewtonSettings {
+                factorization_budget: factorizations,
+                iteration_budget: budget,
+                ..settings
+            },
+        )
     };
     let (newton_x, newton) = solve(None, None);
     let (chord_x, chord) = solve(Some(1), None);
