@@ -135,6 +135,36 @@ impl MeshAutoencoder {
         self.encoder_fc.forward(&h.reshape((b, v * c))?)
     }
 
+    /// [`MeshAutoencoder::encode`] of several batches, each `[B_k, V, 9]`. The fused
+    /// encoder takes them as one batch, so the fully connected layer's 4.9 M weights (on
+    /// the 4225-vertex sheet) are read once for all, not once a batch; its backward pass
+    /// skips the frames that receive no gradient. Through autograd each batch is encoded
+    /// alone (the reference path keeps its cost).
+    pub fn encode_all(&self, batches: &[&Tensor]) -> Result<Vec<Tensor>> {
+        self.through_all(batches, |x| self.encode(x))
+    }
+
+    /// [`MeshAutoencoder::decode`] of several batches of codes, as
+    /// [`MeshAutoencoder::encode_all`].
+    pub fn decode_all(&self, batches: &[&Tensor]) -> Result<Vec<Tensor>> {
+        self.through_all(batches, |z| self.decode(z))
+    }
+
+    fn through_all(&self, batches: &[&Tensor], f: impl Fn(&Tensor) -> Result<Tensor>) -> Result<Vec<Tensor>> {
+        if self.kernels != Kernels::Fused || batches.len() < 2 {
+            return batches.iter().map(|&t| f(t)).collect();
+        }
+        let out = f(&Tensor::cat(batches, 0)?)?;
+        let mut start = 0;
+        let mut parts = Vec::with_capacity(batches.len());
+        for t in batches {
+            let rows = t.dim(0)?;
+            parts.push(out.narrow(0, start, rows)?);
+            start += rows;
+        }
+        Ok(parts)
+    }
+
     /// `D`: `[B, latent]` → `[B, V, 9]` normalised features in (−1, 1).
     pub fn decode(&self, z: &Tensor) -> Result<Tensor> {
         Ok(self.decode_timed(z)?.0)

@@ -590,16 +590,15 @@ impl EmbedModel {
         let phys_scale = data.phys_scale(self.config.phys_scale);
         if stage == 1 || stage == 3 {
             let x = data.feature_batch(batch, device)?;
-            let z = self.autoencoder.encode(&x)?;
             // The predecessors' codes feed the latent step (stage 3) and L_ephys; the
-            // baseline in stage 1 needs neither.
-            let predecessors = if stage == 3 || w.ephys != 0.0 {
-                Some((
-                    self.autoencoder.encode(&data.feature_batch(&b1, device)?)?,
-                    self.autoencoder.encode(&data.feature_batch(&b2, device)?)?,
-                ))
+            // baseline in stage 1 needs neither. The window's frame and its predecessors
+            // go through each network as one batch (`MeshAutoencoder::encode_all`).
+            let (z, predecessors) = if stage == 3 || w.ephys != 0.0 {
+                let (x1, x2) = (data.feature_batch(&b1, device)?, data.feature_batch(&b2, device)?);
+                let [z, z1, z2] = three(self.autoencoder.encode_all(&[&x, &x1, &x2])?)?;
+                (z, Some((z1, z2)))
             } else {
-                None
+                (self.autoencoder.encode(&x)?, None)
             };
             let z_used = if let (3, Some((z1, z2))) = (stage, &predecessors) {
                 let q = data.control_batch(batch, device)?;
@@ -610,16 +609,23 @@ impl EmbedModel {
             } else {
                 z.clone()
             };
-            let y = self.autoencoder.decode(&z_used)?;
+            // L_ephys decodes the predecessors too: with the window's code, one batch.
+            let (y, decoded) = match (w.ephys != 0.0, &predecessors) {
+                (true, Some((z1, z2))) => {
+                    let [y, y1, y2] = three(self.autoencoder.decode_all(&[&z_used, z1, z2])?)?;
+                    (y, Some((y1, y2)))
+                }
+                _ => (self.autoencoder.decode(&z_used)?, None),
+            };
             let recon = (&y - &x)?.sqr()?.sum((1, 2))?.mean_all()?;
             add(recon, w.recon, &mut terms.recon)?;
             let p = data.decoder_op(batch).apply(&y)?;
             let truth = data.position_batch(batch, device)?;
             let vert = (&p - &truth)?.sqr()?.sum((1, 2))?.mean_all()?;
             add(vert, w.vert, &mut terms.vert)?;
-            if let (true, Some((z1, z2))) = (w.ephys != 0.0, &predecessors) {
-                let p1 = self.positions(data, &b1, z1)?;
-                let p2 = self.positions(data, &b2, z2)?;
+            if let Some((y1, y2)) = decoded {
+                let p1 = data.decoder_op(&b1).apply(&y1)?;
+                let p2 = data.decoder_op(&b2).apply(&y2)?;
                 let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
                 add(ephys, w.ephys, &mut terms.ephys)?;
             }
@@ -653,6 +659,15 @@ impl EmbedModel {
         terms.total = scalar(&total)?;
         Ok((total, terms))
     }
+}
+
+/// The three batches [`MeshAutoencoder::encode_all`] / `decode_all` return for three.
+fn three(parts: Vec<Tensor>) -> Result<[Tensor; 3]> {
+    <[Tensor; 3]>::try_from(parts).map_err(|parts| Error::Shape {
+        what: "autoencoder batches",
+        expected: "3".into(),
+        got: parts.len().to_string(),
+    })
 }
 
 /// The windows' frames `k` steps back.

@@ -350,24 +350,31 @@ fn convs_forward(graph: &MeshGraph, theta: &[f32], h0: &[f32], tanh_last: bool) 
     tape
 }
 
-/// The backward pass of [`convs_forward`] from `∂L/∂out` of the last layer; returns
-/// `∂L/∂h0` and writes the convolutions' parameter gradients into `d_theta`.
+/// The backward pass of [`convs_forward`] from `∂L/∂out` of the last layer, for the tape's
+/// rows `rows` (whole frames: `d_out` holds those rows only); returns `∂L/∂h0` of those
+/// rows and writes the convolutions' parameter gradients into `d_theta`.
 fn convs_backward(
     graph: &MeshGraph,
     theta: &[f32],
     tape: &ConvTape,
+    rows: std::ops::Range<usize>,
     d_out: Vec<f32>,
     tanh_last: bool,
     d_theta: &mut [f32],
 ) -> Vec<f32> {
     let layers = theta.len() / CONV_PARAMS;
+    let part = |width: usize| rows.start * width..rows.end * width;
     let mut d = d_out;
     for l in (0..layers).rev() {
+        let (out, pre, a) = (&tape.out[l], &tape.pre[l], &tape.a[l]);
         let dpre: Vec<f32> = if tanh_last && l == layers - 1 {
-            d.par_iter().zip(&tape.out[l]).map(|(g, y)| g * (1.0 - y * y)).collect()
+            d.par_iter()
+                .zip(&out[part(C)])
+                .map(|(g, y)| g * (1.0 - y * y))
+                .collect()
         } else {
             d.par_iter()
-                .zip(&tape.pre[l])
+                .zip(&pre[part(C)])
                 .map(|(g, x)| g * leaky_derivative(*x))
                 .collect()
         };
@@ -375,7 +382,7 @@ fn convs_backward(
         conv_backward(
             graph,
             &theta[l * CONV_PARAMS..(l + 1) * CONV_PARAMS],
-            &tape.a[l],
+            &a[part(2 * C)],
             &dpre,
             &mut d_theta[l * CONV_PARAMS..(l + 1) * CONV_PARAMS],
             Some(&mut dh),
@@ -383,6 +390,19 @@ fn convs_backward(
         d = dh;
     }
     d
+}
+
+/// The frames `[B, width]` of `grad` from the first to the last one with a nonzero value.
+/// A frame outside them adds nothing to any gradient, so the backward passes skip it: the
+/// embedding's loss sends the two predecessor frames of each window through the networks
+/// in the same batch as the window's frame, and only the window's frame carries gradient
+/// (Tan et al. Eq. 9–10 detach the predecessors).
+fn frames_with_gradient(grad: &[f32], width: usize) -> std::ops::Range<usize> {
+    let nonzero = |f: &[f32]| f.iter().any(|&g| g != 0.0);
+    let frames: Vec<&[f32]> = grad.chunks_exact(width).collect();
+    let first = frames.iter().position(|f| nonzero(f)).unwrap_or(frames.len());
+    let last = frames.iter().rposition(|f| nonzero(f)).map_or(first, |l| l + 1);
+    first..last
 }
 
 /// Column sums of a row-major `[rows, cols]` buffer, in f64.
@@ -470,30 +490,40 @@ impl CustomOp3 for EncoderOp {
             None => with_values(w_fc_t, |w_fc| self.forward(&theta, w_fc, &x).0)?,
         };
         let conv_len = theta.len() - self.latent;
-        let width = self.graph.num_vertices() * C;
+        let v = self.graph.num_vertices();
+        let width = v * C;
         let b = x.len() / width;
         let h: &[f32] = tape.out.last().map_or(&x, |o| o.as_slice());
         let mut d_theta = vec![0.0f32; theta.len()];
         d_theta[conv_len..].copy_from_slice(&column_sums(&dz, self.latent));
+        // Frames without gradient are skipped (`frames_with_gradient`).
+        let frames = frames_with_gradient(&dz, self.latent);
+        let (h, dz) = (
+            &h[frames.start * width..frames.end * width],
+            &dz[frames.start * self.latent..frames.end * self.latent],
+        );
         let mut d_w = vec![0.0f32; width * self.latent];
-        outer_sum(h, &dz, width, self.latent, &mut d_w);
-        let mut dh = vec![0.0f32; b * width];
+        outer_sum(h, dz, width, self.latent, &mut d_w);
+        let mut dh = vec![0.0f32; frames.len() * width];
         with_values(w_fc_t, |w_fc| {
             gemm_wide(
-                view_mut(&mut dh, b, width),
+                view_mut(&mut dh, frames.len(), width),
                 Accum::Replace,
-                view(&dz, b, self.latent),
+                view(dz, frames.len(), self.latent),
                 view(w_fc, width, self.latent).transpose(),
             )
         })?;
-        let dx = convs_backward(
+        let dx_frames = convs_backward(
             &self.graph,
             &theta[..conv_len],
             &tape,
+            frames.start * v..frames.end * v,
             dh,
             false,
             &mut d_theta[..conv_len],
         );
+        let mut dx = vec![0.0f32; b * width];
+        dx[frames.start * width..frames.end * width].copy_from_slice(&dx_frames);
         let dev = theta_t.device();
         Ok((
             Some(Tensor::from_vec(d_theta, theta_t.shape(), dev)?),
@@ -581,24 +611,41 @@ impl CustomOp3 for DecoderOp {
                 (u_pre, tape)
             })?,
         };
-        let width = self.graph.num_vertices() * C;
+        let v = self.graph.num_vertices();
+        let width = v * C;
         let b = z.len() / self.latent;
         let mut d_theta = vec![0.0f32; theta.len()];
-        let du = convs_backward(&self.graph, &theta[width..], &tape, dy, true, &mut d_theta[width..]);
+        // Frames without gradient are skipped (`frames_with_gradient`).
+        let frames = frames_with_gradient(&dy, width);
+        let dy = dy[frames.start * width..frames.end * width].to_vec();
+        let du = convs_backward(
+            &self.graph,
+            &theta[width..],
+            &tape,
+            frames.start * v..frames.end * v,
+            dy,
+            true,
+            &mut d_theta[width..],
+        );
         let du_pre: Vec<f32> = du
             .par_iter()
-            .zip(&u_pre)
+            .zip(&u_pre[frames.start * width..frames.end * width])
             .map(|(g, x)| g * leaky_derivative(*x))
             .collect();
         d_theta[..width].copy_from_slice(&column_sums(&du_pre, width));
         let mut d_w = vec![0.0f32; self.latent * width];
-        outer_sum(&z, &du_pre, self.latent, width, &mut d_w);
+        let z_frames = &z[frames.start * self.latent..frames.end * self.latent];
+        outer_sum(z_frames, &du_pre, self.latent, width, &mut d_w);
         let mut dz = vec![0.0f32; b * self.latent];
         with_values(w_fc_t, |w_fc| {
             gemm_wide(
-                view_mut(&mut dz, b, self.latent),
+                view_mut(
+                    &mut dz[frames.start * self.latent..frames.end * self.latent],
+                    frames.len(),
+                    self.latent,
+                ),
                 Accum::Replace,
-                view(&du_pre, b, width),
+                view(&du_pre, frames.len(), width),
                 view(w_fc, self.latent, width).transpose(),
             )
         })?;

@@ -881,25 +881,22 @@ fn relative_gap(a: &Tensor, b: &Tensor) -> f32 {
     norm(&(a - b).unwrap()) / norm(b)
 }
 
-#[test]
-fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
-    // A sheet whose boundary vertices have fewer neighbours, a batch of three, random
-    // weights with non-zero biases (so every leaky ReLU sees both signs), and a loss that
-    // weighs every output differently: the encoder's and decoder's outputs and the
-    // gradients of every parameter and of both inputs agree with candle's autograd. 196
-    // vertices × 3 frames = 588 rows: two of the kernels' 512-row tasks, the second
-    // partial, so the per-task products and their sum over tasks are both exercised.
-    let mesh = weft_mesh::generators::sheet(14, 1.0).unwrap();
+/// A two-convolution autoencoder on an `n × n` sheet with `latent` codes, its weights from
+/// `param_seed` and its biases drawn non-zero (so every leaky ReLU sees both signs); the
+/// generator that drew them, to draw the test's inputs; and the vertex count.
+fn autoencoder_with_random_biases(
+    n: usize,
+    latent: usize,
+    param_seed: u64,
+    rng_seed: u64,
+) -> (Params, MeshAutoencoder, TestRng, usize) {
+    let mesh = weft_mesh::generators::sheet(n, 1.0).unwrap();
     let v = mesh.num_vertices();
-    assert!(3 * v > 512 && 3 * v < 1024);
     let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
-    let mut params = Params::new(&cpu(), 8);
-    let config = AutoencoderConfig {
-        conv_layers: 2,
-        latent: 7,
-    };
-    let fused = MeshAutoencoder::new(&mut params, graph, config).unwrap();
-    let mut rng = TestRng::new(3);
+    let mut params = Params::new(&cpu(), param_seed);
+    let config = AutoencoderConfig { conv_layers: 2, latent };
+    let autoencoder = MeshAutoencoder::new(&mut params, graph, config).unwrap();
+    let mut rng = TestRng::new(rng_seed);
     for (name, var) in params.vars() {
         if name.ends_with(".b") {
             let n = var.as_tensor().elem_count();
@@ -908,16 +905,31 @@ fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
                 .unwrap();
         }
     }
+    (params, autoencoder, rng, v)
+}
+
+/// A variable of `shape` with entries uniform in (−0.9, 0.9).
+fn random_var(rng: &mut TestRng, shape: &[usize]) -> Var {
+    let n: usize = shape.iter().product();
+    let x: Vec<f32> = (0..n).map(|_| rng.uniform(-0.9, 0.9) as f32).collect();
+    Var::from_tensor(&Tensor::from_vec(x, shape, &cpu()).unwrap()).unwrap()
+}
+
+#[test]
+fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
+    // A sheet whose boundary vertices have fewer neighbours, a batch of three, random
+    // weights with non-zero biases (so every leaky ReLU sees both signs), and a loss that
+    // weighs every output differently: the encoder's and decoder's outputs and the
+    // gradients of every parameter and of both inputs agree with candle's autograd. 196
+    // vertices × 3 frames = 588 rows: two of the kernels' 512-row tasks, the second
+    // partial, so the per-task products and their sum over tasks are both exercised.
+    let (params, fused, mut rng, v) = autoencoder_with_random_biases(14, 7, 8, 3);
+    assert!(3 * v > 512 && 3 * v < 1024);
     let reference = fused.clone().with_kernels(weft_nn::Kernels::Autograd);
-    let random = |rng: &mut TestRng, shape: &[usize]| {
-        let n: usize = shape.iter().product();
-        let x: Vec<f32> = (0..n).map(|_| rng.uniform(-0.9, 0.9) as f32).collect();
-        Var::from_tensor(&Tensor::from_vec(x, shape, &cpu()).unwrap()).unwrap()
-    };
-    let x = random(&mut rng, &[3, v, 9]);
-    let z_in = random(&mut rng, &[3, 7]);
-    let weights_z = random(&mut rng, &[3, 7]);
-    let weights_y = random(&mut rng, &[3, v, 9]);
+    let x = random_var(&mut rng, &[3, v, 9]);
+    let z_in = random_var(&mut rng, &[3, 7]);
+    let weights_z = random_var(&mut rng, &[3, 7]);
+    let weights_y = random_var(&mut rng, &[3, v, 9]);
     let run = |ae: &MeshAutoencoder| {
         let z = ae.encode(x.as_tensor()).unwrap();
         let y = ae.decode(z_in.as_tensor()).unwrap();
@@ -943,6 +955,72 @@ fn the_fused_autoencoder_has_the_autograd_values_and_gradients() {
         checked += 1;
     }
     assert_eq!(checked, params.vars().len() + 2);
+}
+
+#[test]
+fn the_fused_autoencoder_batched_with_frames_without_gradient_has_the_autograd_gradients() {
+    // `encode_all` / `decode_all` send several batches through the fused ops as one, whose
+    // backward passes skip the frames that receive no gradient. Here the loss reads only
+    // the middle batch's codes (frames 2–3 of 6) and only the last batch's decoded
+    // features (frames 5–5): every parameter's and input's gradient must still equal
+    // autograd's, which runs each batch alone, and the inputs of the skipped frames must
+    // get exactly zero.
+    let (params, fused, mut rng, v) = autoencoder_with_random_biases(9, 6, 5, 9);
+    let reference = fused.clone().with_kernels(weft_nn::Kernels::Autograd);
+    let xs = [
+        random_var(&mut rng, &[2, v, 9]),
+        random_var(&mut rng, &[2, v, 9]),
+        random_var(&mut rng, &[2, v, 9]),
+    ];
+    let zs = [
+        random_var(&mut rng, &[2, 6]),
+        random_var(&mut rng, &[3, 6]),
+        random_var(&mut rng, &[1, 6]),
+    ];
+    let weights_z = random_var(&mut rng, &[2, 6]);
+    let weights_y = random_var(&mut rng, &[1, v, 9]);
+    let run = |ae: &MeshAutoencoder| {
+        let codes = ae
+            .encode_all(&[xs[0].as_tensor(), xs[1].as_tensor(), xs[2].as_tensor()])
+            .unwrap();
+        let decoded = ae
+            .decode_all(&[zs[0].as_tensor(), zs[1].as_tensor(), zs[2].as_tensor()])
+            .unwrap();
+        let loss = ((&codes[1] * weights_z.as_tensor()).unwrap().sum_all().unwrap()
+            + (&decoded[2] * weights_y.as_tensor())
+                .unwrap()
+                .sqr()
+                .unwrap()
+                .sum_all()
+                .unwrap())
+        .unwrap();
+        (codes, decoded, loss.backward().unwrap())
+    };
+    let (codes_f, decoded_f, g_f) = run(&fused);
+    let (codes_r, decoded_r, g_r) = run(&reference);
+    for (f, r) in codes_f.iter().zip(&codes_r).chain(decoded_f.iter().zip(&decoded_r)) {
+        assert_eq!(f.dims(), r.dims());
+        assert!(relative_gap(f, r) < 1e-5, "outputs differ");
+    }
+    let inputs = xs.iter().chain(&zs).enumerate().map(|(k, x)| (format!("input {k}"), x));
+    let mut checked = 0;
+    for (name, var) in params.vars().iter().map(|(n, v)| (n.clone(), v)).chain(inputs) {
+        let r = g_r.get(var.as_tensor());
+        let f = g_f.get(var.as_tensor()).unwrap();
+        match r {
+            Some(r) => {
+                let gap = relative_gap(f, r);
+                assert!(gap < 1e-4, "{name}: gradients differ by {gap:.2e} relative");
+            }
+            // Autograd never reached this batch; the fused op must give it exact zeros.
+            None => {
+                let max = f.abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+                assert_eq!(max, 0.0, "{name}: a skipped frame got gradient {max}");
+            }
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, params.vars().len() + 6);
 }
 
 /// A synthetic `nnwarp` dataset on the small clamped beam where more training data must
