@@ -399,9 +399,9 @@ fn convs_backward(
 /// (Tan et al. Eq. 9–10 detach the predecessors).
 fn frames_with_gradient(grad: &[f32], width: usize) -> std::ops::Range<usize> {
     let nonzero = |f: &[f32]| f.iter().any(|&g| g != 0.0);
-    let frames: Vec<&[f32]> = grad.chunks_exact(width).collect();
-    let first = frames.iter().position(|f| nonzero(f)).unwrap_or(frames.len());
-    let last = frames.iter().rposition(|f| nonzero(f)).map_or(first, |l| l + 1);
+    let mut frames = grad.chunks_exact(width);
+    let first = frames.position(nonzero).unwrap_or(grad.len() / width);
+    let last = grad.chunks_exact(width).rposition(nonzero).map_or(first, |l| l + 1);
     first..last
 }
 
