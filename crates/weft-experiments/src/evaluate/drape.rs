@@ -314,6 +314,38 @@ fn cached_score(path: &Path, key: &str, compute: impl FnOnce() -> crate::Result<
     Ok(s)
 }
 
+/// Starts the model directory `to` as a copy of `from` (a model trained under the same
+/// stamp for fewer epochs, which `fit` then continues), unless `to` already holds a
+/// model or `from` does not. The copy is made beside `to` and renamed into place, so an
+/// interrupted copy leaves no partial model.
+fn start_from_copy(from: &Path, to: &Path) -> crate::Result<()> {
+    fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
+        std::fs::create_dir_all(to)?;
+        for entry in std::fs::read_dir(from)? {
+            let entry = entry?;
+            let target = to.join(entry.file_name());
+            if entry.file_type()?.is_dir() {
+                copy_tree(&entry.path(), &target)?;
+            } else {
+                std::fs::copy(entry.path(), &target)?;
+            }
+        }
+        Ok(())
+    }
+    if to.exists() || !from.join("config.json").exists() {
+        return Ok(());
+    }
+    let mut name = to.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let partial = to.with_file_name(name);
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial)?;
+    }
+    copy_tree(from, &partial)?;
+    std::fs::rename(&partial, to)?;
+    Ok(())
+}
+
 /// The state of a trained model, for the score cache's key.
 fn state_key(f: &Fitted) -> String {
     format!(
@@ -463,6 +495,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     // first seed's network. The base rate's model is the method's own first-seed model.
     let (seed0, net0) = (seeds[0], networks[0].1.clone());
     let mut rate_rows = Vec::new();
+    let mut rate_fits = Vec::new();
     let mut chosen = (f64::INFINITY, base.learning_rate);
     for &lr in finetune_rates(ctx.size) {
         let dir = if lr == base.learning_rate {
@@ -489,8 +522,12 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
         if f.state.best_validation < chosen.0 {
             chosen = (f.state.best_validation, lr);
         }
+        rate_fits.push((lr, f));
     }
     let finetune_lr = chosen.1;
+    // The chosen rate's model is the first seed's `trained-qs-mu0.1`: the same stamp
+    // (configuration, layer, starting weights) and epochs, so it is not trained twice.
+    let mut chosen_fit = rate_fits.into_iter().find(|(lr, _)| *lr == finetune_lr).map(|(_, f)| f);
 
     // Every trained-* model per seed, fine-tuned from that seed's network.
     let mut trainings: Vec<(String, Layer)> = vec![("trained-socp".into(), Layer::Socp)];
@@ -516,8 +553,16 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
         let config = config_of(seed, finetune_lr);
         let mut fitted = vec![("network-only".to_string(), net)];
         for (name, layer) in &trainings {
-            let dir = models_of(seed).join(name);
-            let f = train_one(out, &dir, name, *layer, &config, Some(&net_dir), base.finetune_epochs)?;
+            let reused = (seed == seed0 && *layer == Layer::Quasistatic(0.1))
+                .then(|| chosen_fit.take())
+                .flatten();
+            let f = match reused {
+                Some(f) => f,
+                None => {
+                    let dir = models_of(seed).join(name);
+                    train_one(out, &dir, name, *layer, &config, Some(&net_dir), base.finetune_epochs)?
+                }
+            };
             fitted.push((name.clone(), f));
         }
         runs.push(SeedRun { seed, fitted });
@@ -543,6 +588,11 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
                 .1
         } else {
             let dir = models_of(seed0).join(&name);
+            if label == "0.1" {
+                // The method's model is this run's first epochs (the same stamp), so
+                // the study continues it rather than train them again.
+                start_from_copy(&models_of(seed0).join("trained-qs-learned-mu"), &dir)?;
+            }
             owned = train_one(
                 out,
                 &dir,
@@ -1190,6 +1240,8 @@ pub fn summarize_trained(
 
 #[cfg(test)]
 mod tests {
+    use std::path::PathBuf;
+
     use super::*;
 
     #[test]
@@ -1201,6 +1253,36 @@ mod tests {
         assert_eq!(learned(0.1, false), "trained-qs-learned-mu");
         assert_eq!(learned(1.0, false), "learned-mu-from-1");
         assert_eq!(learned(0.1, true), "trained-qs-per-vertex-mu");
+    }
+
+    #[test]
+    fn a_model_directory_is_copied_whole_once_and_never_over_a_model() {
+        let root = std::env::temp_dir().join(format!("weft-drape-copy-{}", std::process::id()));
+        let (from, to) = (root.join("trained-qs-learned-mu"), root.join("learned-mu-from-0.1"));
+        let write = |path: &Path, text: &str| {
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, text).unwrap();
+        };
+        // No model to copy yet: nothing is made.
+        start_from_copy(&from, &to).unwrap();
+        assert!(!to.exists());
+        write(&from.join("config.json"), "stamp");
+        write(&from.join("last/net/params.safetensors"), "weights");
+        write(&from.join("best/net/state.json"), "best");
+        // A partial copy left by an interrupted run is replaced.
+        write(&root.join("learned-mu-from-0.1.partial/config.json"), "stale");
+        start_from_copy(&from, &to).unwrap();
+        let read = |path: PathBuf| std::fs::read_to_string(path).unwrap();
+        assert_eq!(read(to.join("config.json")), "stamp");
+        assert_eq!(read(to.join("last/net/params.safetensors")), "weights");
+        assert_eq!(read(to.join("best/net/state.json")), "best");
+        assert!(!root.join("learned-mu-from-0.1.partial").exists());
+        // A model already there (being continued) is never overwritten.
+        write(&from.join("last/net/params.safetensors"), "newer");
+        write(&to.join("last/net/params.safetensors"), "continued");
+        start_from_copy(&from, &to).unwrap();
+        assert_eq!(read(to.join("last/net/params.safetensors")), "continued");
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]
