@@ -19,8 +19,9 @@ use weft_proj::{QuasistaticLayer, ZeroLengthScaling};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    if args.iter().any(|a| a == "--help" || a == "-h") || args.len() < 4 {
-        println!("usage: quasistatic_drape_solves DATA_DIR MU N MODEL_DIR [MODEL_DIR ...] [--out FILE]");
+    const USAGE: &str = "usage: quasistatic_drape_solves DATA_DIR MU N MODEL_DIR [MODEL_DIR ...] [--out FILE]";
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{USAGE}");
         return Ok(());
     }
     let out = match args.iter().position(|a| a == "--out") {
@@ -32,6 +33,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(_) => return Err("--out needs a file".into()),
         None => None,
     };
+    if args.len() < 4 {
+        return Err(USAGE.into());
+    }
     let data_dir = PathBuf::from(&args[0]);
     let mu: f64 = args[1].parse()?;
     let n: usize = args[2].parse()?;

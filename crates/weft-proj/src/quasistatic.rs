@@ -16,9 +16,10 @@
 //! Minimised by weft-sim's Newton solver from `r̂` itself (which may be stretched or
 //! inverted): per-spring PSD projection of the Hessian (the definiteness fix of Teran et
 //! al. 2005) until near the equilibrium or until the projected steps stop lowering the
-//! residual, then the true Hessian; an Armijo line search, sparse Cholesky with the symbolic factor reused and
-//! each numeric factor kept for further steps while they contract the residual force
-//! tenfold (Shamanskii's method; `NewtonSettings::reuse_factorization`).
+//! residual, then the true Hessian; an Armijo line search, sparse Cholesky with the
+//! symbolic factor reused and each numeric factor kept for further steps while they
+//! contract the residual force tenfold (Shamanskii's method;
+//! `NewtonSettings::reuse_factorization`).
 //!
 //! # Backward (Geng et al. Eq. 12–16)
 //!
@@ -526,10 +527,11 @@ impl QuasistaticLayer {
     /// the true Hessian (diagonally shifted by weft-sim's solver only if indefinite), whose
     /// convergence stays quadratic where compressed springs make the projection differ
     /// from the true Hessian at the minimum. The first phase also switches to the true
-    /// Hessian once its residual has risen on two projected steps in a row: on a loose
-    /// garment at small μ the projected steps otherwise crawl for tens of iterations
-    /// between 1e-5 and 1e-4 N, and can stall there (docs/BENCHMARKS.md, "The
-    /// quasistatic layer on the loose sleeve").
+    /// Hessian once its residual has risen on two projected steps in a row (as the drape
+    /// ground truth does, `DrapeParams::exact_hessian_after_rises`): on a loose garment at
+    /// small μ the projected steps otherwise crawl for tens of iterations short of the
+    /// hand-over, and can stall there (docs/BENCHMARKS.md, "The quasistatic layer on the
+    /// loose sleeve").
     fn minimize(
         &self,
         solver: &mut NewtonSolver,

@@ -319,19 +319,6 @@ fn cached_score(path: &Path, key: &str, compute: impl FnOnce() -> crate::Result<
 /// model or `from` does not. The copy is made beside `to` and renamed into place, so an
 /// interrupted copy leaves no partial model.
 fn start_from_copy(from: &Path, to: &Path) -> crate::Result<()> {
-    fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
-        std::fs::create_dir_all(to)?;
-        for entry in std::fs::read_dir(from)? {
-            let entry = entry?;
-            let target = to.join(entry.file_name());
-            if entry.file_type()?.is_dir() {
-                copy_tree(&entry.path(), &target)?;
-            } else {
-                std::fs::copy(entry.path(), &target)?;
-            }
-        }
-        Ok(())
-    }
     if to.exists() || !from.join("config.json").exists() {
         return Ok(());
     }
@@ -341,7 +328,7 @@ fn start_from_copy(from: &Path, to: &Path) -> crate::Result<()> {
     if partial.exists() {
         std::fs::remove_dir_all(&partial)?;
     }
-    copy_tree(from, &partial)?;
+    super::copy_tree(from, &partial)?;
     std::fs::rename(&partial, to)?;
     Ok(())
 }

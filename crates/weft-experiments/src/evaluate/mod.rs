@@ -280,7 +280,8 @@ fn provenance_per_experiment(outputs: &[ExperimentOutput]) -> String {
     s
 }
 
-fn copy_tree(from: &Path, to: &Path) -> crate::Result<()> {
+/// Copies the directory `from` into `to`, recursively (made if missing).
+pub(super) fn copy_tree(from: &Path, to: &Path) -> crate::Result<()> {
     std::fs::create_dir_all(to)?;
     for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
         let p = e?.path();
