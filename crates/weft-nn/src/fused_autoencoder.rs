@@ -21,7 +21,9 @@
 //! faer's parallel GEMM is not used: its worker threads, which keep spinning after a
 //! product, slowed the row passes that follow on a 2-core machine. The small products run
 //! on one thread; the fully connected layers' products, memory-bound with a batch of a few
-//! frames, are split by output columns over rayon's threads (`gemm_wide`).
+//! frames, are split by output columns over rayon's threads (`gemm_wide`), and the
+//! decoder's forward one, `[B, 128] · [128, 9V]`, streams its weight rows through a kernel
+//! of its own (`rows_times_wide`).
 //!
 //! The backward pass of the neighbour mean is its transpose: with `g_i = ∂L/∂mean_i`,
 //! `∂L/∂x_j = Σ_{i : j ∈ N¹(i)} g_i / |N¹(i)| = Σ_{i ∈ N¹(j)} g_i / |N¹(i)|` (the 1-ring
@@ -120,6 +122,97 @@ fn gemm_split(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<
 fn gemm_wide(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<'_, f32>) {
     let depth = rayon::current_num_threads().next_power_of_two().trailing_zeros();
     gemm_split(out, accum, a, b, depth);
+}
+
+/// `out += a · w` for a few rows `a` (`[B, k]`, row-major) and a row-major `w` (`[k, n]`)
+/// far wider than deep: the decoder's fully connected layer, `[B, 128] · [128, 4225·9]`
+/// on the sheet. faer runs this shape as matrix–vector products; in a latent roll-out
+/// (`B = 1`) that was half the decoder's time (a development profile). Here `w` is
+/// streamed once, row by row: each output row takes four scaled `w` rows per pass
+/// (four multiply-adds per load and store of the output), the columns split into as many
+/// contiguous pieces as rayon has threads.
+fn rows_times_wide(out: &mut [f32], a: &[f32], w: &[f32], k: usize, n: usize) {
+    let rows = a.len() / k;
+    debug_assert_eq!(out.len(), rows * n);
+    debug_assert_eq!(w.len(), k * n);
+    let threads = rayon::current_num_threads().max(1);
+    let piece = n.div_ceil(threads).max(MIN_SPLIT_COLUMNS);
+    // Each piece: its column range and every output row's part of it.
+    let mut pieces: Vec<(usize, Vec<&mut [f32]>)> = (0..n).step_by(piece).map(|c| (c, Vec::new())).collect();
+    for row in out.chunks_exact_mut(n) {
+        let mut rest = row;
+        for (c, parts) in pieces.iter_mut() {
+            let (part, tail) = rest.split_at_mut(piece.min(n - *c));
+            parts.push(part);
+            rest = tail;
+        }
+    }
+    pieces.into_par_iter().for_each(|(first, parts)| {
+        pulp::Arch::new().dispatch(WideRows {
+            a,
+            w,
+            k,
+            n,
+            first,
+            parts,
+        });
+    });
+}
+
+struct WideRows<'a, 'b> {
+    a: &'a [f32],
+    w: &'a [f32],
+    k: usize,
+    n: usize,
+    /// The piece's first column.
+    first: usize,
+    /// Each output row's part `[first, first + width)`.
+    parts: Vec<&'b mut [f32]>,
+}
+
+impl pulp::WithSimd for WideRows<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(mut self, simd: S) {
+        let Some(width) = self.parts.first().map(|p| p.len()) else {
+            return;
+        };
+        let w_row = |kk: usize| &self.w[kk * self.n + self.first..][..width];
+        let mut kk = 0;
+        while kk + 4 <= self.k {
+            let rows: [_; 4] = std::array::from_fn(|i| S::as_simd_f32s(w_row(kk + i)));
+            for (r, out) in self.parts.iter_mut().enumerate() {
+                let s: [f32; 4] = std::array::from_fn(|i| self.a[r * self.k + kk + i]);
+                let sv = s.map(|x| simd.splat_f32s(x));
+                let (head, tail) = S::as_mut_simd_f32s(out);
+                for (j, o) in head.iter_mut().enumerate() {
+                    let mut acc = simd.mul_add_f32s(sv[0], rows[0].0[j], *o);
+                    acc = simd.mul_add_f32s(sv[1], rows[1].0[j], acc);
+                    acc = simd.mul_add_f32s(sv[2], rows[2].0[j], acc);
+                    *o = simd.mul_add_f32s(sv[3], rows[3].0[j], acc);
+                }
+                for (j, o) in tail.iter_mut().enumerate() {
+                    *o += s[0] * rows[0].1[j] + s[1] * rows[1].1[j] + s[2] * rows[2].1[j] + s[3] * rows[3].1[j];
+                }
+            }
+            kk += 4;
+        }
+        for kk in kk..self.k {
+            let (head_w, tail_w) = S::as_simd_f32s(w_row(kk));
+            for (r, out) in self.parts.iter_mut().enumerate() {
+                let s = self.a[r * self.k + kk];
+                let sv = simd.splat_f32s(s);
+                let (head, tail) = S::as_mut_simd_f32s(out);
+                for (o, x) in head.iter_mut().zip(head_w) {
+                    *o = simd.mul_add_f32s(sv, *x, *o);
+                }
+                for (o, x) in tail.iter_mut().zip(tail_w) {
+                    *o += s * x;
+                }
+            }
+        }
+    }
 }
 
 /// `out = aᵀ c` for row-major `a` `[B, m]` and `c` `[B, n]` with few rows `B` (a weight
@@ -556,12 +649,7 @@ impl DecoderOp {
         let width = self.graph.num_vertices() * C;
         let b = z.len() / self.latent;
         let mut u_pre: Vec<f32> = (0..b).flat_map(|_| theta[..width].iter().copied()).collect();
-        gemm_wide(
-            view_mut(&mut u_pre, b, width),
-            Accum::Add,
-            view(z, b, self.latent),
-            view(w_fc, self.latent, width),
-        );
+        rows_times_wide(&mut u_pre, z, w_fc, self.latent, width);
         let u: Vec<f32> = u_pre.par_iter().map(|&x| leaky(x)).collect();
         let tape = convs_forward(&self.graph, &theta[width..], &u, true);
         (u_pre, u, tape)
@@ -661,6 +749,37 @@ impl CustomOp3 for DecoderOp {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_wide_row_product_equals_faers_product() {
+        // Depths with and without a remainder after the passes of four `w` rows, widths
+        // below the split minimum, uneven pieces and a vector tail, one to eight rows.
+        let mut state = 11u32;
+        let mut next = move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        for (rows, inner, cols) in [(1, 128, 1001), (3, 37, 131), (8, 9, 63), (2, 6, 20), (5, 3, 517)] {
+            let a: Vec<f32> = (0..rows * inner).map(|_| next()).collect();
+            let w: Vec<f32> = (0..inner * cols).map(|_| next()).collect();
+            let start: Vec<f32> = (0..rows * cols).map(|_| next()).collect();
+            let (mut reference, mut wide) = (start.clone(), start.clone());
+            gemm(
+                view_mut(&mut reference, rows, cols),
+                Accum::Add,
+                view(&a, rows, inner),
+                view(&w, inner, cols),
+            );
+            rows_times_wide(&mut wide, &a, &w, inner, cols);
+            for (i, (x, y)) in reference.iter().zip(&wide).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-5 * (1.0 + x.abs()),
+                    "[{rows}, {inner}] · [{inner}, {cols}]: entry {i}: {y} against {x}"
+                );
+            }
+            assert_ne!(wide, start, "[{rows}, {inner}] · [{inner}, {cols}] added nothing");
+        }
+    }
 
     #[test]
     fn a_product_split_by_columns_equals_the_whole_product() {
