@@ -333,6 +333,24 @@ fn start_from_copy(from: &Path, to: &Path) -> crate::Result<()> {
     Ok(())
 }
 
+/// Checks that the model directory `copy` holds the run of `run` (their training records
+/// are the same bytes): a directory left by another run under the method's name is a
+/// typed error naming both, never scored under the wrong name.
+fn check_same_run(run: &Path, copy: &Path) -> crate::Result<()> {
+    let record = |dir: &Path| {
+        let path = dir.join("training.json");
+        std::fs::read(&path).with_context(|| format!("reading {}", path.display()))
+    };
+    if record(run)? != record(copy)? {
+        return Err(crate::Error::Invalid(format!(
+            "{} holds another run than the chosen fine-tuning rate's {}; move it away and rerun",
+            copy.display(),
+            run.display()
+        )));
+    }
+    Ok(())
+}
+
 /// The state of a trained model, for the score cache's key.
 fn state_key(f: &Fitted) -> String {
     format!(
@@ -479,17 +497,14 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     }
 
     // The fine-tuning rate, on validation: the quasistatic layer at μ = 0.1 from the
-    // first seed's network. The base rate's model is the method's own first-seed model.
+    // first seed's network, one directory per rate.
     let (seed0, net0) = (seeds[0], networks[0].1.clone());
+    let rate_dir = |lr: f64| models_of(seed0).join(format!("lr-{lr}")).join("trained-qs-mu0.1");
     let mut rate_rows = Vec::new();
     let mut rate_fits = Vec::new();
     let mut chosen = (f64::INFINITY, base.learning_rate);
     for &lr in finetune_rates(ctx.size) {
-        let dir = if lr == base.learning_rate {
-            models_of(seed0).join("trained-qs-mu0.1")
-        } else {
-            models_of(seed0).join(format!("lr-{lr}")).join("trained-qs-mu0.1")
-        };
+        let dir = rate_dir(lr);
         let f = train_one(
             out,
             &dir,
@@ -514,7 +529,12 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     let finetune_lr = chosen.1;
     // The chosen rate's model is the first seed's `trained-qs-mu0.1`: the same stamp
     // (configuration, layer, starting weights) and epochs, so it is not trained twice.
+    // Its directory is copied to the method's place, so that every seed's model
+    // directories hold what the tables score.
     let mut chosen_fit = rate_fits.into_iter().find(|(lr, _)| *lr == finetune_lr).map(|(_, f)| f);
+    let method_dir = models_of(seed0).join("trained-qs-mu0.1");
+    start_from_copy(&rate_dir(finetune_lr), &method_dir)?;
+    check_same_run(&rate_dir(finetune_lr), &method_dir)?;
 
     // Every trained-* model per seed, fine-tuned from that seed's network.
     let mut trainings: Vec<(String, Layer)> = vec![("trained-socp".into(), Layer::Socp)];
@@ -1269,6 +1289,28 @@ mod tests {
         write(&to.join("last/net/params.safetensors"), "continued");
         start_from_copy(&from, &to).unwrap();
         assert_eq!(read(to.join("last/net/params.safetensors")), "continued");
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn the_method_directory_must_hold_the_chosen_rate_run() {
+        let root = std::env::temp_dir().join(format!("weft-drape-same-run-{}", std::process::id()));
+        let (run, copy) = (root.join("lr-0.0001"), root.join("trained-qs-mu0.1"));
+        for dir in [&run, &copy] {
+            std::fs::create_dir_all(dir).unwrap();
+        }
+        std::fs::write(run.join("training.json"), "lr 1e-4 history").unwrap();
+        // No record in the method's directory: an error, not a pass.
+        assert!(check_same_run(&run, &copy).is_err());
+        // Another rate's run left there (the layout before the rate directories).
+        std::fs::write(copy.join("training.json"), "lr 1e-3 history").unwrap();
+        let message = check_same_run(&run, &copy).unwrap_err().to_string();
+        assert!(
+            message.contains("trained-qs-mu0.1") && message.contains("lr-0.0001"),
+            "{message}"
+        );
+        std::fs::write(copy.join("training.json"), "lr 1e-4 history").unwrap();
+        check_same_run(&run, &copy).unwrap();
         std::fs::remove_dir_all(&root).unwrap();
     }
 
