@@ -126,12 +126,16 @@ fn gemm_wide(out: MatMut<'_, f32>, accum: Accum, a: MatRef<'_, f32>, b: MatRef<'
 
 /// `out += a · w` for a few rows `a` (`[B, k]`, row-major) and a row-major `w` (`[k, n]`)
 /// far wider than deep: the decoder's fully connected layer, `[B, 128] · [128, 4225·9]`
-/// on the sheet. faer runs this shape as matrix–vector products; in a latent roll-out
-/// (`B = 1`) that was half the decoder's time (a development profile). Here `w` is
+/// on the sheet. faer runs this shape as matrix–vector products, the latent roll-out's
+/// (`B = 1`) largest single cost in the decoder. Here `w` is
 /// streamed once, row by row: each output row takes four scaled `w` rows per pass
 /// (four multiply-adds per load and store of the output), the columns split into as many
 /// contiguous pieces as rayon has threads.
 fn rows_times_wide(out: &mut [f32], a: &[f32], w: &[f32], k: usize, n: usize) {
+    if k == 0 || n == 0 {
+        // An empty product adds nothing (and `chunks_exact_mut(0)` would panic).
+        return;
+    }
     let rows = a.len() / k;
     debug_assert_eq!(out.len(), rows * n);
     debug_assert_eq!(w.len(), k * n);
@@ -779,6 +783,11 @@ mod tests {
             }
             assert_ne!(wide, start, "[{rows}, {inner}] · [{inner}, {cols}] added nothing");
         }
+        // Empty depth or width: nothing to add, no panic.
+        let mut out = vec![1.5f32; 3];
+        rows_times_wide(&mut out, &[], &[], 0, 1);
+        rows_times_wide(&mut out[..0], &[2.0; 3], &[], 1, 0);
+        assert_eq!(out, vec![1.5; 3]);
     }
 
     #[test]
