@@ -191,8 +191,9 @@ fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequ
         !frames.is_empty(),
         "nothing to encode: give --mesh files or a simulate directory as --rest"
     );
-    for &p in pins {
+    for (k, &p) in pins.iter().enumerate() {
         ensure!(p < nv, "pin {p} is out of range for {nv} vertices");
+        ensure!(!pins[..k].contains(&p), "vertex {p} is pinned twice in --pin");
     }
 
     let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
@@ -236,6 +237,16 @@ fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequ
             frames: frames.len(),
         })?;
         fs::write(sidecar(out, "json"), json).with_context(|| format!("writing {}", sidecar(out, "json").display()))?;
+    } else {
+        // Pin files of an earlier encode into the same name would otherwise be read by
+        // `acap decode` as this encode's pins.
+        for ext in ["npy", "json"] {
+            let stale = sidecar(out, ext);
+            if stale.exists() {
+                fs::remove_file(&stale)
+                    .with_context(|| format!("removing the earlier pin file {}", stale.display()))?;
+            }
+        }
     }
     println!(
         "wrote {} frames × {} vertices × 9 features to {}",

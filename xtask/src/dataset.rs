@@ -25,7 +25,8 @@ enum DatasetCommand {
 
 #[derive(Args)]
 pub struct GenerateArgs {
-    /// Dataset name (a built-in cloth scene, or `limb`), or `all`. `cargo xtask dataset list` shows them.
+    /// Dataset name — a built-in cloth scene, limb, limb-jiggle, nnwarp, drape or drape-loose — or `all`.
+    /// `cargo xtask dataset list` shows them with their sizes.
     name: Option<String>,
     /// quick (seconds), standard (the committed evaluation's), or paper (the papers' sizes).
     #[arg(long, default_value_t = Size::Quick)]

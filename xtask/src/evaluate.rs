@@ -9,11 +9,12 @@ use weft_experiments::evaluate::EvaluateOptions;
 
 #[derive(Args)]
 pub struct EvaluateArgs {
-    /// quick (minutes; small meshes) or standard (the committed evaluation in docs/results/).
+    /// quick (minutes; small meshes), standard (the committed evaluation in docs/results/)
+    /// or paper (the papers' dataset sizes).
     #[arg(long, default_value_t = Size::Standard)]
     size: Size,
-    /// Shorthand for --size quick.
-    #[arg(long)]
+    /// Shorthand for --size quick (not with --size).
+    #[arg(long, conflicts_with = "size")]
     quick: bool,
     /// Run only these experiments (comma-separated): sim, proj, embed, nnwarp, altconv, drape.
     #[arg(long, value_delimiter = ',')]

@@ -32,8 +32,10 @@ pub enum MeshCommand {
     },
     /// Closed UV sphere (48 segments × 32 rings + 2 poles = 1538 vertices, Tan et al.'s BALL).
     Ball {
+        /// Vertices around each ring of latitude.
         #[arg(long, default_value_t = 48)]
         segments: usize,
+        /// Rings of latitude between the two poles.
         #[arg(long, default_value_t = 32)]
         rings: usize,
         /// Radius (m).
@@ -53,6 +55,7 @@ pub enum MeshCommand {
     TaperedBeam {
         #[command(flatten)]
         beam: BeamArgs,
+        /// The free end's cross-section as a fraction of the fixed end's (positive).
         #[arg(long, default_value_t = 0.5)]
         tip_scale: f64,
         #[command(flatten)]
@@ -62,6 +65,7 @@ pub enum MeshCommand {
     BentBeam {
         #[command(flatten)]
         beam: BeamArgs,
+        /// Bend angle (radians, positive; the arc's inner radius must stay positive).
         #[arg(long, default_value_t = std::f64::consts::FRAC_PI_2)]
         angle: f64,
         #[command(flatten)]

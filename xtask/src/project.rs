@@ -6,7 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use weft_mesh::{TriMesh, io};
+use weft_mesh::TriMesh;
+use weft_mesh::io::{self, AnyMesh};
 use weft_proj::{
     InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, StrainSummary, ZeroLengthScaling,
     strain_summary,
@@ -18,29 +19,32 @@ pub enum ProjectCommand {
     /// Inextensibility SOCP: closest mass-weighted configuration with every edge at most
     /// (1 + ε) times its rest length.
     Socp {
-        /// Rest mesh (OBJ).
+        /// Rest mesh (a cloth surface: .obj).
         #[arg(long)]
         rest: PathBuf,
-        /// Predicted mesh (OBJ, same vertices and faces as REST).
+        /// Predicted mesh (.obj, same vertices and faces as REST).
         #[arg(long)]
         pred: PathBuf,
         /// Strain bound ε ≥ 0.
         #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
         eps: f64,
-        /// Output mesh (OBJ, vertex order of PRED).
+        /// Output mesh, format by extension (.obj, .ply, .vtk), vertex order of PRED.
         #[arg(long)]
         out: PathBuf,
     },
     /// Quasistatic spring equilibrium tied to the prediction by zero-length springs of
     /// scale μ.
     Quasistatic {
+        /// Rest mesh (a cloth surface: .obj).
         #[arg(long)]
         rest: PathBuf,
+        /// Predicted mesh (.obj, same vertices and faces as REST).
         #[arg(long)]
         pred: PathBuf,
         /// Zero-length spring scale μ > 0.
         #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
         mu: f64,
+        /// Output mesh, format by extension (.obj, .ply, .vtk), vertex order of PRED.
         #[arg(long)]
         out: PathBuf,
     },
@@ -90,8 +94,17 @@ pub fn run(cmd: ProjectCommand) -> anyhow::Result<()> {
 }
 
 fn read_pair(rest: &Path, pred: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
-    let rest_mesh = io::read_obj(rest).with_context(|| format!("reading rest mesh {}", rest.display()))?;
-    let pred_mesh = io::read_obj(pred).with_context(|| format!("reading prediction {}", pred.display()))?;
+    let surface = |path: &Path, what: &str| -> anyhow::Result<TriMesh> {
+        match io::read_mesh(path).with_context(|| format!("reading {what} {}", path.display()))? {
+            AnyMesh::Surface(m) => Ok(m),
+            AnyMesh::Volume(_) => bail!(
+                "{what} {} is a volume mesh; the projection layers take a cloth surface (.obj)",
+                path.display()
+            ),
+        }
+    };
+    let rest_mesh = surface(rest, "rest mesh")?;
+    let pred_mesh = surface(pred, "prediction")?;
     if rest_mesh.num_vertices() != pred_mesh.num_vertices() {
         bail!(
             "{} has {} vertices but {} has {}",
@@ -112,7 +125,8 @@ fn read_pair(rest: &Path, pred: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
 }
 
 fn write(out: &Path, x: &[f64], pred: &TriMesh) -> anyhow::Result<()> {
-    io::write_obj(out, &weft_mesh::unflatten(x), pred.faces()).with_context(|| format!("writing {}", out.display()))
+    let projected = TriMesh::new(weft_mesh::unflatten(x), pred.faces().to_vec())?;
+    io::write_surface(out, &projected).with_context(|| format!("writing {}", out.display()))
 }
 
 fn print_report(

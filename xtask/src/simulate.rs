@@ -16,7 +16,8 @@ pub struct SimulateArgs {
     /// A built-in scene name — cloth: sheet-ms, sheet-ms-holes, sheet-fem, sheet-fem-obstacle, ball-ms,
     /// ball-fem, ball-fem-soft-stretch, ball-fem-soft-bend, sheet-ms-33, sheet-ms-17; volume: beam-linear,
     /// beam-corotational, beam-stvk, beam-neo-hookean, beam-neo-hookean-field, beam-static-linear; soft
-    /// tissue: limb — or a scene TOML file (`type = "volume"` or `type = "soft-tissue"`; no type key: cloth).
+    /// tissue: limb, limb-jiggle — or a scene TOML file (`type = "volume"` or `type = "soft-tissue"`; no type
+    /// key: cloth).
     pub scene: String,
     /// Number of frames to simulate (default: the scene's).
     #[arg(long)]
@@ -24,8 +25,9 @@ pub struct SimulateArgs {
     /// Use the scene's small variant (coarse mesh, few frames) — for tests and smoke runs.
     #[arg(long)]
     pub quick: bool,
-    /// Output directory: frames.safetensors, scene.toml, stats.json, and the rest mesh (rest.obj; volume scenes
-    /// also rest.node/.ele, rest_surface.obj and final.vtk with the displacement field).
+    /// Output directory: frames.safetensors, scene.toml, stats.json and the rest shape: rest.obj for cloth and
+    /// soft tissue (its surface); for volume scenes rest.node/.ele, rest_surface.obj and final.vtk with the
+    /// displacement field.
     #[arg(long)]
     pub out: PathBuf,
     /// Also write one OBJ per frame (the surface) to OUT/obj/frame_NNNNN.obj.

@@ -152,9 +152,10 @@ pub struct DrapeArgs {
     /// The layer after the network, in training and in the scores.
     #[arg(long, value_enum, default_value = "none")]
     pub layer: DrapeLayer,
-    /// μ of the quasistatic layer, or where a learned μ starts.
-    #[arg(long, default_value_t = 0.1)]
-    pub mu: f64,
+    /// μ of the quasistatic layer, or where a learned μ starts [default: 0.1]. Only with
+    /// `--layer quasistatic`.
+    #[arg(long)]
+    pub mu: Option<f64>,
     /// Learn μ (as log μ, with its own Adam at the configuration's `mu_learning_rate`).
     #[arg(long, value_enum)]
     pub learn_mu: Option<LearnMu>,
@@ -282,8 +283,12 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     c.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
     [config.pretrain_epochs, config.finetune_epochs] = epochs;
     config.validate()?;
-    if !(args.mu > 0.0 && args.mu.is_finite()) {
-        bail!("--mu must be positive and finite, not {}", args.mu);
+    if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
+        bail!("--mu sets the quasistatic layer's μ; it needs --layer quasistatic");
+    }
+    let mu = args.mu.unwrap_or(0.1);
+    if !(mu > 0.0 && mu.is_finite()) {
+        bail!("--mu must be positive and finite, not {mu}");
     }
     if let Some(m) = args.scan_mu.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
         bail!("--scan-mu values must be positive and finite, not {m}");
@@ -291,9 +296,9 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     let layer = match (args.layer, args.learn_mu) {
         (DrapeLayer::None, None) => Layer::None,
         (DrapeLayer::Socp, None) => Layer::Socp,
-        (DrapeLayer::Quasistatic, None) => Layer::Quasistatic(args.mu),
+        (DrapeLayer::Quasistatic, None) => Layer::Quasistatic(mu),
         (DrapeLayer::Quasistatic, Some(learn)) => Layer::LearnedMu {
-            start: args.mu,
+            start: mu,
             per_vertex: learn == LearnMu::PerVertex,
         },
         (_, Some(_)) => bail!("--learn-mu needs --layer quasistatic"),

@@ -66,7 +66,8 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
     let mut reference = if args.reference { Some(reference_sim) } else { None };
     let rest = mesh.flat_positions();
     let n = rest.len();
-    std::fs::create_dir_all(&args.out)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     let mut frames = Vec::new();
     let (mut solve_seconds, mut warp_seconds, mut reference_seconds) = (0.0, 0.0, 0.0);
     for k in 1..=scene.frames {

@@ -131,15 +131,43 @@ impl Manifest {
         want == have
     }
     fn same_dataset(&self, other: &Manifest) -> bool {
-        self.format == other.format
-            && self.dataset == other.dataset
-            && self.size == other.size
-            && self.seed == other.seed
-            && self.code_version == other.code_version
-            && self.sequences_total == other.sequences_total
-            && self.frames_per_sequence == other.frames_per_sequence
-            && self.split == other.split
-            && self.files == other.files
+        self.differences(other).is_empty()
+    }
+
+    /// What tells this dataset from `other`, each as `field: ours vs theirs` (empty when
+    /// they are the same dataset), so a refused resume names what changed.
+    fn differences(&self, other: &Manifest) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut check = |field: &str, a: String, b: String| {
+            if a != b {
+                out.push(format!("{field}: {a} vs {b}"));
+            }
+        };
+        check("format", self.format.clone(), other.format.clone());
+        check("dataset", self.dataset.clone(), other.dataset.clone());
+        check("size", self.size.as_str().into(), other.size.as_str().into());
+        check("seed", self.seed.to_string(), other.seed.to_string());
+        check("code version", self.code_version.clone(), other.code_version.clone());
+        check(
+            "sequences",
+            self.sequences_total.to_string(),
+            other.sequences_total.to_string(),
+        );
+        check(
+            "stored frames per sequence",
+            self.frames_per_sequence.to_string(),
+            other.frames_per_sequence.to_string(),
+        );
+        check("split", format!("{:?}", self.split), format!("{:?}", other.split));
+        if self.files != other.files {
+            let names = |m: &Manifest| m.files.iter().map(|f| f.path.clone()).collect::<Vec<_>>().join(", ");
+            out.push(format!(
+                "shared files (scene, rest shape) differ in content: {} vs {}",
+                names(self),
+                names(other)
+            ));
+        }
+        out
     }
 }
 
@@ -179,6 +207,14 @@ pub struct Timing {
     pub sequences: BTreeMap<usize, (usize, f64, f64)>,
 }
 
+/// The most sequences a dataset holds: the paper sizes have hundreds, and the manifest
+/// lists every one, so a count far beyond this is a typo that would exhaust memory.
+pub const MAX_SEQUENCES: usize = 1_000_000;
+
+/// The most frames a sequence holds (the paper sizes have hundreds); every frame of a
+/// sequence is in memory until its file is written.
+pub const MAX_FRAMES: usize = 1_000_000;
+
 /// Generates (or resumes) `spec` into `out`; returns the manifest written. A sequence that
 /// stops early (a solve that does not converge) keeps its frames up to the failure, and the
 /// manifest records why ([`Manifest::stopped_early`]): whether that is acceptable is the
@@ -192,6 +228,16 @@ pub fn generate(spec: &DatasetSpec, out: &Path, options: &GenerateOptions) -> Re
         quiet,
         ref code_version,
     } = *options;
+    ensure!(
+        (1..=MAX_SEQUENCES).contains(&spec.sequences),
+        "a dataset has 1 to {MAX_SEQUENCES} sequences, got {}",
+        spec.sequences
+    );
+    ensure!(
+        (1..=MAX_FRAMES).contains(&spec.frames),
+        "a sequence has 1 to {MAX_FRAMES} frames, got {}",
+        spec.frames
+    );
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let manifest_path = out.join(Manifest::file_name(shard));
     // The files every sequence shares: the base scene and its rest surface.
@@ -254,15 +300,15 @@ pub fn generate(spec: &DatasetSpec, out: &Path, options: &GenerateOptions) -> Re
             out.display()
         );
         let old: Manifest = read_manifest(&manifest_path)?;
+        let mut differences = old.differences(&manifest);
+        if old.shard != manifest.shard {
+            differences.push(format!("shard: {:?} vs {:?}", old.shard, manifest.shard));
+        }
         ensure!(
-            old.same_dataset(&manifest) && old.shard == manifest.shard,
-            "{} holds a different dataset (name, size, seed, shard or code version differ): {} {} seed {} code {}; \
-             refusing to mix them",
+            differences.is_empty(),
+            "{} holds a different dataset ({}, written there vs asked for now); refusing to mix them",
             manifest_path.display(),
-            old.dataset,
-            old.size.as_str(),
-            old.seed,
-            old.code_version
+            differences.join("; ")
         );
         // Keep the sequences whose files are intact.
         for s in old.sequences {
@@ -498,6 +544,53 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Manifest> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn counts_beyond_the_limits_are_refused_before_anything_is_written() {
+        let dir = std::env::temp_dir().join(format!("weft-data-limits-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let base = DatasetSpec::new("sheet-ms-17", Size::Quick).unwrap();
+        for (sequences, frames, what) in [
+            (0, 2, "sequences"),
+            (MAX_SEQUENCES + 1, 2, "sequences"),
+            (100_000_000_000, 2, "sequences"),
+            (1, 0, "frames"),
+            (1, MAX_FRAMES + 1, "frames"),
+        ] {
+            let spec = DatasetSpec {
+                sequences,
+                frames,
+                ..base.clone()
+            };
+            let e = generate(&spec, &dir, &GenerateOptions::default()).unwrap_err();
+            assert!(matches!(&e, Error::Invalid(m) if m.contains(what)), "{e}");
+            assert!(!dir.exists(), "nothing is created for a refused count");
+        }
+    }
+
+    #[test]
+    fn a_refused_resume_names_what_differs() {
+        let manifest = |sequences_total, frames_per_sequence, seed| Manifest {
+            format: FORMAT.into(),
+            dataset: "sheet-ms-17".into(),
+            size: Size::Quick,
+            seed,
+            code_version: "v".into(),
+            sequences_total,
+            frames_per_sequence,
+            split: Split::Frames12Of17,
+            shard: None,
+            files: Vec::new(),
+            sequences: Vec::new(),
+        };
+        let a = manifest(4, 9, 0);
+        assert!(a.differences(&manifest(4, 9, 0)).is_empty());
+        assert!(a.same_dataset(&manifest(4, 9, 0)));
+        let d = a.differences(&manifest(2, 3, 0));
+        assert_eq!(d, vec!["sequences: 4 vs 2", "stored frames per sequence: 9 vs 3"]);
+        assert_eq!(a.differences(&manifest(4, 9, 7)), vec!["seed: 0 vs 7"]);
+        assert!(!a.same_dataset(&manifest(4, 9, 7)));
+    }
 
     #[test]
     fn shards_partition_the_sequences() {

@@ -301,6 +301,21 @@ impl ClothDataset {
     pub fn load(dir: &Path) -> Result<Self> {
         let (manifest_path, manifest) = read_manifest(dir, None)?;
         let name = manifest["dataset"].as_str().unwrap_or_default().to_string();
+        let other_kind = if crate::spec::is_drape(&name) {
+            Some("a drape one (for `train drape`)")
+        } else if name == crate::spec::NNWARP {
+            Some("a volumetric one (for `train nnwarp`)")
+        } else if weft_sim::scenes::load::SOFT_TISSUE_SCENES.contains(&name.as_str()) {
+            Some("a soft-tissue one (for `train altconv`)")
+        } else {
+            None
+        };
+        if let Some(kind) = other_kind {
+            return Err(data_error(
+                &manifest_path,
+                format!("holds dataset {name:?}, {kind}, not a cloth dataset"),
+            ));
+        }
         let scene_path = dir.join("scene.toml");
         let scene_text = std::fs::read_to_string(&scene_path).map_err(|e| io_error(&scene_path, e))?;
         let scene = ClothScene::from_toml(&scene_text).map_err(|e| data_error(&scene_path, e.to_string()))?;
@@ -736,6 +751,23 @@ impl DrapeDataset {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cloth_reader_given_another_kind_of_dataset_names_its_kind() {
+        let dir = std::env::temp_dir().join(format!("weft-data-kind-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, kind) in [
+            ("nnwarp", "volumetric"),
+            ("drape-loose", "drape"),
+            ("limb-jiggle", "soft-tissue"),
+        ] {
+            let manifest = serde_json::json!({"format": "weft-dataset/1", "dataset": name, "files": []});
+            std::fs::write(dir.join("manifest.json"), manifest.to_string()).unwrap();
+            let e = ClothDataset::load(&dir).unwrap_err().to_string();
+            assert!(e.contains(kind) && e.contains("not a cloth dataset"), "{name}: {e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn sequence(index: usize, split: &str) -> WarpSequence {
         WarpSequence {

@@ -9,6 +9,7 @@
 
 use std::path::PathBuf;
 
+use crate::error::Context;
 use crate::evaluate::context::EvalContext;
 use crate::evaluate::{altconv, drape, embed, nnwarp};
 use crate::records::ExperimentOutput;
@@ -74,7 +75,8 @@ pub fn score(options: &ScoreOptions) -> crate::Result<ExperimentOutput> {
         )));
     }
     let manifest = weft_data::read_manifest(&options.data.join("manifest.json"))?;
-    std::fs::create_dir_all(&options.out)?;
+    std::fs::create_dir_all(&options.out)
+        .with_context(|| format!("creating the output directory {}", options.out.display()))?;
     let ctx = EvalContext {
         size: manifest.size,
         out: options.out.clone(),

@@ -31,7 +31,7 @@ pub enum Error {
     InconsistentOrientation { a: usize, b: usize },
     #[error("face {face} has area {area:e}, at or below the tolerance {tolerance:e}")]
     DegenerateFace { face: usize, area: f64, tolerance: f64 },
-    #[error("tetrahedron {tet} has signed volume {volume:e}: {}", if *.volume < 0.0 { "inverted" } else { "zero volume" })]
+    #[error("tetrahedron {tet} has signed volume {volume:e}: {}", tet_volume_problem(*.volume))]
     BadTetVolume { tet: usize, volume: f64 },
     #[error("{what}: expected {expected} entries, got {got}")]
     LengthMismatch {
@@ -59,3 +59,16 @@ pub enum Error {
 
 /// `Result` with weft-mesh's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// What is wrong with a tetrahedron's signed volume, for [`Error::BadTetVolume`].
+fn tet_volume_problem(volume: f64) -> &'static str {
+    if volume < 0.0 {
+        "inverted"
+    } else if !volume.is_finite() {
+        "not a finite volume"
+    } else if volume == 0.0 {
+        "zero volume"
+    } else {
+        "degenerate (at or below 1e-14 × the cube of the mesh's bounding-box diagonal)"
+    }
+}

@@ -24,6 +24,7 @@ fn sheet_arrays(n: usize, size: f64) -> Result<(Vec<Vector3<f64>>, Vec<[usize; 3
             "sheet needs n >= 2 vertices per side, got {n}"
         )));
     }
+    check_vertex_count(&format!("a sheet of n = {n}"), &[n, n])?;
     check_positive("sheet size", size)?;
     let h = size / (n - 1) as f64;
     let positions = (0..n * n)
@@ -54,6 +55,7 @@ pub fn tube(around: usize, rings: usize, x0: f64, x1: f64, radius: impl Fn(f64) 
             "a tube needs ≥ 3 vertices around and ≥ 2 rings, got {around} and {rings}"
         )));
     }
+    check_vertex_count("the tube", &[around, rings])?;
     if !(x1 > x0) || !x0.is_finite() || !x1.is_finite() {
         return Err(Error::InvalidParameter(format!(
             "a tube needs finite ends x0 < x1, got {x0} and {x1}"
@@ -139,6 +141,8 @@ pub fn ball(segments: usize, rings: usize, radius: f64) -> Result<TriMesh> {
             "ball needs segments >= 3 and rings >= 1, got {segments} and {rings}"
         )));
     }
+    // Two poles besides the rings (`rings + 1` bounds `rings · segments + 2` from above).
+    check_vertex_count("the ball", &[segments, rings.saturating_add(1)])?;
     check_positive("ball radius", radius)?;
     let mut positions = vec![Vector3::new(0.0, 0.0, radius)];
     for r in 0..rings {
@@ -210,7 +214,7 @@ pub fn bent_beam(params: &BeamParams, angle: f64) -> Result<TetMesh> {
     let [lx, _, lz] = params.size;
     if !(angle.is_finite() && angle > 0.0) {
         return Err(Error::InvalidParameter(format!(
-            "bend angle must be positive, got {angle}"
+            "bend angle must be positive and finite, got {angle}"
         )));
     }
     let radius = lx / angle;
@@ -247,6 +251,25 @@ pub fn t_beam(params: &BeamParams) -> Result<TetMesh> {
     grid_tets(params, |_, j, k| k >= flange || (j >= w0 && j < w1), |p| p)
 }
 
+/// The most vertices a generator builds: 2²⁴ (16.8 M), about 400 MB of positions and
+/// several times that in elements. Every scene in weft is at least three orders of
+/// magnitude smaller; a request beyond it is a typo (`--n 100000` for `--n 100`), and
+/// without the check it would end in an allocation failure (an abort, not an error).
+pub const MAX_GENERATED_VERTICES: usize = 1 << 24;
+
+/// Checks that the product of `factors` (a vertex count) is at most
+/// [`MAX_GENERATED_VERTICES`], without overflowing.
+fn check_vertex_count(what: &str, factors: &[usize]) -> Result<()> {
+    let count = factors.iter().try_fold(1usize, |acc, &f| acc.checked_mul(f));
+    match count {
+        Some(c) if c <= MAX_GENERATED_VERTICES => Ok(()),
+        _ => Err(Error::InvalidParameter(format!(
+            "{what} would have {} vertices, more than the {MAX_GENERATED_VERTICES} a generator builds",
+            factors.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(" × ")
+        ))),
+    }
+}
+
 fn check_positive(what: &str, x: f64) -> Result<()> {
     if x.is_finite() && x > 0.0 {
         Ok(())
@@ -269,6 +292,10 @@ fn grid_tets(
             params.cells
         )));
     }
+    check_vertex_count(
+        &format!("a beam of {nx} × {ny} × {nz} cells"),
+        &[nx.saturating_add(1), ny.saturating_add(1), nz.saturating_add(1)],
+    )?;
     for (axis, s) in params.size.iter().enumerate() {
         check_positive(["beam length (X)", "beam width (Y)", "beam height (Z)"][axis], *s)?;
     }
@@ -277,6 +304,12 @@ fn grid_tets(
         params.size[1] / ny as f64,
         params.size[2] / nz as f64,
     ];
+    if !(h[0] * h[1] * h[2]).is_normal() {
+        return Err(Error::InvalidParameter(format!(
+            "beam cells of {:?} m have no finite, non-zero volume (size {:?} m over {:?} cells)",
+            h, params.size, params.cells
+        )));
+    }
     let vid = |i: usize, j: usize, k: usize| (k * (ny + 1) + j) * (nx + 1) + i;
     let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
     for k in 0..=nz {

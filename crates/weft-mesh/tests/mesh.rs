@@ -623,3 +623,67 @@ fn tube_is_an_open_cylinder_with_outward_faces() {
     assert!(generators::tube(8, 5, 1.0, 0.0, |_| 1.0).is_err());
     assert!(generators::tube(8, 5, 0.0, 1.0, |_| -1.0).is_err());
 }
+
+#[test]
+fn generators_refuse_sizes_beyond_their_limit_with_an_error_not_an_abort() {
+    use generators::{BeamParams, MAX_GENERATED_VERTICES};
+    let too_large = |e: Error| matches!(&e, Error::InvalidParameter(m) if m.contains("more than"));
+    // 4096² = 2²⁴ vertices is the limit itself; one more per side is beyond it.
+    assert!(too_large(generators::sheet(4097, 1.0).unwrap_err()));
+    assert!(too_large(generators::sheet(100_000, 1.0).unwrap_err()));
+    // Products that overflow usize are refused the same way.
+    assert!(too_large(generators::sheet(usize::MAX / 2, 1.0).unwrap_err()));
+    assert!(too_large(generators::ball(1_000_000, 1_000_000, 0.5).unwrap_err()));
+    assert!(too_large(
+        generators::tube(MAX_GENERATED_VERTICES, 2, 0.0, 1.0, |_| 0.1).unwrap_err()
+    ));
+    let huge = BeamParams {
+        cells: [100_000, 100_000, 100_000],
+        ..BeamParams::default()
+    };
+    assert!(too_large(generators::beam(&huge).unwrap_err()));
+    let overflow = BeamParams {
+        cells: [usize::MAX, 1, 1],
+        ..BeamParams::default()
+    };
+    assert!(too_large(generators::beam(&overflow).unwrap_err()));
+    // Sizes within the limit still build.
+    assert_eq!(generators::sheet(65, 1.0).unwrap().num_vertices(), 4225);
+}
+
+#[test]
+fn a_beam_whose_cells_have_no_finite_volume_is_refused_naming_the_size() {
+    let params = generators::BeamParams {
+        cells: [2, 1, 1],
+        size: [1e200, 1e200, 1e200],
+    };
+    let e = generators::beam(&params).unwrap_err();
+    assert!(
+        matches!(&e, Error::InvalidParameter(m) if m.contains("no finite, non-zero volume")),
+        "{e}"
+    );
+    // A tetrahedron's volume problem is named: inverted, non-finite, zero or degenerate.
+    let degenerate = Error::BadTetVolume { tet: 3, volume: 2e-2 }.to_string();
+    assert!(
+        degenerate.contains("degenerate") && !degenerate.contains("zero volume"),
+        "{degenerate}"
+    );
+    assert!(
+        Error::BadTetVolume { tet: 0, volume: -1.0 }
+            .to_string()
+            .contains("inverted")
+    );
+    assert!(
+        Error::BadTetVolume {
+            tet: 0,
+            volume: f64::INFINITY
+        }
+        .to_string()
+        .contains("not a finite")
+    );
+    assert!(
+        Error::BadTetVolume { tet: 0, volume: 0.0 }
+            .to_string()
+            .contains("zero volume")
+    );
+}

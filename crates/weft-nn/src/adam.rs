@@ -16,6 +16,7 @@ use crate::params::Params;
 
 /// Adam's hyper-parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct AdamSettings {
     pub learning_rate: f64,
     pub beta1: f64,

@@ -27,6 +27,7 @@ pub const FEATURE_CHANNELS: usize = 9;
 
 /// Shape of the autoencoder.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct AutoencoderConfig {
     /// Graph convolutions on each side, `L`.
     pub conv_layers: usize,

@@ -873,6 +873,7 @@ pub fn train_stages(
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<Vec<(u8, crate::trainer::TrainingState)>> {
     model.config.validate()?;
+    check_stages(dir, &model.config, stages)?;
     // Stages before the first asked for (`--stages 2,3` continues a trained autoencoder)
     // are loaded at their best weights.
     for earlier in 1..stages.iter().copied().min().unwrap_or(1) {
@@ -883,9 +884,6 @@ pub fn train_stages(
     }
     let mut out = Vec::new();
     for &stage in stages {
-        if !(1..=3).contains(&stage) {
-            return Err(crate::trainer::invalid("stages", stage, "must be 1, 2 or 3"));
-        }
         let config = model.config.trainer(stage);
         if config.epochs == 0 {
             continue;
@@ -903,6 +901,31 @@ pub fn train_stages(
     Ok(out)
 }
 
+/// Checks the stages asked for, reading `dir` only: each of 1, 2, 3, in increasing order,
+/// and every earlier stage the configuration trains (epochs > 0) already trained in `dir`
+/// — a later stage would otherwise start from untrained weights.
+fn check_stages(dir: &std::path::Path, config: &EmbedTrainingConfig, stages: &[u8]) -> Result<()> {
+    if let Some(&s) = stages.iter().find(|s| !(1..=3).contains(*s)) {
+        return Err(crate::trainer::invalid("stages", s, "must be 1, 2 or 3"));
+    }
+    if !stages.windows(2).all(|w| w[0] < w[1]) {
+        return Err(crate::trainer::invalid(
+            "stages",
+            stages,
+            "must be in increasing order, each at most once (e.g. 1,2,3 or 2,3)",
+        ));
+    }
+    for earlier in 1..stages.iter().copied().min().unwrap_or(1) {
+        if config.trainer(earlier).epochs > 0 && !crate::trainer::has_run(&stage_dir(dir, earlier)) {
+            return Err(Error::MissingStage {
+                stage: earlier,
+                dir: dir.display().to_string(),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Trains (or continues) the embedding on `data` into the model directory `dir`:
 /// `config.json`, `normalization.json` (the ACAP feature normalisation fitted on the
 /// training frames) and one trainer run per stage ([`train_stages`]). A directory trained
@@ -915,6 +938,8 @@ pub fn train_model(
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<(EmbedModel, Vec<(u8, crate::trainer::TrainingState)>)> {
     config.validate()?;
+    // Before anything is written, so a refused request leaves no model behind.
+    check_stages(dir, config, stages)?;
     let io = |path: &std::path::Path, source: std::io::Error| Error::Io {
         path: path.display().to_string(),
         source,

@@ -40,6 +40,12 @@ pub enum Error {
         value: String,
         reason: &'static str,
     },
+    /// A later training stage was asked for without the earlier stage it starts from.
+    #[error(
+        "{dir} holds no trained stage {stage}, which the stages asked for start from; train it first (e.g. --stages \
+         1,2,3, or leave out --stages)"
+    )]
+    MissingStage { stage: u8, dir: String },
     /// A checkpoint is missing a tensor, has one of the wrong shape, or does not belong to
     /// this model.
     #[error("checkpoint {path}: {reason}")]

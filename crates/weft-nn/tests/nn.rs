@@ -466,19 +466,24 @@ fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
     weft_data::ClothDataset::simulate("sheet-ms", ClothScene::builtin("sheet-ms", true).unwrap(), frames).unwrap()
 }
 
-#[test]
-fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
-    use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
-    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
-    let config = EmbedTrainingConfig {
+/// The embedding's default configuration with a one-convolution, 8-wide autoencoder: the
+/// size the quick sheet's tests train and differentiate.
+fn small_embed_config() -> weft_nn::embed_training::EmbedTrainingConfig {
+    weft_nn::embed_training::EmbedTrainingConfig {
         autoencoder: AutoencoderConfig {
             conv_layers: 1,
             latent: 8,
         },
-        ..EmbedTrainingConfig::default()
-    };
-    let model = EmbedModel::new(config, &data).unwrap();
+        ..Default::default()
+    }
+}
+
+#[test]
+fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
+    use weft_nn::embed_training::{EmbedData, EmbedModel, FrameRef};
+    use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let model = EmbedModel::new(small_embed_config(), &data).unwrap();
     let z0 = model
         .codes(&data, &[FrameRef { sequence: 0, frame: 0 }])
         .unwrap()
@@ -1165,12 +1170,8 @@ fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_grad
     use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let config = EmbedTrainingConfig {
-        autoencoder: AutoencoderConfig {
-            conv_layers: 1,
-            latent: 8,
-        },
         latent_hidden: vec![16],
-        ..EmbedTrainingConfig::default()
+        ..small_embed_config()
     };
     assert!(config.weights.mphys != 0.0 && config.weights.sim != 0.0);
     let model = EmbedModel::new(config, &data).unwrap();
@@ -1236,4 +1237,73 @@ fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_grad
         "{score} vs {}",
         sum / windows.len() as f64
     );
+}
+
+#[test]
+fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_refused() {
+    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, train_stages};
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let config = small_embed_config();
+    let model = EmbedModel::new(config.clone(), &data).unwrap();
+    let dir = std::env::temp_dir().join(format!("weft-nn-stages-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let silent = &mut weft_nn::trainer::Silent;
+    // Stage 3 alone on an empty directory would train the simulator on an untrained
+    // autoencoder.
+    let e = train_stages(&dir, &model, &data, &[3], "t", silent).unwrap_err();
+    assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
+    // The command line's path refuses it before writing anything, so a retry is not
+    // blocked by a half-made model directory.
+    let e = weft_nn::embed_training::train_model(&dir, &data, &config, &[2, 3], silent).unwrap_err();
+    assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
+    assert!(!dir.exists(), "a refused request writes nothing");
+    for stages in [&[3, 1][..], &[1, 1], &[2, 1, 3], &[4]] {
+        let e = train_stages(&dir, &model, &data, stages, "t", silent).unwrap_err();
+        assert!(
+            matches!(&e, Error::InvalidConfig { field, .. } if field == "stages"),
+            "{stages:?}: {e}"
+        );
+    }
+    // A stage the configuration skips (0 epochs) is not needed before a later one.
+    let skip_one = EmbedModel::new(
+        EmbedTrainingConfig {
+            epochs: [0, 0, 0],
+            ..config
+        },
+        &data,
+    )
+    .unwrap();
+    assert!(
+        train_stages(&dir, &skip_one, &data, &[3], "t", silent)
+            .unwrap()
+            .is_empty()
+    );
+    assert!(!dir.join("stage-1").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_depth() {
+    use weft_nn::embed_training::EmbedTrainingConfig;
+    let c: EmbedTrainingConfig =
+        serde_json::from_str(r#"{"adam": {"learning_rate": 2e-4}, "autoencoder": {"latent": 64}}"#).unwrap();
+    let d = EmbedTrainingConfig::default();
+    assert_eq!(
+        c.adam,
+        AdamSettings {
+            learning_rate: 2e-4,
+            ..d.adam
+        }
+    );
+    assert_eq!(
+        c.autoencoder,
+        AutoencoderConfig {
+            latent: 64,
+            ..d.autoencoder
+        }
+    );
+    assert_eq!(c.epochs, d.epochs);
+    // A full configuration reads back as written.
+    let round: EmbedTrainingConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+    assert_eq!(round, c);
 }

@@ -242,8 +242,14 @@ pub struct CheckSummary {
 /// `published` report (`evaluate --publish`, e.g. `docs/results`) must have its
 /// `PROVENANCE.md`, and its predictions, which are not committed, are not required.
 pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
-    let text = std::fs::read_to_string(dir.join("results.json")).context("reading results.json")?;
-    let raw: Vec<serde_json::Value> = serde_json::from_str(&text).context("results.json is not a JSON array")?;
+    let results = dir.join("results.json");
+    let text = std::fs::read_to_string(&results).with_context(|| format!("reading {}", results.display()))?;
+    let raw: Vec<serde_json::Value> = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{} does not parse as a JSON array of records (JSON has no NaN or Infinity)",
+            results.display()
+        )
+    })?;
     ensure!(!raw.is_empty(), "results.json holds no record");
     const FIELDS: [&str; 10] = [
         "experiment",
@@ -269,9 +275,24 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
     }
     let records: Vec<Record> = serde_json::from_str(&text).context("results.json records do not parse")?;
     crate::records::validate(&records)?;
+    // One value per (experiment, scene, method, metric, split): a second would make every
+    // table and claim depend on which one a reader happens to take.
+    let mut keys = std::collections::HashSet::new();
+    for r in &records {
+        ensure!(
+            keys.insert((&r.experiment, &r.scene, &r.method, &r.metric, &r.split)),
+            "results.json holds two records of experiment {:?}, scene {:?}, method {:?}, metric {:?}, split {:?}",
+            r.experiment,
+            r.scene,
+            r.method,
+            r.metric,
+            r.split
+        );
+    }
     peers::read(dir)?;
     for f in ["tables.md", "index.html"] {
-        let t = std::fs::read_to_string(dir.join(f)).with_context(|| format!("reading {f}"))?;
+        let path = dir.join(f);
+        let t = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
         ensure!(t.len() > 100, "{f} is nearly empty");
     }
     let html = std::fs::read_to_string(dir.join("index.html"))?;
@@ -292,7 +313,8 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
         );
     }
     if published {
-        let t = std::fs::read_to_string(dir.join("PROVENANCE.md")).context("reading PROVENANCE.md")?;
+        let path = dir.join("PROVENANCE.md");
+        let t = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
         ensure!(t.contains("cargo xtask"), "PROVENANCE.md names no command");
     }
     let mut files = 0;
@@ -365,4 +387,54 @@ fn walk(dir: &Path) -> crate::Result<Vec<std::path::PathBuf>> {
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_report_with_two_records_of_one_cell_fails_the_check_naming_the_cell() {
+        let dir = std::env::temp_dir().join(format!("weft-check-duplicates-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let record = |value: f64| {
+            serde_json::json!({
+                "experiment": "proj", "scene": "sheet", "method": "socp", "metric": "m-rms",
+                "split": "test", "value": value, "unit": "mm", "paper_value": null,
+                "seconds_per_frame": null, "ground_truth_seconds_per_frame": null
+            })
+        };
+        std::fs::write(
+            dir.join("results.json"),
+            serde_json::to_string(&vec![record(1.0), record(2.0)]).unwrap(),
+        )
+        .unwrap();
+        let e = check(&dir, false).unwrap_err().to_string();
+        assert!(e.contains("two records") && e.contains("\"socp\""), "{e}");
+        // One record of the cell passes this check and fails later, on the missing tables.
+        std::fs::write(
+            dir.join("results.json"),
+            serde_json::to_string(&vec![record(1.0)]).unwrap(),
+        )
+        .unwrap();
+        let e = anyhow_chain(check(&dir, false).unwrap_err());
+        assert!(!e.contains("two records"), "{e}");
+        // A missing report names its path.
+        let missing = dir.join("absent");
+        let e = anyhow_chain(check(&missing, false).unwrap_err());
+        assert!(e.contains(&missing.join("results.json").display().to_string()), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The error and its sources, as `anyhow`'s `{:#}` prints them.
+    fn anyhow_chain(e: crate::Error) -> String {
+        let mut out = e.to_string();
+        let mut source = std::error::Error::source(&e);
+        while let Some(s) = source {
+            out.push_str(": ");
+            out.push_str(&s.to_string());
+            source = s.source();
+        }
+        out
+    }
 }

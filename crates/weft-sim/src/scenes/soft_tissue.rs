@@ -525,7 +525,9 @@ impl SoftTissue {
         let start = std::time::Instant::now();
         let dt = self.params.frame_dt / self.params.substeps as f64;
         let t0 = self.time();
-        let mut steps = Vec::with_capacity(self.params.substeps);
+        // Not `with_capacity(substeps)`: the count comes from the user, and a typo must not
+        // become one huge allocation.
+        let mut steps = Vec::new();
         let positions = self.limb.mesh.positions();
         let elbow = self.limb.params.joint_position();
         for k in 1..=self.params.substeps {
@@ -582,7 +584,7 @@ pub fn simulate_soft_tissue(
         rest,
         skinned: vec![sim.skinned_surface()],
         simulated: vec![sim.simulated_surface()],
-        reports: Vec::with_capacity(frames),
+        reports: Vec::new(),
     };
     for _ in 0..frames {
         seq.reports.push(sim.step_frame()?);
