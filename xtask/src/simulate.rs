@@ -99,6 +99,14 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     ) {
         (_, None, None, None) => {}
         (AnyScene::Cloth(c), hessian, budget, factorizations) => {
+            anyhow::ensure!(
+                budget != Some(0),
+                "--newton-budget must be at least 1 (omit it to solve every step to the tolerance)"
+            );
+            anyhow::ensure!(
+                factorizations != Some(0),
+                "--newton-factorizations must be at least 1 (omit it to factorise at every iteration)"
+            );
             if let Some(h) = hessian {
                 c.hessian = Some(serde_json::from_value(serde_json::Value::String(h.into()))?);
             }

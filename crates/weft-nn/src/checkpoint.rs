@@ -124,17 +124,95 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     })
 }
 
+/// The kind of model a stored `config.json` belongs to, by the fields only that kind's
+/// configuration has: `drape` (a stamp of `config`, `layer` and the starting weights), `embed`
+/// (`autoencoder`), `altconv` (`variant` and `steps`) or `nnwarp` (`material`).
+pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
+    if config.get("config").is_some() && config.get("layer").is_some() {
+        Some("drape")
+    } else if config.get("autoencoder").is_some() {
+        Some("embed")
+    } else if config.get("variant").is_some() && config.get("steps").is_some() {
+        Some("altconv")
+    } else if config.get("material").is_some() {
+        Some("nnwarp")
+    } else {
+        None
+    }
+}
+
+/// Checks that the model directory `dir` holds an `expected` model (see
+/// [`stored_model_kind`]): a directory of another kind is an error naming both kinds,
+/// rather than whatever field of the other configuration fails to parse first. A
+/// directory whose kind is not recognised passes (its own loader reports what is wrong).
+pub fn check_model_kind(dir: &Path, expected: &'static str) -> Result<()> {
+    let path = dir.join("config.json");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(());
+    };
+    let kind = serde_json::from_str::<serde_json::Value>(&text)
+        .ok()
+        .as_ref()
+        .and_then(stored_model_kind);
+    match kind {
+        Some(k) if k != expected => Err(Error::Checkpoint {
+            path: path.display().to_string(),
+            reason: format!("{} holds a `{k}` model, not a `{expected}` one", dir.display()),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Refuses to continue a model directory trained under another configuration:
 /// `continues` says whether the stored one (`path`) trains like the asked one but for its
-/// epochs — every `train_model` driver asks this before touching the directory.
-pub fn check_continues(path: &Path, continues: bool) -> Result<()> {
+/// epochs — every `train_model` driver asks this before touching the directory. The error
+/// names each field in which `stored` and `asked` differ, with both values.
+pub fn check_continues<T: serde::Serialize>(path: &Path, continues: bool, stored: &T, asked: &T) -> Result<()> {
     if continues {
         return Ok(());
     }
+    let (stored, asked) = (serde_json::to_value(stored), serde_json::to_value(asked));
+    let differences = match (stored, asked) {
+        (Ok(a), Ok(b)) => {
+            let mut out = Vec::new();
+            json_differences("", &a, &b, &mut out);
+            out
+        }
+        _ => Vec::new(),
+    };
+    let what = if differences.is_empty() {
+        String::new()
+    } else {
+        format!(" ({}; stored vs asked)", differences.join("; "))
+    };
     Err(Error::Checkpoint {
         path: path.display().to_string(),
-        reason: "the model was trained under another configuration; continue it with the same one (only the \
-                 epochs may change)"
-            .into(),
+        reason: format!(
+            "the model was trained under another configuration{what}; continue it with the same one (only the \
+             epochs may change)"
+        ),
     })
+}
+
+/// The fields in which two JSON values differ, as `path: a vs b`, descending into objects.
+fn json_differences(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                let sub = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                let missing = Value::String("(absent)".into());
+                json_differences(&sub, x.get(k).unwrap_or(&missing), y.get(k).unwrap_or(&missing), out);
+            }
+        }
+        _ if a != b => out.push(format!("{path}: {a} vs {b}")),
+        _ => {}
+    }
 }

@@ -256,6 +256,10 @@ pub fn fit(
         path: path.display().to_string(),
         source,
     };
+    if let Some(init) = plan.init {
+        // Before anything is written: the weights to start from are a drape network's.
+        crate::checkpoint::check_model_kind(init, "drape")?;
+    }
     let stamp = stamp(config, plan.layer, plan.init)?;
     let stamp_path = dir.join("config.json");
     if stamp_path.exists() {
@@ -326,6 +330,7 @@ pub fn fit(
 /// layer at the best validation weights, rebuilt on `sleeve` from the stored stamp.
 /// Returns the model, its layer and its training configuration.
 pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingConfig)> {
+    crate::checkpoint::check_model_kind(dir, "drape")?;
     let stamp: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
     let bad = |reason: String| Error::Checkpoint {
         path: dir.join("config.json").display().to_string(),

@@ -473,6 +473,7 @@ impl EmbedModel {
     /// train embed`): `config.json` and each stage's best weights, up to and including
     /// stage `after` (Tan Table IV reads the model after stage 2 and after stage 3).
     pub fn load(dir: &std::path::Path, data: &EmbedData, after: u8) -> Result<Self> {
+        crate::checkpoint::check_model_kind(dir, "embed")?;
         let path = dir.join("config.json");
         let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
             path: path.display().to_string(),
@@ -950,9 +951,10 @@ pub fn train_model(
         let stored: EmbedTrainingConfig = crate::checkpoint::read_json(&config_path)?;
         let stored = EmbedTrainingConfig {
             epochs: config.epochs,
+            kernels: config.kernels,
             ..stored
         };
-        crate::checkpoint::check_continues(&config_path, stored.trains_like(config))?;
+        crate::checkpoint::check_continues(&config_path, stored.trains_like(config), &stored, config)?;
     }
     crate::checkpoint::write_json(&config_path, config)?;
     crate::checkpoint::write_json(&dir.join("normalization.json"), &data.normalization)?;

@@ -952,6 +952,7 @@ impl crate::trainer::Trainable for WarpTraining<'_> {
 /// training configuration, hidden widths resolved), `standardization.json` and the
 /// trainer's run, loaded at its best validation weights.
 pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)> {
+    crate::checkpoint::check_model_kind(dir, "nnwarp")?;
     let read = |name: &str| -> Result<String> {
         let path = dir.join(name);
         std::fs::read_to_string(&path).map_err(|source| Error::Io {
@@ -1036,7 +1037,7 @@ pub fn train_model(
             epochs: config.epochs,
             ..stored
         };
-        crate::checkpoint::check_continues(&config_path, stored == config)?;
+        crate::checkpoint::check_continues(&config_path, stored == config, &stored, &config)?;
         crate::checkpoint::read_json(&standardization_path)?
     } else {
         let s = Standardization::fit(&train_x, &train_y)?;

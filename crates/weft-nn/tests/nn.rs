@@ -1307,3 +1307,56 @@ fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_de
     let round: EmbedTrainingConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
     assert_eq!(round, c);
 }
+
+#[test]
+fn continuing_a_model_under_another_configuration_names_each_differing_field() {
+    let stored = small_embed_config();
+    let mut asked = stored.clone();
+    asked.autoencoder.latent = 16;
+    asked.adam.learning_rate = 5e-4;
+    let path = std::path::Path::new("m/config.json");
+    assert!(checkpoint::check_continues(path, true, &stored, &asked).is_ok());
+    let e = checkpoint::check_continues(path, false, &stored, &asked)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("m/config.json"), "{e}");
+    assert!(e.contains("autoencoder.latent: 8 vs 16"), "{e}");
+    assert!(e.contains("adam.learning_rate: 0.001 vs 0.0005"), "{e}");
+    assert!(
+        !e.contains("epochs:") && !e.contains("seed:"),
+        "only the differing fields are named: {e}"
+    );
+}
+
+#[test]
+fn a_model_directory_of_another_kind_is_named_by_its_kind() {
+    use weft_nn::checkpoint::{check_model_kind, stored_model_kind};
+    let kinds = [
+        (
+            serde_json::json!({"config": {"batch": 16}, "layer": "None", "init_weights_sha256": null}),
+            "drape",
+        ),
+        (serde_json::to_value(small_embed_config()).unwrap(), "embed"),
+        (
+            serde_json::json!({"variant": "Alt", "steps": 20, "hidden": [8]}),
+            "altconv",
+        ),
+        (serde_json::json!({"material": "stvk", "hidden": []}), "nnwarp"),
+    ];
+    let dir = std::env::temp_dir().join(format!("weft-nn-kinds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (config, kind) in &kinds {
+        assert_eq!(stored_model_kind(config), Some(*kind));
+        std::fs::write(dir.join("config.json"), config.to_string()).unwrap();
+        assert!(check_model_kind(&dir, kind).is_ok());
+        for (_, other) in kinds.iter().filter(|(_, k)| k != kind) {
+            let e = check_model_kind(&dir, other).unwrap_err().to_string();
+            assert!(e.contains(&format!("a `{kind}` model, not a `{other}` one")), "{e}");
+        }
+    }
+    // Unrecognised or missing configurations are left to the loaders.
+    assert_eq!(stored_model_kind(&serde_json::json!({"x": 1})), None);
+    std::fs::remove_file(dir.join("config.json")).unwrap();
+    assert!(check_model_kind(&dir, "drape").is_ok());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1088,3 +1088,34 @@ fn cloth_elastic_terms_are_exactly_stretching_and_bending_in_every_builtin_scene
         );
     }
 }
+
+#[test]
+fn newton_iteration_limits_of_zero_are_refused_naming_the_field() {
+    let base = ClothScene::builtin("sheet-ms-17", true).unwrap();
+    let named = |scene: ClothScene, field: &str| {
+        let e = scene.validate().unwrap_err().to_string();
+        assert!(e.contains(field) && e.contains("at least 1"), "{e}");
+    };
+    named(
+        ClothScene {
+            max_newton_iterations: 0,
+            ..base.clone()
+        },
+        "max_newton_iterations",
+    );
+    named(
+        ClothScene {
+            newton_budget: Some(0),
+            ..base.clone()
+        },
+        "newton_budget",
+    );
+    named(
+        ClothScene {
+            newton_factorizations: Some(0),
+            ..base.clone()
+        },
+        "newton_factorizations",
+    );
+    assert!(base.validate().is_ok());
+}

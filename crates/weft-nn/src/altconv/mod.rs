@@ -914,6 +914,7 @@ pub fn mean_error(
 /// A trained model directory written by `cargo xtask train altconv`: `config.json`,
 /// `scaling.json` and the trainer's run, loaded at its best validation weights.
 pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingConfig, Params, AltConvNet)> {
+    crate::checkpoint::check_model_kind(dir, "altconv")?;
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
         path: path.display().to_string(),
@@ -1083,7 +1084,7 @@ pub fn train_model(
             kernels: config.kernels,
             ..stored
         };
-        crate::checkpoint::check_continues(&config_path, stored == *config)?;
+        crate::checkpoint::check_continues(&config_path, stored == *config, &stored, config)?;
         crate::checkpoint::read_json(&scaling_path)?
     } else {
         let s = Scaling::fit(&train, config.variant, config.steps)?;

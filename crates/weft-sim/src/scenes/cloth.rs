@@ -412,6 +412,11 @@ impl ClothScene {
         if self.frames == 0 {
             return Err(Error::Scene("frames must be at least 1".into()));
         }
+        if self.max_newton_iterations == 0 {
+            return Err(Error::Scene(
+                "max_newton_iterations must be at least 1 (no step can be solved without one)".into(),
+            ));
+        }
         if self.newton_budget == Some(0) {
             return Err(Error::Scene(
                 "newton_budget must be at least 1 (omit it to solve every step to the tolerance)".into(),

@@ -102,6 +102,14 @@ pub fn load(name_or_path: &str, quick: bool) -> Result<LoadedScene> {
             builtin_names().collect::<Vec<_>>().join(", ")
         )));
     }
+    if quick {
+        // A file has no small variant; simulating it at full size would ignore the request.
+        return Err(Error::Scene(format!(
+            "{}: the small (quick) variant exists for built-in scenes only; a scene file is simulated as \
+             written",
+            path.display()
+        )));
+    }
     let text = std::fs::read_to_string(path).map_err(|e| Error::Scene(format!("reading {}: {e}", path.display())))?;
     let scene = AnyScene::from_toml(&text).map_err(|e| Error::Scene(format!("{}: {e}", path.display())))?;
     Ok(LoadedScene {
@@ -145,5 +153,17 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("plasma"), "{e}");
+    }
+
+    #[test]
+    fn a_scene_file_loads_as_written_and_refuses_the_quick_variant() {
+        let path = std::env::temp_dir().join(format!("weft-sim-load-{}.toml", std::process::id()));
+        let scene = load("sheet-ms-17", true).unwrap().scene;
+        std::fs::write(&path, scene.to_toml().unwrap()).unwrap();
+        let name = path.to_str().unwrap();
+        assert_eq!(load(name, false).unwrap().scene, scene);
+        let e = load(name, true).unwrap_err().to_string();
+        assert!(e.contains("built-in scenes only") && e.contains(name), "{e}");
+        std::fs::remove_file(&path).unwrap();
     }
 }
