@@ -6,6 +6,15 @@
 //! (δ = 5 mm, k = 1e4 N/m per vertex) nothing enters the obstacle under cloth weight.
 //! Only vertices are tested against the obstacle (no edge–face contact); meshes are fine
 //! enough in weft's scenes for that to hold.
+//!
+//! A triangle-mesh query is the expensive part (a bounding-volume traversal per vertex;
+//! a quarter of the loose sleeve's drape solve before the clearances below). Each vertex
+//! keeps the last place it was queried at and its distance there; by the triangle
+//! inequality, a vertex that has moved less than that distance minus the margin is still
+//! outside and farther than the margin, so it adds nothing and is not queried again. The
+//! answers are exactly those of querying every vertex every time.
+
+use std::sync::{Mutex, PoisonError};
 
 use nalgebra::{Matrix3, Vector3};
 use parry3d_f64::math::Vector as PVec;
@@ -123,13 +132,39 @@ fn check_finite_point(name: &'static str, p: &Vector3<f64>) -> Result<()> {
     }
 }
 
+/// A place `anchor` (m) outside the obstacle and at least `distance` (m) from it.
+#[derive(Debug, Clone, Copy)]
+struct Clearance {
+    anchor: Vector3<f64>,
+    distance: f64,
+}
+
+/// Rounding allowance (m) of a clearance test: parry's distance and the displacement's
+/// norm are each within a few ulps of 1 m at most, far below this.
+const CLEARANCE_SLACK: f64 = 1e-12;
+
 /// Penalty contact energy of all vertices against one obstacle.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct ObstaclePenalty {
     shape: ObstacleShape,
     stiffness: f64,
     margin: f64,
     num_vertices: usize,
+    /// Per vertex, where it was last queried outside a mesh obstacle (see the module
+    /// documentation); only ever a true bound, so the state never changes an answer.
+    clearances: Mutex<Vec<Option<Clearance>>>,
+}
+
+impl Clone for ObstaclePenalty {
+    fn clone(&self) -> Self {
+        Self {
+            shape: self.shape.clone(),
+            stiffness: self.stiffness,
+            margin: self.margin,
+            num_vertices: self.num_vertices,
+            clearances: Mutex::new(vec![None; self.num_vertices]),
+        }
+    }
 }
 
 impl ObstaclePenalty {
@@ -168,7 +203,41 @@ impl ObstaclePenalty {
             stiffness,
             margin,
             num_vertices,
+            clearances: Mutex::new(vec![None; num_vertices]),
         })
+    }
+
+    /// The contact of the vertex `i` at `x`, or `None` when it is outside and farther
+    /// than the margin (it then adds nothing to the energy or its derivatives).
+    fn contact_within_margin(
+        &self,
+        clearances: &mut [Option<Clearance>],
+        i: usize,
+        x: &Vector3<f64>,
+    ) -> Option<Contact> {
+        let ObstacleShape::Mesh(_) = self.shape else {
+            let c = self.shape.contact(x);
+            return (self.margin - c.distance > 0.0).then_some(c);
+        };
+        if let Some(c) = clearances[i] {
+            // d(x) ≥ d(anchor) − |x − anchor|, and every point of the segment from the
+            // anchor to x is at least that far from the surface, so x is outside too.
+            if c.distance - (x - c.anchor).norm() > self.margin + CLEARANCE_SLACK {
+                return None;
+            }
+        }
+        let c = self.shape.contact(x);
+        clearances[i] = (c.distance > 0.0).then_some(Clearance {
+            anchor: *x,
+            distance: c.distance,
+        });
+        (self.margin - c.distance > 0.0).then_some(c)
+    }
+
+    /// The per-vertex clearances, for one evaluation (a poisoned lock still holds true
+    /// bounds: each entry is written whole).
+    fn clearances(&self) -> std::sync::MutexGuard<'_, Vec<Option<Clearance>>> {
+        self.clearances.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     pub fn shape(&self) -> &ObstacleShape {
@@ -190,22 +259,24 @@ impl Energy for ObstaclePenalty {
     }
     fn hessian_pairs(&self, _pairs: &mut Vec<(usize, usize)>) {}
     fn value(&self, x: &[f64]) -> f64 {
+        let mut clearances = self.clearances();
         (0..self.num_vertices)
-            .map(|i| {
-                let phi = self.margin - self.shape.contact(&vertex(x, i)).distance;
-                if phi > 0.0 {
-                    0.5 * self.stiffness * phi * phi
-                } else {
-                    0.0
-                }
-            })
+            .map(
+                |i| match self.contact_within_margin(&mut clearances, i, &vertex(x, i)) {
+                    Some(c) => {
+                        let phi = self.margin - c.distance;
+                        0.5 * self.stiffness * phi * phi
+                    }
+                    None => 0.0,
+                },
+            )
             .sum()
     }
     fn add_gradient(&self, x: &[f64], grad: &mut [f64]) {
+        let mut clearances = self.clearances();
         for i in 0..self.num_vertices {
-            let c = self.shape.contact(&vertex(x, i));
-            let phi = self.margin - c.distance;
-            if phi > 0.0 {
+            if let Some(c) = self.contact_within_margin(&mut clearances, i, &vertex(x, i)) {
+                let phi = self.margin - c.distance;
                 // ∇E = k φ ∇φ = −k φ n.
                 for k in 0..3 {
                     grad[3 * i + k] -= self.stiffness * phi * c.normal[k];
@@ -214,10 +285,10 @@ impl Energy for ObstaclePenalty {
         }
     }
     fn add_hessian(&self, x: &[f64], project: bool, hessian: &mut SymmetricMatrix) {
+        let mut clearances = self.clearances();
         for i in 0..self.num_vertices {
-            let c = self.shape.contact(&vertex(x, i));
-            let phi = self.margin - c.distance;
-            if phi > 0.0 {
+            if let Some(c) = self.contact_within_margin(&mut clearances, i, &vertex(x, i)) {
+                let phi = self.margin - c.distance;
                 // ∇²E = k (n nᵀ − φ ∇²d). Outside a convex feature ∇²d is PSD, so the
                 // second term is negative: projection drops it.
                 let mut h = self.stiffness * c.normal * c.normal.transpose();
@@ -232,5 +303,75 @@ impl Energy for ObstaclePenalty {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use weft_linalg::SymmetricPattern;
+    use weft_mesh::generators;
+    use weft_testkit::TestRng;
+
+    use super::*;
+
+    /// Value, gradient and Hessian (dense), each from `e` as it is.
+    fn evaluate(e: &ObstaclePenalty, x: &[f64]) -> (f64, Vec<f64>, Vec<f64>) {
+        let mut grad = vec![0.0; x.len()];
+        e.add_gradient(x, &mut grad);
+        let n = x.len() / 3;
+        let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(n, Vec::new()));
+        let mut h = SymmetricMatrix::zeros(pattern);
+        e.add_hessian(x, true, &mut h);
+        let dense = (0..x.len())
+            .flat_map(|r| (0..x.len()).map(move |c| (r, c)))
+            .map(|(r, c)| h.get(r, c))
+            .collect();
+        (e.value(x), grad, dense)
+    }
+
+    #[test]
+    fn remembered_clearances_never_change_an_answer_and_spare_far_queries() {
+        // The unit cube's surface; vertices wander in and out of the margin and through
+        // the box, in small steps and in jumps.
+        let cube = generators::beam(&generators::BeamParams {
+            cells: [1, 1, 1],
+            size: [1.0, 1.0, 1.0],
+        })
+        .unwrap()
+        .boundary_surface()
+        .unwrap()
+        .mesh;
+        let n = 24;
+        let margin = 0.05;
+        let e = ObstaclePenalty::new(ObstacleShape::mesh(&cube).unwrap(), n, 1e3, margin).unwrap();
+        let mut rng = TestRng::new(31);
+        let mut x = rng.vec(3 * n, -0.5, 1.5);
+        let (mut skipped, mut in_contact) = (0, 0);
+        for step in 0..300 {
+            let jump = if step % 37 == 0 { 0.5 } else { 0.02 };
+            for v in &mut x {
+                *v = (*v + rng.uniform(-jump, jump)).clamp(-0.6, 1.6);
+            }
+            // A clone starts with no clearances: every vertex queried afresh.
+            let (fresh, remembered) = (evaluate(&e.clone(), &x), evaluate(&e, &x));
+            assert_eq!(fresh.0.to_bits(), remembered.0.to_bits(), "value at step {step}");
+            assert_eq!(fresh.1, remembered.1, "gradient at step {step}");
+            assert_eq!(fresh.2, remembered.2, "Hessian at step {step}");
+            let clearances = e.clearances();
+            for i in 0..n {
+                let p = vertex(&x, i);
+                let d = e.signed_distance(&p);
+                in_contact += usize::from(d < margin);
+                skipped += usize::from(clearances[i].is_some_and(|c| c.anchor != p));
+            }
+        }
+        // Both kinds of vertex were seen: some spared a query, some in contact.
+        assert!(
+            skipped > 1000,
+            "{skipped} vertex evaluations used a remembered clearance"
+        );
+        assert!(in_contact > 100, "{in_contact} vertex evaluations were in contact");
     }
 }
