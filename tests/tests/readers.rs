@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use proptest::prelude::*;
-use weft_mesh::io::{parse_obj, parse_tetgen, parse_vtk_tets};
+use weft_mesh::io::{parse_obj, parse_ply, parse_tetgen, parse_vtk, parse_vtk_tets};
 use weft_sim::AnyScene;
 
 /// The reference files, written once (tests run in parallel).
@@ -44,6 +44,21 @@ fn write_obj_text() -> String {
     let path = dir.join("s.obj");
     weft_mesh::io::write_obj(&path, m.positions(), m.faces()).unwrap();
     std::fs::read_to_string(path).unwrap()
+}
+
+/// The sheet of [`write_obj_text`] as a PLY, with per-vertex colours (as weft's error maps).
+fn ply_text() -> String {
+    static TEXT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TEXT.get_or_init(|| {
+        let m = weft_mesh::generators::sheet(4, 1.0).unwrap();
+        let dir = std::env::temp_dir().join(format!("weft-readers-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.ply");
+        let colors = vec![[10, 20, 30]; m.num_vertices()];
+        weft_mesh::io::write_ply(&path, m.positions(), m.faces(), Some(&colors)).unwrap();
+        std::fs::read_to_string(path).unwrap()
+    })
+    .clone()
 }
 
 fn write_tetgen_and_vtk() -> (String, String) {
@@ -126,6 +141,15 @@ proptest! {
         let _ = parse_vtk_tets(&text, Path::new("random.vtk"));
         let _ = parse_vtk_tets(&format!("UNSTRUCTURED_GRID {text}"), Path::new("random.vtk"));
         let _ = parse_vtk_tets(&mutate(&vtk_text(), &e), Path::new("mutated.vtk"));
+        let _ = parse_vtk(&format!("UNSTRUCTURED_GRID {text}"), Path::new("random.vtk"));
+        let _ = parse_vtk(&mutate(&vtk_text(), &e), Path::new("mutated.vtk"));
+    }
+
+    #[test]
+    fn ply_reader_never_panics(text in "\\PC{0,400}", e in edits()) {
+        let _ = parse_ply(&text, Path::new("random.ply"));
+        let _ = parse_ply(&format!("ply\nformat ascii 1.0\n{text}"), Path::new("random.ply"));
+        let _ = parse_ply(&mutate(&ply_text(), &e), Path::new("mutated.ply"));
     }
 
     #[test]
@@ -147,6 +171,8 @@ fn unmutated_files_read_back_exactly() {
     let t = parse_tetgen(&node, &ele, Path::new("b.node"), Path::new("b.ele")).unwrap();
     let v = parse_vtk_tets(&vtk_text(), Path::new("b.vtk")).unwrap();
     assert_eq!(t.tets(), v.tets());
+    let p = parse_ply(&ply_text(), Path::new("s.ply")).unwrap();
+    assert_eq!(p, m);
     assert_eq!(AnyScene::from_toml(&scene_text()).unwrap().name(), "sheet-fem-obstacle");
 }
 
@@ -172,4 +198,8 @@ fn lying_header_counts_allocate_nothing_and_are_typed_errors() {
     // A cell size of usize::MAX must not overflow the cursor.
     let vtk = "DATASET UNSTRUCTURED_GRID\nPOINTS 1 double\n0 0 0\nCELLS 2 5\n18446744073709551615 0\n";
     assert!(parse_vtk_tets(vtk, Path::new("l.vtk")).is_err());
+    let ply = "ply\nformat ascii 1.0\nelement vertex 999999999999999\nproperty float x\nproperty float y\n\
+               property float z\nend_header\n0 0 0\n";
+    let e = parse_ply(ply, Path::new("l.ply")).unwrap_err();
+    assert!(e.to_string().contains("declares 999999999999999 rows"), "{e}");
 }

@@ -47,7 +47,7 @@ pub enum AcapCommand {
         /// directory holding `rest.obj`.
         #[arg(long, value_name = "REST.obj|DIR")]
         rest: PathBuf,
-        /// Features (.npy, [frames, vertices, 9] or [vertices, 9], f64).
+        /// Features (.npy, [frames, vertices, 9] or [vertices, 9], f64; f32 is widened).
         #[arg(long, value_name = "F.npy")]
         features: PathBuf,
         /// Pinned vertex indices, comma-separated. Default: the pins recorded by `acap encode`
@@ -141,7 +141,7 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
         "mean_rms_error": mean_rms,
         "per_frame_max_rms": per_frame,
     });
-    println!("{}", serde_json::to_string_pretty(&report)?);
+    outln!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }
 
@@ -248,7 +248,7 @@ fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequ
             }
         }
     }
-    println!(
+    outln!(
         "wrote {} frames × {} vertices × 9 features to {}",
         frames.len(),
         nv,
@@ -349,7 +349,7 @@ fn decode(
         bar.inc(1);
     }
     bar.finish();
-    println!("wrote {frames} meshes to {}", out_dir.display());
+    outln!("wrote {frames} meshes to {}", out_dir.display());
     Ok(())
 }
 
@@ -419,21 +419,37 @@ fn read_npy(path: &Path) -> Result<(Vec<u64>, Vec<f64>)> {
     parse_npy(&bytes).with_context(|| format!("in {}", path.display()))
 }
 
-/// Shape and f64 values of `.npy` bytes. The element count the header claims is checked
+/// The shape and values of an `.npy` array of float64, or of float32 (as numpy users often
+/// save features), widened to f64 exactly. The element count the header claims is checked
 /// against the bytes present before anything is allocated for it.
 fn parse_npy(bytes: &[u8]) -> Result<(Vec<u64>, Vec<f64>)> {
     let npy = npyz::NpyFile::new(bytes).context("not an .npy file")?;
     let shape = npy.shape().to_vec();
+    let dtype = npy.dtype();
+    let width = match &dtype {
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && matches!(t.size_field(), 4 | 8) => {
+            t.size_field()
+        }
+        other => bail!("expected float64 or float32 values, found dtype {}", other.descr()),
+    };
     let count = shape
         .iter()
         .try_fold(1u64, |a, &d| a.checked_mul(d))
         .context("the header's shape overflows")?;
     ensure!(
-        count.checked_mul(8).is_some_and(|b| b <= bytes.len() as u64),
-        "the header claims {count} values ({shape:?}) but the file has {} bytes",
+        count.checked_mul(width).is_some_and(|b| b <= bytes.len() as u64),
+        "the header claims {count} values ({shape:?}) of {width} bytes but the file has {} bytes",
         bytes.len()
     );
-    let values = npy.into_vec::<f64>().context("expected f64 data")?;
+    let values = if width == 8 {
+        npy.into_vec::<f64>().context("reading float64 values")?
+    } else {
+        npy.into_vec::<f32>()
+            .context("reading float32 values")?
+            .into_iter()
+            .map(f64::from)
+            .collect()
+    };
     Ok((shape, values))
 }
 
@@ -468,6 +484,36 @@ mod tests {
         w.extend(values.iter().copied()).unwrap();
         w.finish().unwrap();
         out
+    }
+
+    #[test]
+    fn npy_of_float32_is_widened_and_other_dtypes_are_named() {
+        let mut bytes = Vec::new();
+        let mut w = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&[2, 2])
+            .writer(&mut bytes)
+            .begin_nd()
+            .unwrap();
+        w.extend([0.1f32, -2.5, 3.0, 1e-7]).unwrap();
+        w.finish().unwrap();
+        let (shape, values) = parse_npy(&bytes).unwrap();
+        assert_eq!(shape, vec![2, 2]);
+        assert_eq!(values, vec![f64::from(0.1f32), -2.5, 3.0, f64::from(1e-7f32)]);
+        let mut ints = Vec::new();
+        let mut w = npyz::WriteOptions::<i32>::new()
+            .default_dtype()
+            .shape(&[3])
+            .writer(&mut ints)
+            .begin_nd()
+            .unwrap();
+        w.extend([1, 2, 3]).unwrap();
+        w.finish().unwrap();
+        let err = format!("{:#}", parse_npy(&ints).unwrap_err());
+        assert!(
+            err.contains("expected float64 or float32 values, found dtype '<i4'"),
+            "{err}"
+        );
     }
 
     #[test]

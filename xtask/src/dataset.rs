@@ -144,13 +144,13 @@ fn generate(spec: &DatasetSpec, out: &std::path::Path, options: &GenerateOptions
 }
 
 fn list() -> anyhow::Result<()> {
-    println!("{:<24} {:>22} {:>22} {:>22}", "dataset", "quick", "standard", "paper");
+    outln!("{:<24} {:>22} {:>22} {:>22}", "dataset", "quick", "standard", "paper");
     for d in dataset_names() {
         let cell = |s| -> anyhow::Result<String> {
             let spec = DatasetSpec::new(d, s)?;
             Ok(format!("{} × {} frames", spec.sequences, spec.frames))
         };
-        println!(
+        outln!(
             "{d:<24} {:>22} {:>22} {:>22}",
             cell(Size::Quick)?,
             cell(Size::Standard)?,

@@ -64,7 +64,7 @@ pub struct CheckArgs {
 
 pub fn check(args: CheckArgs) -> anyhow::Result<()> {
     let s = weft_experiments::report::check(&args.dir, args.published)?;
-    println!(
+    outln!(
         "{}: {} records, {} plot, render and prediction files — all parse",
         args.dir.display(),
         s.records,

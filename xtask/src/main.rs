@@ -4,6 +4,15 @@
 //! crates do the work, xtask wires them together and handles files, progress and
 //! reports. `cargo xtask <command> --help` documents every option.
 
+/// `println!` for what a command prints as its answer. Rust ignores `SIGPIPE`, so a plain
+/// `println!` panics when the reader has gone (`cargo xtask mesh info F | head -3`); this
+/// ends the process quietly instead, as a Unix tool killed by `SIGPIPE` would.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!($($arg)*))
+    };
+}
+
 mod acap;
 mod dataset;
 mod evaluate;
@@ -15,7 +24,26 @@ mod stability;
 mod train;
 mod warp;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
+
+/// Writes one line to standard output (see [`outln`]): a closed pipe ends the process
+/// with status 0, any other write error with status 1 after saying so.
+pub(crate) fn write_stdout(line: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let written = out
+        .write_fmt(line)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush());
+    match written {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => {
+            eprintln!("error: writing to standard output: {e}");
+            std::process::exit(1);
+        }
+    }
+}
 
 /// The code version recorded in manifests and results: the crate version and, when built
 /// from a git checkout, the commit (with `-dirty` for uncommitted changes). Fixed at build
@@ -73,8 +101,16 @@ enum Command {
     Warp(warp::WarpArgs),
 }
 
+/// Lets every option of `cmd` and its subcommands take a negative number as its value
+/// (`--mu -1`), so that the value's own check names the problem. clap would otherwise read
+/// `-1` as an unknown flag and suggest `-- -1`, which does not work for an option.
+fn allow_negative_numbers(cmd: clap::Command) -> clap::Command {
+    cmd.allow_negative_numbers(true).mut_subcommands(allow_negative_numbers)
+}
+
 fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+    let matches = allow_negative_numbers(Cli::command()).get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     match cli.command {
         Command::Mesh(cmd) => mesh::run(cmd),
         Command::Simulate(args) => simulate::run(args),

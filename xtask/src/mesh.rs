@@ -78,7 +78,7 @@ pub enum MeshCommand {
         #[command(flatten)]
         out: Out,
     },
-    /// Print counts and validation results of a mesh file (.obj, .node/.ele) as JSON.
+    /// Print counts and validation results of a mesh file (.obj, .ply, .vtk, .node/.ele) as JSON.
     Info {
         /// The mesh file.
         file: PathBuf,
@@ -185,7 +185,7 @@ fn info(file: &Path) -> anyhow::Result<()> {
             })
         }
     };
-    println!("{}", serde_json::to_string_pretty(&report)?);
+    outln!("{}", serde_json::to_string_pretty(&report)?);
     if report["valid"] == false {
         anyhow::bail!("{} is not a valid mesh: {}", file.display(), report["error"]);
     }

@@ -150,6 +150,6 @@ fn print_report(
         "compression_energy_after": after.compression_energy,
         "solver": solver,
     });
-    println!("{}", serde_json::to_string_pretty(&report)?);
+    outln!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }

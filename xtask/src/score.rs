@@ -33,7 +33,7 @@ pub fn run(args: ScoreArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
     })?;
     for r in &output.records {
-        println!(
+        outln!(
             "{}/{}/{} {} ({}): {:.6} {}",
             r.experiment,
             r.scene,

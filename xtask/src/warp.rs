@@ -59,6 +59,23 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
     }
     let base_dir = loaded.base_dir.as_deref();
     let (config, mlp) = load_model(&args.model).with_context(|| format!("loading {}", args.model.display()))?;
+    let scene_material = weft_data::nnwarp::material_key(scene.material);
+    if config.material != scene_material {
+        // A network learns one material's nonlinearity (Luo et al. Eq. 6-7); it still
+        // runs, for studies across materials, but its answer is not that material's.
+        eprintln!(
+            "warning: {} was trained on {}, but {} is {}: the correction is applied outside its training{}",
+            args.model.display(),
+            config.material,
+            scene.name,
+            scene_material,
+            if args.reference {
+                " (the error against the reference measures that)"
+            } else {
+                ""
+            }
+        );
+    }
     // The reference twin builds the body, anchors and loads once; the linear twin shares them.
     let reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
     let mut runtime = NnWarpSimulation::new(&reference_sim, mlp)?;

@@ -235,6 +235,18 @@ fn train_nnwarp_corrects_held_out_poses_better_than_linear_and_modal_warping() {
     );
     let vtk = std::fs::read_to_string(warp_out.join("frame-0004.vtk")).unwrap();
     assert!(vtk.contains("displacement") && vtk.contains("error"));
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+    // On a beam of another material the model runs, with a warning naming both.
+    let stvk = xtask(
+        &["warp", "--scene", "beam-stvk", "--quick", "--frames", "1"],
+        &[("--model", &model), ("--out", &root.join("stvk"))],
+    );
+    assert!(stvk.status.success(), "{}", String::from_utf8_lossy(&stvk.stderr));
+    let stderr = String::from_utf8_lossy(&stvk.stderr);
+    assert!(
+        stderr.contains("trained on neo-hookean, but beam-stvk is stvk"),
+        "{stderr}"
+    );
     let cloth = xtask(
         &["warp", "--scene", "sheet-ms", "--quick"],
         &[("--model", &model), ("--out", &root.join("cloth"))],

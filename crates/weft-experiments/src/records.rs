@@ -220,6 +220,14 @@ impl Timing {
 
 /// Every name is lower-case kebab-case and every number finite: the checks CI runs on a
 /// report (and `evaluate` runs before writing one).
+/// The units a record may carry (docs/RESULTS.md).
+pub const UNITS: [&str; 11] = ["mm", "m", "s", "1/s", "J", "mJ", "N", "N^2", "count", "code", "1"];
+
+/// Units of quantities that are never negative: distances and errors, times, rates, force
+/// norms and their squares, energy errors (mJ) and counts. Energies (J), codes and
+/// dimensionless figures (1, e.g. a signed bound violation) may be negative.
+const NON_NEGATIVE_UNITS: [&str; 8] = ["mm", "m", "s", "1/s", "mJ", "N", "N^2", "count"];
+
 pub fn validate(records: &[Record]) -> crate::Result<()> {
     let kebab = |s: &str| {
         !s.is_empty()
@@ -238,7 +246,12 @@ pub fn validate(records: &[Record]) -> crate::Result<()> {
         if let Some(s) = &r.split {
             ensure!(kebab(s), "record {r:?}: split {s:?} is not lower-case kebab-case");
         }
-        ensure!(!r.unit.is_empty(), "record {r:?}: empty unit");
+        ensure!(
+            UNITS.contains(&r.unit.as_str()),
+            "record {r:?}: unit {:?} is not one of {}",
+            r.unit,
+            UNITS.join(", ")
+        );
         let finite = |x: Option<f64>| x.is_none_or(f64::is_finite);
         ensure!(
             r.value.is_finite()
@@ -251,6 +264,13 @@ pub fn validate(records: &[Record]) -> crate::Result<()> {
             r.seconds_per_frame.is_none_or(|s| s >= 0.0) && r.ground_truth_seconds_per_frame.is_none_or(|s| s > 0.0),
             "record {r:?}: negative or zero time"
         );
+        if NON_NEGATIVE_UNITS.contains(&r.unit.as_str()) {
+            ensure!(
+                r.value >= 0.0 && r.paper_value.is_none_or(|p| p >= 0.0),
+                "record {r:?}: a figure in {} is never negative",
+                r.unit
+            );
+        }
     }
     Ok(())
 }
@@ -282,7 +302,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn validation_rejects_non_kebab_names_and_nan() {
+    fn validation_rejects_non_kebab_names_nan_unknown_units_and_negative_sizes() {
         let good = Record {
             experiment: "sim".into(),
             scene: "sheet-ms".into(),
@@ -308,8 +328,27 @@ mod tests {
         assert!(validate(&[nan]).is_err());
         let zero_gt = Record {
             ground_truth_seconds_per_frame: Some(0.0),
-            ..good
+            ..good.clone()
         };
         assert!(validate(&[zero_gt]).is_err());
+        let ms = |unit: &str, value: f64, paper_value: Option<f64>| Record {
+            unit: unit.into(),
+            value,
+            paper_value,
+            ..good.clone()
+        };
+        let e = validate(&[ms("mm", -0.1, None)]).unwrap_err();
+        assert!(e.to_string().contains("in mm is never negative"), "{e}");
+        assert!(validate(&[ms("mm", 0.1, Some(-1.0))]).is_err());
+        assert!(validate(&[ms("s", -1e-9, None)]).is_err());
+        // A signed figure keeps its sign: an energy, a bound violation.
+        assert!(validate(&[ms("J", -3.0, None)]).is_ok());
+        assert!(validate(&[ms("1", -3e-11, None)]).is_ok());
+        let e = validate(&[ms("furlongs", 1.0, None)]).unwrap_err();
+        assert!(
+            e.to_string().contains("unit \"furlongs\" is not one of mm, m, s"),
+            "{e}"
+        );
+        assert!(validate(&[ms("", 1.0, None)]).is_err());
     }
 }

@@ -687,3 +687,108 @@ fn a_beam_whose_cells_have_no_finite_volume_is_refused_naming_the_size() {
             .contains("zero volume")
     );
 }
+
+#[test]
+fn every_surface_format_weft_writes_reads_back_exactly() {
+    // A curved, irregular surface: every coordinate a full-precision f64.
+    let mut rng = TestRng::new(5);
+    let sheet = generators::sheet(6, 0.7).unwrap();
+    let moved: Vec<Vector3<f64>> = sheet
+        .positions()
+        .iter()
+        .map(|p| {
+            p + Vector3::new(
+                rng.uniform(-0.01, 0.01),
+                rng.uniform(-0.01, 0.01),
+                rng.uniform(-0.2, 0.2),
+            )
+        })
+        .collect();
+    let m = sheet.with_positions(moved).unwrap();
+    for ext in ["obj", "ply", "vtk"] {
+        let path = tmp(&format!("round-trip.{ext}"));
+        write_surface(&path, &m).unwrap();
+        match read_mesh(&path) {
+            Ok(AnyMesh::Surface(back)) => assert_eq!(back, m, ".{ext}"),
+            other => panic!(".{ext}: expected a surface, got {other:?}"),
+        }
+    }
+    // A coloured PLY (the error maps weft writes) reads back as the same surface.
+    let colored = tmp("colored.ply");
+    write_ply(
+        &colored,
+        m.positions(),
+        m.faces(),
+        Some(&vec![[1, 2, 3]; m.num_vertices()]),
+    )
+    .unwrap();
+    assert_eq!(read_ply(&colored).unwrap(), m);
+}
+
+#[test]
+fn ply_reader_takes_other_writers_files_and_names_bad_ones() {
+    let path = Path::new("in-memory.ply");
+    // Float properties in another order, an extra property, a quad, a trailing element.
+    let quad = "ply\nformat ascii 1.0\ncomment from elsewhere\nelement vertex 4\nproperty float z\n\
+                property float x\nproperty float y\nproperty float confidence\n\
+                element face 1\nproperty list uchar int vertex_index\nelement edge 0\nproperty int vertex1\n\
+                end_header\n0 0 0 1\n0 1 0 1\n0 1 1 1\n0 0 1 1\n4 0 1 2 3\n";
+    let m = parse_ply(quad, path).unwrap();
+    assert_eq!(m.faces(), &[[0, 1, 2], [0, 2, 3]]);
+    assert_eq!(m.positions()[2], Vector3::new(1.0, 1.0, 0.0));
+    let bad = |text: &str, expected: &str| {
+        let e = parse_ply(text, path).unwrap_err();
+        assert!(matches!(e, Error::Parse { .. }), "{e}");
+        assert!(e.to_string().contains(expected), "{e} should say {expected:?}");
+    };
+    let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\n\
+                  element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    bad(&format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"), "face index \"3\"");
+    bad(&format!("{header}0 0 0\n1 0 0\n0 1 0\n2 0 1\n"), "at least 3");
+    bad(&format!("{header}0 0 0\n1 0\n0 1 0\n3 0 1 2\n"), "vertex has 2 values");
+    bad(
+        &format!("{header}0 0 0\n1 0 0\n0 1 0\n"),
+        "file ends inside element face",
+    );
+    bad(&format!("{header}0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n"), "bad coordinate");
+    bad(
+        &header.replace("element vertex 3", "element vertex 3000000000"),
+        "declares 3000000000 rows",
+    );
+    bad(&header.replace("ascii", "binary_little_endian"), "binary_little_endian");
+    let body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    bad(
+        &format!("{}{body}", header.replace("property double z\n", "")),
+        "no x, y and z",
+    );
+    bad(&header.replace("end_header\n", ""), "end_header");
+    bad("solid stl\n", "not a PLY file");
+}
+
+#[test]
+fn vtk_reader_takes_triangles_where_there_are_no_tetrahedra() {
+    let path = tmp("surface.vtk");
+    write_vtk_triangles(
+        &path,
+        square().positions(),
+        square().faces(),
+        &[("height", 1, &[0.0; 4])],
+    )
+    .unwrap();
+    match read_vtk(&path).unwrap() {
+        AnyMesh::Surface(m) => assert_eq!(m, square()),
+        other => panic!("expected a surface, got {other:?}"),
+    }
+    // A file of lines only (cell type 3) is neither.
+    let lines = "# vtk DataFile Version 3.0\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 2 double\n0 0 0\n1 0 0\n\
+                 CELLS 1 3\n2 0 1\nCELL_TYPES 1\n3\n";
+    let e = parse_vtk(lines, Path::new("lines.vtk")).unwrap_err();
+    assert!(e.to_string().contains("or triangles"), "{e}");
+    // A triangle cell with four indices is named on its line.
+    let bad = lines.replace(
+        "CELLS 1 3\n2 0 1\nCELL_TYPES 1\n3\n",
+        "CELLS 1 5\n4 0 1 0 1\nCELL_TYPES 1\n5\n",
+    );
+    let e = parse_vtk(&bad, Path::new("bad.vtk")).unwrap_err();
+    assert!(e.to_string().contains("triangle with 4 indices"), "{e}");
+}

@@ -43,7 +43,7 @@ fn mesh_ball(py: Python<'_>, segments: usize, rings: usize, radius: f64) -> PyRe
     )
 }
 
-/// A mesh file (.obj; .node/.ele or .vtk tetrahedra) as a dict: `vertices` and `faces`,
+/// A mesh file (.obj, .ply or .vtk triangles; .node/.ele or .vtk tetrahedra) as a dict: `vertices` and `faces`,
 /// or `vertices` and `tets`.
 #[pyfunction]
 fn mesh_read(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyDict>> {

@@ -16,10 +16,12 @@ REPO = pathlib.Path(__file__).resolve().parents[3]
 def test_meshes_round_trip_through_files(tmp_path):
     v, f = weft.mesh.sheet(5, 0.5)
     assert v.shape == (25, 3) and f.shape == (32, 3) and f.dtype == np.int64
-    weft.mesh.write(tmp_path / "s.obj", v, f)
-    back = weft.mesh.read(tmp_path / "s.obj")
-    np.testing.assert_array_equal(back["vertices"], v)
-    np.testing.assert_array_equal(back["faces"], f)
+    v = v + np.random.default_rng(3).uniform(-0.01, 0.01, v.shape)
+    for ext in ("obj", "ply", "vtk"):
+        weft.mesh.write(tmp_path / f"s.{ext}", v, f)
+        back = weft.mesh.read(tmp_path / f"s.{ext}")
+        np.testing.assert_array_equal(back["vertices"], v)
+        np.testing.assert_array_equal(back["faces"], f)
     bv, bf = weft.mesh.ball(12, 8, 0.5)
     np.testing.assert_allclose(np.linalg.norm(bv, axis=1), 0.5, atol=1e-12)
     with pytest.raises(OSError):

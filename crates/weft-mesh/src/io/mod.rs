@@ -1,5 +1,6 @@
-//! Mesh file I/O: Wavefront OBJ (read/write), PLY (write, optional per-vertex colours),
-//! TetGen `.node`/`.ele` (read/write) and legacy VTK (write).
+//! Mesh file I/O: Wavefront OBJ (read/write), ASCII PLY (read/write, optional per-vertex
+//! colours), TetGen `.node`/`.ele` (read/write) and legacy ASCII VTK (read/write,
+//! tetrahedra or triangles). Every format weft writes a mesh in, it reads back.
 //!
 //! The OBJ reader is hand-written rather than taken from a crate because its errors must
 //! name the file and line of the problem (a truncated line, an index out of range), which
@@ -15,9 +16,9 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 pub use obj::{parse_obj, read_obj, write_obj};
-pub use ply::write_ply;
+pub use ply::{parse_ply, read_ply, write_ply};
 pub use tetgen::{parse_tetgen, read_tetgen, write_tetgen};
-pub use vtk::{PointField, parse_vtk_tets, read_vtk_tets, write_vtk_tets, write_vtk_triangles};
+pub use vtk::{PointField, parse_vtk, parse_vtk_tets, read_vtk, read_vtk_tets, write_vtk_tets, write_vtk_triangles};
 
 use crate::error::{Error, Result};
 use crate::tetmesh::TetMesh;
@@ -30,7 +31,7 @@ pub enum AnyMesh {
     Volume(TetMesh),
 }
 
-const READABLE: &str = ".obj, .node, .ele, .vtk (tetrahedra)";
+const READABLE: &str = ".obj, .ply, .node, .ele, .vtk (tetrahedra or triangles)";
 const WRITABLE: &str = ".obj, .ply, .vtk, .node";
 
 fn extension(path: &Path) -> String {
@@ -40,13 +41,14 @@ fn extension(path: &Path) -> String {
         .to_ascii_lowercase()
 }
 
-/// Reads a mesh, choosing the format by extension (`.obj` surface, `.node`/`.ele` TetGen or
-/// `.vtk` legacy unstructured-grid volume).
+/// Reads a mesh, choosing the format by extension (`.obj` and `.ply` surfaces, `.node`/`.ele`
+/// TetGen volumes, `.vtk` legacy unstructured grids of tetrahedra or triangles).
 pub fn read_mesh(path: &Path) -> Result<AnyMesh> {
     match extension(path).as_str() {
         "obj" => read_obj(path).map(AnyMesh::Surface),
+        "ply" => read_ply(path).map(AnyMesh::Surface),
         "node" | "ele" => read_tetgen(path).map(AnyMesh::Volume),
-        "vtk" => read_vtk_tets(path).map(AnyMesh::Volume),
+        "vtk" => read_vtk(path),
         e => Err(Error::UnsupportedFormat {
             path: path.into(),
             extension: e.into(),

@@ -2,9 +2,10 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 
-use super::{io_err, parse_err, write_atomically};
+use super::{AnyMesh, io_err, parse_err, write_atomically};
 use crate::error::{Error, Result};
 use crate::tetmesh::TetMesh;
+use crate::trimesh::TriMesh;
 
 /// A named per-vertex field for VTK output: 1 component (scalars) or 3 (vectors).
 pub type PointField<'a> = (&'a str, usize, &'a [f64]);
@@ -90,9 +91,63 @@ pub fn read_vtk_tets(path: &Path) -> Result<TetMesh> {
 }
 
 /// Parses the text of a legacy VTK unstructured grid (see [`read_vtk_tets`]); `path` names
-/// the file in errors. Header counts are checked against the tokens that follow before
-/// anything is allocated for them.
+/// the file in errors.
 pub fn parse_vtk_tets(text: &str, path: &Path) -> Result<TetMesh> {
+    let (positions, cells) = parse_grid(text, path)?;
+    let tets = cells_of::<4>(&cells, TETRAHEDRON, "tetrahedron", path)?;
+    if tets.is_empty() {
+        return Err(parse_err(path, 1, "no tetrahedra (VTK cell type 10) in the file"));
+    }
+    TetMesh::new(positions, tets)
+}
+
+/// Reads a legacy ASCII VTK unstructured grid of either kind: its tetrahedra (cell type
+/// 10) as a volume, or, in a file without tetrahedra, its triangles (cell type 5) as a
+/// surface ([`write_vtk_triangles`] writes such a file). Other cell types are skipped.
+pub fn read_vtk(path: &Path) -> Result<AnyMesh> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    parse_vtk(&text, path)
+}
+
+/// Parses the text of a legacy VTK unstructured grid (see [`read_vtk`]).
+pub fn parse_vtk(text: &str, path: &Path) -> Result<AnyMesh> {
+    let (positions, cells) = parse_grid(text, path)?;
+    let tets = cells_of::<4>(&cells, TETRAHEDRON, "tetrahedron", path)?;
+    if !tets.is_empty() {
+        return Ok(AnyMesh::Volume(TetMesh::new(positions, tets)?));
+    }
+    let triangles = cells_of::<3>(&cells, TRIANGLE, "triangle", path)?;
+    if triangles.is_empty() {
+        return Err(parse_err(
+            path,
+            1,
+            "no tetrahedra (VTK cell type 10) or triangles (cell type 5) in the file",
+        ));
+    }
+    Ok(AnyMesh::Surface(TriMesh::new(positions, triangles)?))
+}
+
+const TRIANGLE: usize = 5;
+const TETRAHEDRON: usize = 10;
+
+/// A cell of a grid: the line it is on, its VTK type and its vertex indices.
+type Cell = (usize, usize, Vec<usize>);
+
+/// The cells of type `kind`, each of `N` indices (another count is an error on its line).
+fn cells_of<const N: usize>(cells: &[Cell], kind: usize, what: &str, path: &Path) -> Result<Vec<[usize; N]>> {
+    cells
+        .iter()
+        .filter(|(_, t, _)| *t == kind)
+        .map(|(line, _, ids)| {
+            <[usize; N]>::try_from(ids.as_slice())
+                .map_err(|_| parse_err(path, *line, format!("{what} with {} indices", ids.len())))
+        })
+        .collect()
+}
+
+/// The points and cells of a legacy VTK unstructured grid. Header counts are checked
+/// against the tokens that follow before anything is allocated for them.
+fn parse_grid(text: &str, path: &Path) -> Result<(Vec<Vector3<f64>>, Vec<Cell>)> {
     // Tokens with their line numbers: legacy VTK lets numbers wrap across lines.
     let tokens: Vec<(usize, &str)> = text
         .lines()
@@ -146,21 +201,10 @@ pub fn parse_vtk_tets(text: &str, path: &Path) -> Result<TetMesh> {
             .ok_or_else(|| parse_err(path, tokens[k].0, format!("bad cell size {n}")))?;
     }
     let t = find("CELL_TYPES").ok_or_else(|| parse_err(path, 1, "no CELL_TYPES section"))?;
-    let mut tets = Vec::new();
-    for (i, (line, ids)) in cells.iter().enumerate() {
-        if count(t + 2 + i, "cell type")? == 10 {
-            if ids.len() != 4 {
-                return Err(parse_err(
-                    path,
-                    *line,
-                    format!("tetrahedron with {} indices", ids.len()),
-                ));
-            }
-            tets.push([ids[0], ids[1], ids[2], ids[3]]);
-        }
-    }
-    if tets.is_empty() {
-        return Err(parse_err(path, 1, "no tetrahedra (VTK cell type 10) in the file"));
-    }
-    TetMesh::new(positions, tets)
+    let cells = cells
+        .into_iter()
+        .enumerate()
+        .map(|(i, (line, ids))| Ok((line, count(t + 2 + i, "cell type")?, ids)))
+        .collect::<Result<Vec<Cell>>>()?;
+    Ok((positions, cells))
 }

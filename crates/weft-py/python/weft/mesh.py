@@ -15,8 +15,8 @@ def ball(segments, rings, radius=0.5):
 
 
 def read(path):
-    """A mesh file (.obj; .node/.ele or .vtk tetrahedra) as a dict with ``vertices`` and
-    ``faces`` (surfaces) or ``tets`` (volumes)."""
+    """A mesh file (.obj, .ply or .vtk triangles; .node/.ele or .vtk tetrahedra) as a dict
+    with ``vertices`` and ``faces`` (surfaces) or ``tets`` (volumes)."""
     return _native.mesh_read(str(path))
 
 
