@@ -518,6 +518,7 @@ fn train_altconv_resumes_bit_for_bit_and_refuses_absurd_widths() {
             "schedule.decay.per_epoch",
         ),
         (r#"{"stpes": 3}"#, "stpes"),
+        (r#"{"hidden": [8, 8], "steps": 5000}"#, "set steps to at most"),
     ] {
         std::fs::write(&config, json).unwrap();
         let out = run(&bad, &[]);

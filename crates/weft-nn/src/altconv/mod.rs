@@ -1048,10 +1048,17 @@ pub fn train_model(
             .split(split)
             .map(|s| {
                 if s.skinned.len() <= config.steps {
-                    return Err(Error::InvalidConfig {
-                        field: "steps".into(),
-                        value: config.steps.to_string(),
-                        reason: "exceeds the frames of a dataset sequence (it needs steps + 1 frames)",
+                    return Err(Error::Dataset {
+                        path: dataset.dir.display().to_string(),
+                        reason: format!(
+                            "configuration field `steps` = {} needs sequences of steps + 1 frames, and {} sequence {} \
+                             has {}: set steps to at most {}",
+                            config.steps,
+                            split,
+                            s.index,
+                            s.skinned.len(),
+                            s.skinned.len().saturating_sub(1)
+                        ),
                     });
                 }
                 SequenceTensors::new(s, config.steps + 1, &device)
