@@ -736,6 +736,19 @@ fn ply_reader_takes_other_writers_files_and_names_bad_ones() {
     let m = parse_ply(quad, path).unwrap();
     assert_eq!(m.faces(), &[[0, 1, 2], [0, 2, 3]]);
     assert_eq!(m.positions()[2], Vector3::new(1.0, 1.0, 0.0));
+    // Faces with texture coordinates before their indices and a colour after them.
+    let textured = quad.replace(
+        "element face 1\nproperty list uchar int vertex_index\n",
+        "element face 1\nproperty list uchar float texcoord\nproperty list uchar int vertex_index\nproperty uchar red\n",
+    );
+    let textured = textured.replace("4 0 1 2 3\n", "8 0 0 1 0 1 1 0 1 4 0 1 2 3 255\n");
+    assert_eq!(parse_ply(&textured, path).unwrap(), m);
+    let short = textured.replace("4 0 1 2 3 255\n", "4 0 1 2 3\n");
+    let e = parse_ply(&short, path).unwrap_err();
+    assert!(e.to_string().contains("fewer than its properties declare"), "{e}");
+    let long = textured.replace("4 0 1 2 3 255\n", "4 0 1 2 3 255 7\n");
+    let e = parse_ply(&long, path).unwrap_err();
+    assert!(e.to_string().contains("more than its properties declare"), "{e}");
     let bad = |text: &str, expected: &str| {
         let e = parse_ply(text, path).unwrap_err();
         assert!(matches!(e, Error::Parse { .. }), "{e}");

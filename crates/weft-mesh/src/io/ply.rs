@@ -164,13 +164,16 @@ pub fn parse_ply(text: &str, path: &Path) -> Result<TriMesh> {
             .properties
             .iter()
             .position(|&(n, list)| list && (n == "vertex_indices" || n == "vertex_index"));
-        if element.name == "face" && (indices != Some(0) || element.properties.len() != 1) {
-            return Err(parse_err(
-                path,
-                element.line,
-                "the face element must have the one property `list … vertex_indices`",
-            ));
-        }
+        let indices = match (element.name == "face", indices) {
+            (true, None) => {
+                return Err(parse_err(
+                    path,
+                    element.line,
+                    "the face element has no `list … vertex_indices` property",
+                ));
+            }
+            (_, i) => i.unwrap_or(0),
+        };
         for _ in 0..element.count {
             let (line, l) = body.next().ok_or_else(|| {
                 parse_err(
@@ -200,21 +203,15 @@ pub fn parse_ply(text: &str, path: &Path) -> Result<TriMesh> {
                 }
                 positions.push(Vector3::from(c));
             } else if element.name == "face" {
-                let n: usize = tokens
-                    .first()
-                    .and_then(|t| t.parse().ok())
-                    .ok_or_else(|| parse_err(path, line, "a face row must start with its vertex count"))?;
-                if n < 3 || tokens.len() != n + 1 {
+                let listed = property_values(&tokens, &element.properties, indices, path, line)?;
+                if listed.len() < 3 {
                     return Err(parse_err(
                         path,
                         line,
-                        format!(
-                            "face row declares {n} vertices and holds {}; a face needs at least 3",
-                            tokens.len().saturating_sub(1)
-                        ),
+                        format!("face has {} vertices; a face needs at least 3", listed.len()),
                     ));
                 }
-                let poly = tokens[1..]
+                let poly = listed
                     .iter()
                     .map(|t| {
                         t.parse::<usize>().ok().filter(|&v| v < positions.len()).ok_or_else(|| {
@@ -236,4 +233,55 @@ pub fn parse_ply(text: &str, path: &Path) -> Result<TriMesh> {
         return Err(parse_err(path, header_end, "no vertex element"));
     }
     TriMesh::new(positions, faces)
+}
+
+/// The values of property `wanted` in one row of an element with `properties` (in header
+/// order; a list is its length, then that many values). A row with fewer or more values
+/// than its properties declare is an error on its line.
+fn property_values<'t>(
+    tokens: &[&'t str],
+    properties: &[(&str, bool)],
+    wanted: usize,
+    path: &Path,
+    line: usize,
+) -> Result<Vec<&'t str>> {
+    let mut k = 0;
+    let mut found = Vec::new();
+    for (p, &(name, list)) in properties.iter().enumerate() {
+        let len = if list {
+            let len = tokens
+                .get(k)
+                .and_then(|t| t.parse::<usize>().ok())
+                .ok_or_else(|| parse_err(path, line, format!("the list {name} must start with its length")))?;
+            k += 1;
+            len
+        } else {
+            1
+        };
+        let end = k.checked_add(len).filter(|&end| end <= tokens.len()).ok_or_else(|| {
+            parse_err(
+                path,
+                line,
+                format!(
+                    "the row holds {} values, fewer than its properties declare",
+                    tokens.len()
+                ),
+            )
+        })?;
+        if p == wanted {
+            found = tokens[k..end].to_vec();
+        }
+        k = end;
+    }
+    if k != tokens.len() {
+        return Err(parse_err(
+            path,
+            line,
+            format!(
+                "the row holds {} values, more than its properties declare ({k})",
+                tokens.len()
+            ),
+        ));
+    }
+    Ok(found)
 }

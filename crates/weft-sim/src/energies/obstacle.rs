@@ -12,7 +12,9 @@
 //! keeps the last place it was queried at and its distance there; by the triangle
 //! inequality, a vertex that has moved less than that distance minus the margin is still
 //! outside and farther than the margin, so it adds nothing and is not queried again. The
-//! answers are exactly those of querying every vertex every time.
+//! answers are exactly those of querying every vertex every time, for the closed,
+//! outward-oriented meshes an obstacle must be (a point cannot change sides without
+//! crossing the surface).
 
 use std::sync::{Mutex, PoisonError};
 
