@@ -199,7 +199,12 @@ impl<'a> ReducedIpm<'a> {
     /// stops there and returns it with the iterate. If it declines the converged iterate
     /// and `settings.fallback_tolerance` is tighter, the same iteration continues to that
     /// tolerance and offers its point too; should it fail on the way, the point that met
-    /// `settings.tolerance` is returned (its [`IpmSolution::tolerance`] says which).
+    /// `settings.tolerance` is returned (its [`IpmSolution::tolerance`] says which), with
+    /// the iterations and seconds of the whole solve. The continuation is also given up
+    /// once its primal residual and gap meet the tighter tolerance while the dual residual
+    /// does not, for two iterations: on the paper-size sheet the dual residual then sits
+    /// at a floor of 1e-10 to 1e-9 (the reduced solves' round-off as `z` concentrates on
+    /// the active edges) until a point leaves the cones, 3–5 iterations later.
     pub fn solve<T>(
         &self,
         b: &[f64],
@@ -213,10 +218,17 @@ impl<'a> ReducedIpm<'a> {
         let mut iterations = 0;
         let mut offered = false;
         let mut tolerance = settings.tolerance;
+        let mut dual_stalled = 0;
         // The point that met `settings.tolerance`, kept while the solve continues.
         let mut met: Option<IpmSolution> = None;
+        // Returns that point charged with the whole solve's iterations and time.
+        let give_up = |mut point: IpmSolution, iterations: u32| {
+            point.iterations = iterations;
+            point.seconds = start.elapsed().as_secs_f64();
+            point
+        };
         let failed = |status: &str, iterations: u32, met: Option<IpmSolution>| match met {
-            Some(point) => Ok((point, None)),
+            Some(point) => Ok((give_up(point, iterations), None)),
             None => Err(Error::SolverFailed {
                 status: status.to_string(),
                 iterations,
@@ -236,6 +248,16 @@ impl<'a> ReducedIpm<'a> {
             }
             let worst = res.primal.max(res.dual).max(relative_gap);
             let converged = worst <= tolerance;
+            // The continuation is given up after two iterations in a row with the primal
+            // residual and gap at the tighter tolerance and the dual residual above it.
+            if met.is_some() && !converged && res.primal.max(relative_gap) <= tolerance {
+                dual_stalled += 1;
+                if dual_stalled >= 2
+                    && let Some(point) = met.take()
+                {
+                    return Ok((give_up(point, iterations), None));
+                }
+            }
             let solution = |x: &[f64], s: &[Cone], z: &[Cone]| IpmSolution {
                 x: x.to_vec(),
                 s: s.as_flattened().to_vec(),
@@ -268,7 +290,7 @@ impl<'a> ReducedIpm<'a> {
             iterations += 1;
             if let Err(error) = self.advance(&res, m, settings, iterations, &mut x, &mut s, &mut z) {
                 return match met {
-                    Some(point) => Ok((point, None)),
+                    Some(point) => Ok((give_up(point, iterations), None)),
                     None => Err(error),
                 };
             }

@@ -937,6 +937,51 @@ fn socp_heavy_stretch_is_polished_or_handed_over_tight() {
 }
 
 #[test]
+fn a_continuation_given_up_returns_the_default_tolerance_point_and_counts_its_iterations() {
+    // The paper-size sheet under the smooth 5–30 % stretch of the `socp_moderate_stretch`
+    // example: the polish is declined (more edges at their bound than in-plane freedoms)
+    // and the continuation toward HANDOVER_TOLERANCE stalls on the dual residual, so the
+    // point that met the default tolerance is returned. It must be that point exactly, and
+    // the report must count the continuation's iterations too.
+    let rest = generators::sheet(55, 1.0).unwrap();
+    let mut rng = TestRng::new(5);
+    let pred: Vec<f64> = rest
+        .positions()
+        .iter()
+        .flat_map(|p| {
+            let s = 1.05 + 0.25 * (0.5 + 0.5 * (3.0 * p.x + 1.0).sin() * (2.0 * p.y + 0.5).cos());
+            let z = 0.05 * (4.0 * p.x).sin() * (3.0 * p.y).cos();
+            [s * p.x, s * p.y, z]
+        })
+        .zip(std::iter::repeat_with(|| rng.uniform(-1e-3, 1e-3)))
+        .map(|(v, noise)| v + noise)
+        .collect();
+    let run = |settings: SocpSettings| {
+        InextensibilityLayer::new(&rest, 0.1, settings)
+            .unwrap()
+            .forward(&pred)
+            .unwrap()
+    };
+    let (sol, report) = run(SocpSettings::default());
+    let (straight, straight_report) = run(SocpSettings {
+        polish: false,
+        ..SocpSettings::default()
+    });
+    assert!(
+        report.polish_iterations.is_none() && report.handover_tolerance.is_none(),
+        "this case was expected to give the continuation up: {report:?}"
+    );
+    assert_eq!(sol.positions(), straight.positions());
+    assert!(
+        report.iterations > straight_report.iterations,
+        "{} iterations reported, {} to the default tolerance alone",
+        report.iterations,
+        straight_report.iterations
+    );
+    assert!(report.max_violation <= 0.0, "{report:?}");
+}
+
+#[test]
 fn newton_krylov_reaches_the_cholesky_equilibrium_and_gradient_cold_and_warm() {
     let mut rng = TestRng::new(70);
     let rest = random_sheet(9, &mut rng);

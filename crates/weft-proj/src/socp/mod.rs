@@ -174,7 +174,9 @@ pub struct SocpReport {
     /// With an accepted early polish the reduced IPM reports `Solved` at the iterate it
     /// handed over (see [`SocpSettings::early_polish_gap`]).
     pub status: String,
-    /// Interior-point iterations of whichever [`ConicSolver`] ran.
+    /// Interior-point iterations of whichever [`ConicSolver`] ran, all of them: when a
+    /// continuation toward [`HANDOVER_TOLERANCE`] is given up, its iterations count
+    /// although the point returned is the one that met the tolerance.
     pub iterations: u32,
     /// Newton iterations of the active-set polish, `None` if it was off or rejected (the
     /// interior-point solution is returned then).
