@@ -320,6 +320,25 @@ impl TrainingState {
         self.history.iter().map(|h| h.train_seconds).sum()
     }
 
+    /// The median over the epochs of an epoch's wall seconds in training steps (0 before
+    /// the first epoch); with an even count, the mean of the middle two. The cost of an
+    /// epoch as a user would quote it: an epoch slowed by another process, or stretched
+    /// by a pause of the whole run (`kill -STOP`), moves [`Self::train_seconds`] but not
+    /// this, as long as fewer than half the epochs are affected.
+    pub fn median_epoch_seconds(&self) -> f64 {
+        let mut t: Vec<f64> = self.history.iter().map(|h| h.train_seconds).collect();
+        if t.is_empty() {
+            return 0.0;
+        }
+        t.sort_by(f64::total_cmp);
+        let n = t.len();
+        if n % 2 == 1 {
+            t[n / 2]
+        } else {
+            0.5 * (t[n / 2 - 1] + t[n / 2])
+        }
+    }
+
     /// Training batches skipped over the run, and the first reason.
     pub fn skipped(&self) -> (usize, Option<&str>) {
         (
@@ -788,6 +807,24 @@ mod tests {
         let d = std::env::temp_dir().join(format!("weft-trainer-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         d
+    }
+
+    #[test]
+    fn the_median_epoch_ignores_a_paused_epoch() {
+        let d = tmp("median");
+        let mut model = Line::new(0.05);
+        let mut state = Trainer::new("t", config(4)).run(&d, &mut model, &mut Silent).unwrap();
+        for (h, t) in state.history.iter_mut().zip([2.0, 700.0, 3.0, 4.0]) {
+            h.train_seconds = t;
+        }
+        // Even count: the mean of the middle two; the 700 s epoch does not count.
+        assert_eq!(state.median_epoch_seconds(), 3.5);
+        assert_eq!(state.train_seconds(), 709.0);
+        state.history.pop();
+        assert_eq!(state.median_epoch_seconds(), 3.0);
+        state.history.clear();
+        assert_eq!(state.median_epoch_seconds(), 0.0);
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

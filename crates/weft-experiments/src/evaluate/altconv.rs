@@ -363,13 +363,11 @@ fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: 
         std::fs::create_dir_all(config_path.parent().context("config directory")?)?;
         std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
         // Wall time per training sequence pass (forward, backward, Adam), from each run's
-        // own record: the fused kernels unless the configuration asks for autograd.
+        // own record: the fused kernels unless the configuration asks for autograd. The
+        // median epoch, so a paused or shared epoch does not move it.
         let seconds: Vec<f64> = runs
             .iter()
-            .map(|(state, _)| {
-                let passes = state.epochs_done.max(1) * dataset.split("train").count().max(1);
-                state.train_seconds() / passes as f64
-            })
+            .map(|(state, _)| state.median_epoch_seconds() / dataset.split("train").count().max(1) as f64)
             .collect();
         out.record(
             scene,

@@ -729,8 +729,8 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
                 row.1[k_split].push(s);
             }
             if let Some(f) = f {
-                row.2
-                    .push(f.state.train_seconds() / (f.state.epochs_done.max(1) * train.len()).max(1) as f64);
+                // The median epoch (a paused or shared epoch does not move it).
+                row.2.push(f.state.median_epoch_seconds() / train.len().max(1) as f64);
             }
         }
     }
