@@ -891,7 +891,8 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     });
     out.tables.push(Table {
         title: format!("Training time per example on `{scene}` (s), paper / ours"),
-        caption: "Wall seconds per training example and epoch, mean over the seeds; the paper's figures are its \
+        caption: "Wall seconds per training example and epoch (each model's median epoch), mean over the seeds; \
+                  the paper's figures are its \
                   forward plus backward time per example (Geng et al. §4.1 for the SOCP, §6.1 for the quasistatic \
                   layer) on its machine."
             .into(),
