@@ -4,7 +4,9 @@
 //! pass's report (interior-point and polish iterations, seconds) and the same-run time of
 //! Clarabel on the same problem.
 //!
-//! `cargo run --release -p weft-proj --example socp_moderate_stretch`
+//! `cargo run --release -p weft-proj --example socp_moderate_stretch [SEED] [--verbose]`
+//! (`--verbose`: the interior-point log of the default solver, with each iteration's
+//! assembly and factorisation time, on standard error).
 
 use std::time::Instant;
 
@@ -13,7 +15,12 @@ use weft_proj::{ConicSolver, InextensibilityLayer, SocpSettings};
 fn main() {
     let rest = weft_mesh::generators::sheet(55, 1.0).expect("sheet");
     // An optional seed draws the stretch field's phases and frequencies at random.
-    let seed: Option<u64> = std::env::args().nth(1).map(|a| a.parse().expect("seed: an integer"));
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let verbose = args.iter().any(|a| a == "--verbose");
+    let seed: Option<u64> = args
+        .iter()
+        .find(|a| *a != "--verbose")
+        .map(|a| a.parse().expect("seed: an integer"));
     let mut draw = {
         let mut state = seed.unwrap_or(0).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5;
         move || {
@@ -50,7 +57,13 @@ fn main() {
         })
         .collect();
     for (name, settings) in [
-        ("default", SocpSettings::default()),
+        (
+            "default",
+            SocpSettings {
+                verbose,
+                ..SocpSettings::default()
+            },
+        ),
         (
             "clarabel",
             SocpSettings {

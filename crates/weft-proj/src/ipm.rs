@@ -250,13 +250,12 @@ impl<'a> ReducedIpm<'a> {
             let converged = worst <= tolerance;
             // The continuation is given up after two iterations in a row with the primal
             // residual and gap at the tighter tolerance and the dual residual above it.
-            if met.is_some() && !converged && res.primal.max(relative_gap) <= tolerance {
-                dual_stalled += 1;
-                if dual_stalled >= 2
-                    && let Some(point) = met.take()
-                {
-                    return Ok((give_up(point, iterations), None));
-                }
+            let stalled = met.is_some() && !converged && res.primal.max(relative_gap) <= tolerance;
+            dual_stalled = if stalled { dual_stalled + 1 } else { 0 };
+            if dual_stalled >= 2
+                && let Some(point) = met.take()
+            {
+                return Ok((give_up(point, iterations), None));
             }
             let solution = |x: &[f64], s: &[Cone], z: &[Cone]| IpmSolution {
                 x: x.to_vec(),
