@@ -12,15 +12,36 @@ use std::time::Instant;
 
 use weft_proj::{ConicSolver, InextensibilityLayer, SocpSettings};
 
-fn main() {
-    let rest = weft_mesh::generators::sheet(55, 1.0).expect("sheet");
-    // An optional seed draws the stretch field's phases and frequencies at random.
+const USAGE: &str = "socp_moderate_stretch [SEED] [--verbose]\n  SEED       draws the stretch field's phases and frequencies (default: a fixed field)\n  --verbose  the default solver's interior-point log on standard error";
+
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{USAGE}");
+        return Ok(());
+    }
     let verbose = args.iter().any(|a| a == "--verbose");
-    let seed: Option<u64> = args
-        .iter()
-        .find(|a| *a != "--verbose")
-        .map(|a| a.parse().expect("seed: an integer"));
+    // An optional seed draws the stretch field's phases and frequencies at random; any
+    // other argument is an error, never read as a seed.
+    let mut seed: Option<u64> = None;
+    for a in args.iter().filter(|a| *a != "--verbose") {
+        match (a.parse::<u64>(), seed) {
+            (Ok(s), None) => seed = Some(s),
+            (Ok(_), Some(_)) => return Err(format!("more than one seed given ({a})\nusage: {USAGE}").into()),
+            (Err(_), _) => return Err(format!("unknown argument {a:?}\nusage: {USAGE}").into()),
+        }
+    }
+    let rest = weft_mesh::generators::sheet(55, 1.0)?;
     let mut draw = {
         let mut state = seed.unwrap_or(0).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5;
         move || {
@@ -72,19 +93,20 @@ fn main() {
             },
         ),
     ] {
-        let layer = InextensibilityLayer::new(&rest, 0.1, settings).expect("layer");
+        let layer = InextensibilityLayer::new(&rest, 0.1, settings)?;
         let mut best = f64::INFINITY;
         let mut last = None;
         for _ in 0..3 {
             let t = Instant::now();
-            let (_, report) = layer.forward(&pred).expect("forward");
+            let (_, report) = layer.forward(&pred)?;
             best = best.min(t.elapsed().as_secs_f64());
             last = Some(report);
         }
         println!(
             "{name}: best of 3 forward passes {:.3} s; {:?}",
             best,
-            last.expect("ran")
+            last.ok_or("no forward pass ran")?
         );
     }
+    Ok(())
 }

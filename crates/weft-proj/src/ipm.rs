@@ -227,12 +227,15 @@ impl<'a> ReducedIpm<'a> {
             point.seconds = start.elapsed().as_secs_f64();
             point
         };
-        let failed = |status: &str, iterations: u32, met: Option<IpmSolution>| match met {
+        // A solve that stops early returns the point that met the looser tolerance, if
+        // there is one, and the error otherwise.
+        let stop = |error: Error, iterations: u32, met: Option<IpmSolution>| match met {
             Some(point) => Ok((give_up(point, iterations), None)),
-            None => Err(Error::SolverFailed {
-                status: status.to_string(),
-                iterations,
-            }),
+            None => Err(error),
+        };
+        let failed = |status: &str, iterations: u32| Error::SolverFailed {
+            status: status.to_string(),
+            iterations,
         };
         loop {
             let res = self.residuals(b, &x, &s, &z);
@@ -244,7 +247,7 @@ impl<'a> ReducedIpm<'a> {
                 );
             }
             if !(res.primal.is_finite() && res.dual.is_finite() && relative_gap.is_finite()) {
-                return failed("NumericalError", iterations, met);
+                return stop(failed("NumericalError", iterations), iterations, met);
             }
             let worst = res.primal.max(res.dual).max(relative_gap);
             let converged = worst <= tolerance;
@@ -284,14 +287,11 @@ impl<'a> ReducedIpm<'a> {
                 }
             }
             if iterations >= settings.max_iterations {
-                return failed("MaxIterations", iterations, met);
+                return stop(failed("MaxIterations", iterations), iterations, met);
             }
             iterations += 1;
             if let Err(error) = self.advance(&res, m, settings, iterations, &mut x, &mut s, &mut z) {
-                return match met {
-                    Some(point) => Ok((give_up(point, iterations), None)),
-                    None => Err(error),
-                };
+                return stop(error, iterations, met);
             }
         }
     }
