@@ -286,6 +286,29 @@ pub fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
     (mean, var.sqrt())
 }
 
+/// Decimals that print `x` with three significant digits in fixed notation: tables hold
+/// figures that span decades (an energy error of 1.39 mJ beside one of 0.00707 mJ; μ of
+/// 0.1 beside 0.0074), which a fixed number of decimals rounds to nothing.
+pub fn three_significant_decimals(x: f64) -> usize {
+    if x.is_finite() && x != 0.0 {
+        (2 - x.abs().log10().floor() as i32).max(0) as usize
+    } else {
+        3
+    }
+}
+
+/// `x` with three significant digits in fixed notation (`three_significant_decimals`).
+pub fn three_significant(x: f64) -> String {
+    let d = three_significant_decimals(x);
+    format!("{x:.d$}")
+}
+
+/// A mean over seeds with three significant digits and their spread to the same decimals.
+pub fn mean_and_spread(mean: f64, sd: f64) -> String {
+    let d = three_significant_decimals(mean);
+    format!("{mean:.d$}±{sd:.d$}")
+}
+
 /// The distinct names of `names`, in first-seen order.
 pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
     let mut v: Vec<&str> = Vec::new();
@@ -300,6 +323,18 @@ pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn table_figures_keep_three_significant_digits_across_decades() {
+        assert_eq!(three_significant(1.394), "1.39");
+        assert_eq!(three_significant(0.007_07), "0.00707");
+        assert_eq!(three_significant(-0.022), "-0.0220");
+        assert_eq!(three_significant(123.4), "123");
+        assert_eq!(three_significant(4519.7), "4520");
+        assert_eq!(three_significant(0.0), "0.000");
+        assert_eq!(mean_and_spread(4.0712, 0.0721), "4.07±0.07");
+        assert_eq!(mean_and_spread(0.007_07, 0.002_1), "0.00707±0.00210");
+    }
 
     #[test]
     fn validation_rejects_non_kebab_names_nan_unknown_units_and_negative_sizes() {

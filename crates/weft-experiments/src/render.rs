@@ -1,7 +1,9 @@
-//! Software rendering of a triangle mesh coloured by per-vertex error: an orthographic
+//! Software rendering of a triangle mesh coloured by a per-vertex value: an orthographic
 //! view, faces painted back to front (painter's algorithm), each face's colour the
-//! viridis colour of its mean vertex error shaded by how squarely it faces the camera,
-//! and a colour bar in millimetres.
+//! viridis colour of its vertices' mean position on the colour bar, shaded by how
+//! squarely it faces the camera. Errors are drawn on a linear bar in millimetres
+//! ([`error_png`]); a positive parameter spanning decades, such as a learned per-vertex
+//! μ, on a logarithmic bar in its own unit ([`log_scale_png`]).
 
 use std::path::Path;
 
@@ -41,23 +43,98 @@ const BAR: i32 = 70;
 /// The viridis colour of each vertex error (m) on a scale from 0 to `scale` (m): the
 /// colours of [`error_png`], for a PLY file a user can open in any mesh viewer.
 pub fn error_colors(errors: &[f64], scale: f64) -> Vec<[u8; 3]> {
-    errors
+    bar_colors(&errors.iter().map(|&e| e / scale.max(1e-300)).collect::<Vec<_>>())
+}
+
+/// The viridis colour of each position on the colour bar (0 at the bottom, 1 at the top;
+/// clamped).
+pub fn bar_colors(fractions: &[f64]) -> Vec<[u8; 3]> {
+    fractions
         .iter()
-        .map(|&e| {
-            let c = ViridisRGB.get_color_normalized((e / scale.max(1e-300)).clamp(0.0, 1.0), 0.0, 1.0);
+        .map(|&t| {
+            let c = ViridisRGB.get_color_normalized(t.clamp(0.0, 1.0), 0.0, 1.0);
             [c.0, c.1, c.2]
         })
         .collect()
 }
 
+/// The colour bar's labels: its bottom and top values and their unit.
+#[derive(Debug, Clone)]
+pub struct ColourBar {
+    pub bottom: String,
+    pub top: String,
+    pub unit: String,
+}
+
 /// Renders `positions` (flat, m) with `faces`, coloured by `errors` (m per vertex) on a
-/// scale from 0 to `scale` (m), to a PNG at `path`.
+/// scale from 0 to `scale` (m), to a PNG at `path`; the bar is labelled in millimetres.
 pub fn error_png(
     path: &Path,
     positions: &[f64],
     faces: &[[usize; 3]],
     errors: &[f64],
     scale: f64,
+    title: &str,
+    view: View,
+) -> crate::Result<()> {
+    let fractions: Vec<f64> = errors.iter().map(|&e| e / scale).collect();
+    let bar = ColourBar {
+        bottom: format!("{:.3}", 0.0),
+        top: format!("{:.3}", 1e3 * scale),
+        unit: "mm".into(),
+    };
+    shaded_png(path, positions, faces, &fractions, &bar, title, view)
+}
+
+/// Where each of `values` (positive) sits on a logarithmic bar from the smallest to the
+/// largest of them, and that bar's labels in `unit`: a learned per-vertex μ spans several
+/// decades, which a linear bar shows as one colour and a few outliers.
+pub fn log_scale(values: &[f64], unit: &str) -> crate::Result<(Vec<f64>, ColourBar)> {
+    if let Some(bad) = values.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+        return Err(crate::Error::Invalid(format!(
+            "a logarithmic colour bar needs positive, finite values; got {bad}"
+        )));
+    }
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(0.0f64, f64::max);
+    let span = (hi / lo).ln();
+    let fractions = values
+        .iter()
+        .map(|v| if span > 0.0 { (v / lo).ln() / span } else { 0.5 })
+        .collect();
+    let label = |v: f64| format!("{v:.1e}");
+    Ok((
+        fractions,
+        ColourBar {
+            bottom: label(lo),
+            top: label(hi),
+            unit: format!("{unit} (log)"),
+        },
+    ))
+}
+
+/// [`error_png`] for `values` on a logarithmic bar ([`log_scale`]).
+pub fn log_scale_png(
+    path: &Path,
+    positions: &[f64],
+    faces: &[[usize; 3]],
+    values: &[f64],
+    unit: &str,
+    title: &str,
+    view: View,
+) -> crate::Result<()> {
+    let (fractions, bar) = log_scale(values, unit)?;
+    shaded_png(path, positions, faces, &fractions, &bar, title, view)
+}
+
+/// Renders `positions` (flat, m) with `faces`, each vertex at `fractions` of the way up the
+/// colour bar `bar`, to a PNG at `path`.
+fn shaded_png(
+    path: &Path,
+    positions: &[f64],
+    faces: &[[usize; 3]],
+    fractions: &[f64],
+    bar: &ColourBar,
     title: &str,
     view: View,
 ) -> crate::Result<()> {
@@ -102,8 +179,8 @@ pub fn error_png(
         } else {
             0.0
         };
-        let e = t.iter().map(|&v| errors[v]).sum::<f64>() / 3.0;
-        let c = ViridisRGB.get_color_normalized((e / scale).clamp(0.0, 1.0), 0.0, 1.0);
+        let e = t.iter().map(|&v| fractions[v]).sum::<f64>() / 3.0;
+        let c = ViridisRGB.get_color_normalized(e.clamp(0.0, 1.0), 0.0, 1.0);
         let shade = 0.45 + 0.55 * facing;
         let rgb = RGBColor(
             (c.0 as f64 * shade) as u8,
@@ -113,25 +190,24 @@ pub fn error_png(
         let pts: Vec<(i32, i32)> = t.iter().map(|&v| to_px(screen[v])).collect();
         root.draw(&Polygon::new(pts, rgb.filled()))?;
     }
-    // Colour bar with its scale in millimetres.
+    // Colour bar with its bottom and top labels and its unit.
     let (bx, by, bh) = (WIDTH as i32 - BAR + 10, 50, HEIGHT as i32 - 100);
     for k in 0..bh {
         let c = ViridisRGB.get_color_normalized(1.0 - k as f64 / bh as f64, 0.0, 1.0);
         root.draw(&Rectangle::new([(bx, by + k), (bx + 14, by + k + 1)], c.filled()))?;
     }
-    let label = |v: f64| format!("{:.3}", 1e3 * v);
     root.draw(&Text::new(
-        label(scale),
+        bar.top.clone(),
         (bx + 17, by - 5),
         ("sans-serif", 12).into_font(),
     ))?;
     root.draw(&Text::new(
-        label(0.0),
+        bar.bottom.clone(),
         (bx + 17, by + bh - 8),
         ("sans-serif", 12).into_font(),
     ))?;
     root.draw(&Text::new(
-        "mm".to_string(),
+        bar.unit.clone(),
         (bx, by + bh + 10),
         ("sans-serif", 12).into_font(),
     ))?;
@@ -154,5 +230,36 @@ pub mod fonts {
                 dejavu::sans::regular(),
             );
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_log_scale_puts_each_decade_at_an_equal_step_and_rejects_non_positive_values() {
+        let (f, bar) = log_scale(&[1e-3, 1e-2, 1e-1, 1.0], "μ").unwrap();
+        for (got, want) in f.iter().zip([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0]) {
+            assert!((got - want).abs() < 1e-12, "{f:?}");
+        }
+        assert_eq!((bar.bottom.as_str(), bar.top.as_str()), ("1.0e-3", "1.0e0"));
+        assert_eq!(bar.unit, "μ (log)");
+        // One value: the middle of the bar, not a division by zero.
+        assert_eq!(log_scale(&[0.1, 0.1], "μ").unwrap().0, vec![0.5, 0.5]);
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = log_scale(&[0.1, bad], "μ").unwrap_err().to_string();
+            assert!(e.contains("positive, finite"), "{e}");
+        }
+    }
+
+    #[test]
+    fn error_colours_run_from_the_bottom_to_the_top_of_the_bar() {
+        let c = error_colors(&[0.0, 0.002, 0.004, 0.008], 0.004);
+        assert_eq!(c[0], bar_colors(&[0.0])[0]);
+        assert_eq!(c[1], bar_colors(&[0.5])[0]);
+        // Beyond the scale: clamped to the top.
+        assert_eq!(c[2], c[3]);
+        assert_ne!(c[0], c[2]);
     }
 }

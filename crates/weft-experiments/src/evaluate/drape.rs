@@ -30,7 +30,7 @@ use weft_proj::RestShape;
 use super::context::EvalContext;
 use crate::paper::Table;
 use crate::records::{ExperimentOutput, Timing, mean_sd};
-use crate::render::{View, error_colors, error_png};
+use crate::render::View;
 use weft_data::Size;
 use weft_data::files::{progress_bar, write_json};
 
@@ -616,7 +616,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
             .state
             .history
             .iter()
-            .filter_map(|h| h.extra.get("mu").map(|m| format!("{m:.4}")))
+            .filter_map(|h| h.extra.get("mu").map(|&m| crate::records::three_significant(m)))
             .collect();
         let last = f
             .state
@@ -632,9 +632,9 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
         mu_rows.push(vec![
             format!("{start}"),
             paper_learned_mu(label).map_or("—".into(), |p| format!("{p}")),
-            format!("{kept:.4}"),
+            crate::records::three_significant(kept),
             format!("{}", f.state.best_epoch),
-            format!("{last:.4}"),
+            crate::records::three_significant(last),
             path.join(" → "),
         ]);
     }
@@ -791,9 +791,9 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
                     set_split(out, split);
                 }
                 let ours = if many {
-                    format!("{m:.3}±{sd:.3}")
+                    crate::records::mean_and_spread(m, sd)
                 } else {
-                    format!("{m:.3}")
+                    crate::records::three_significant(m)
                 };
                 cells.push(match p {
                     Some(p) => format!("{p:.3} / {ours}"),
@@ -857,7 +857,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     out.notes.push(format!(
         "drape/{scene}: the learned global μ after {mu_study_epochs} epochs from starts 1, 0.1 and 0.01 (seed {seed0}): \
          {} — largest / smallest {:.2}",
-        final_mu.iter().map(|m| format!("{m:.4}")).collect::<Vec<_>>().join(", "),
+        final_mu.iter().map(|&m| crate::records::three_significant(m)).collect::<Vec<_>>().join(", "),
         hi / lo
     ));
     let header = |a: &str, b: &str| {
@@ -1026,25 +1026,32 @@ fn render_mu(
 ) -> crate::Result<()> {
     let dir = Path::new("renders").join("drape").join(scene);
     std::fs::create_dir_all(ctx.out.join(&dir))?;
-    let scale = mu.iter().copied().fold(0.0f64, f64::max).max(1e-12);
+    // μ_i spans decades (a few vertices far above the median), so the map is logarithmic.
+    let mut sorted = mu.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
     let x = dataset.sleeve.flat_positions();
     let png = dir.join("per-vertex-mu.png");
-    error_png(
+    crate::render::log_scale_png(
         &ctx.out.join(&png),
         &x,
         dataset.sleeve.faces(),
         mu,
-        scale,
-        &format!("{scene} — learned μ_i (0 to {scale:.3})"),
+        "μ",
+        &format!(
+            "{scene} — learned μ_i (median {})",
+            crate::records::three_significant(median)
+        ),
         View::BEAM,
     )?;
     out.renders.push(png.display().to_string());
     let points: Vec<Vector3<f64>> = dataset.sleeve.positions().to_vec();
+    let (fractions, _) = crate::render::log_scale(mu, "μ")?;
     weft_mesh::io::write_ply(
         &ctx.out.join(dir.join("per-vertex-mu.ply")),
         &points,
         dataset.sleeve.faces(),
-        Some(&error_colors(mu, scale)),
+        Some(&crate::render::bar_colors(&fractions)),
     )?;
     Ok(())
 }

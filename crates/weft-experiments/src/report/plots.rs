@@ -87,6 +87,34 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 2.0, hi * 2.0)
 }
 
+/// Labelled ticks of a logarithmic axis from `lo` to `hi`: 1, 2 and 5 times the powers of
+/// ten inside it; every integer multiple where that gives fewer than three; the powers of
+/// ten alone (every n-th of them past ten) where it gives more than ten. plotters labels a
+/// logarithmic axis at powers of ten only, so a range inside one decade (the loose
+/// sleeve's errors, 1.6–8.1 mm with the margins) would carry no label at all.
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
+    }
+    let ticks = |mantissas: &[f64]| -> Vec<f64> {
+        let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+        (k0..=k1)
+            .flat_map(|k| mantissas.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|v| *v >= lo && *v <= hi)
+            .collect()
+    };
+    let coarse = ticks(&[1.0, 2.0, 5.0]);
+    if coarse.len() < 3 {
+        return ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    }
+    if coarse.len() <= 10 {
+        return coarse;
+    }
+    let decades = ticks(&[1.0]);
+    let step = decades.len().div_ceil(10).max(1);
+    decades.into_iter().step_by(step).collect()
+}
+
 /// Indices of the points no other point beats in both time and error.
 pub fn pareto_front(points: &[ParetoPoint]) -> Vec<usize> {
     let mut front: Vec<usize> = (0..points.len())
@@ -123,7 +151,10 @@ where
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d((xlo..xhi).log_scale(), (ylo..yhi).log_scale())
+        .build_cartesian_2d(
+            (xlo..xhi).log_scale(),
+            (ylo..yhi).log_scale().with_key_points(log_ticks(ylo, yhi)),
+        )
         .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
@@ -185,7 +216,7 @@ where
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..xmax, (ylo..yhi).log_scale())
+        .build_cartesian_2d(0.0..xmax, (ylo..yhi).log_scale().with_key_points(log_ticks(ylo, yhi)))
         .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
@@ -379,7 +410,9 @@ where
     if p.log_y {
         let (lo, hi) = log_range(ys());
         draw!(
-            builder.build_cartesian_2d(xlo..xhi, (lo..hi).log_scale()).map_err(e)?,
+            builder
+                .build_cartesian_2d(xlo..xhi, (lo..hi).log_scale().with_key_points(log_ticks(lo, hi)))
+                .map_err(e)?,
             lo
         )
     } else {
@@ -401,6 +434,23 @@ pub fn lines(stem: &Path, p: &LinePlot) -> crate::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_axes_are_labelled_inside_one_decade_and_sparsely_across_many() {
+        let close = |a: &[f64], b: &[f64]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9 * y);
+        // Inside one decade: every integer mantissa.
+        let t = log_ticks(1.59, 8.14);
+        assert!(close(&t, &[2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]), "{t:?}");
+        // Two decades: 1, 2, 5.
+        let t = log_ticks(0.05, 3.0);
+        assert!(close(&t, &[0.05, 0.1, 0.2, 0.5, 1.0, 2.0]), "{t:?}");
+        // Twelve decades: at most ten labels, all powers of ten.
+        let t = log_ticks(1e-9, 1e3);
+        assert!(t.len() <= 10 && t.len() >= 5, "{t:?}");
+        assert!(t.iter().all(|v| (v.log10() - v.log10().round()).abs() < 1e-9), "{t:?}");
+        // No range, no ticks.
+        assert!(log_ticks(0.0, 1.0).is_empty() && log_ticks(2.0, 1.0).is_empty());
+    }
 
     #[test]
     fn pareto_front_keeps_exactly_the_undominated_points() {

@@ -310,17 +310,6 @@ fn nnwarp_claim(records: &[Record]) -> Claim {
 /// beyond both seed spreads (`mean + sd ≤ 0.95 (mean_net − sd_net)`), with its stretching
 /// error cut at least 5×, and the learned μ from starts 1, 0.1 and 0.01 within a factor
 /// 1.5 of each other.
-/// `x` with three significant digits in fixed notation (μ spans decades: 0.0741 and 0.00741
-/// must not both print as 0.07 or 0.007).
-fn three_significant(x: f64) -> String {
-    let decimals = if x.is_finite() && x != 0.0 {
-        (2 - x.abs().log10().floor() as i32).max(0) as usize
-    } else {
-        3
-    };
-    format!("{x:.decimals$}")
-}
-
 fn drape_claim(records: &[Record]) -> Claim {
     let scene = if records
         .iter()
@@ -415,7 +404,10 @@ fn drape_claim(records: &[Record]) -> Claim {
     } else {
         format!(
             "learned μ {} (largest / smallest {:.2})",
-            mu.iter().map(|&m| three_significant(m)).collect::<Vec<_>>().join(", "),
+            mu.iter()
+                .map(|&m| crate::records::three_significant(m))
+                .collect::<Vec<_>>()
+                .join(", "),
             mu_ratio
         )
     };
@@ -681,8 +673,6 @@ mod tests {
             c.ours
         );
         assert_eq!(c.verdict, Verdict::Reproduced);
-        assert_eq!(three_significant(1.0), "1.00");
-        assert_eq!(three_significant(123.4), "123");
         // The same means with a spread that closes the 5 % margin: not reproduced.
         let c = drape_claim(&with(cell("loose-sleeve", "trained-qs-mu0.1", 9.0, 0.5, 1.0)));
         assert_eq!(c.verdict, Verdict::NotReproduced);
