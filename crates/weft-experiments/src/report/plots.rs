@@ -23,8 +23,11 @@ pub struct ParetoPoint {
 
 const SIZE: (u32, u32) = (760, 520);
 
+/// Colours of [`palette`] before it repeats.
+const PALETTE_LEN: usize = 10;
+
 fn palette(i: usize) -> RGBColor {
-    const C: [RGBColor; 10] = [
+    const C: [RGBColor; PALETTE_LEN] = [
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),
         RGBColor(44, 160, 44),
@@ -183,11 +186,14 @@ where
                 .label(p.method.clone())
                 .legend(move |(x, y)| TriangleMarker::new((x + 9, y), 6, c.filled()));
         } else {
+            // Past the palette's ten colours a method is drawn as a ring, so no two share
+            // a marker (the drape plots have eleven methods).
+            let style = if i < PALETTE_LEN { c.filled() } else { c.stroke_width(3) };
             chart
-                .draw_series(std::iter::once(Circle::new(clamp(p), 6, c.filled())))
+                .draw_series(std::iter::once(Circle::new(clamp(p), 6, style)))
                 .map_err(crate::Error::plot)?
                 .label(p.method.clone())
-                .legend(move |(x, y)| Circle::new((x + 9, y), 5, c.filled()));
+                .legend(move |(x, y)| Circle::new((x + 9, y), 5, style));
         }
     }
     finish(&root, &mut chart, SeriesLabelPosition::UpperRight)
