@@ -19,13 +19,9 @@ fn ms(r: Option<&Record>) -> String {
 
 pub fn format_ms(s: f64) -> String {
     let ms = 1e3 * s;
-    if ms >= 100.0 {
-        format!("{ms:.0} ms")
-    } else if ms >= 10.0 {
-        format!("{ms:.1} ms")
-    } else {
-        format!("{ms:.2} ms")
-    }
+    // Three significant digits, but no more than two decimals below a millisecond.
+    let d = crate::records::three_significant_decimals(ms).min(2);
+    format!("{ms:.d$} ms")
 }
 
 /// Every table this run can fill.
@@ -339,3 +335,17 @@ const PENDING: [(&str, &str, bool); 6] = [
         true,
     ),
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::format_ms;
+
+    #[test]
+    fn milliseconds_keep_three_significant_digits_and_at_most_two_decimals() {
+        assert_eq!(format_ms(0.000_234), "0.23 ms");
+        assert_eq!(format_ms(0.006_25), "6.25 ms");
+        assert_eq!(format_ms(0.023_14), "23.1 ms");
+        assert_eq!(format_ms(0.943), "943 ms");
+        assert_eq!(format_ms(1.18), "1180 ms");
+    }
+}

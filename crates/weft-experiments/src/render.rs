@@ -196,21 +196,13 @@ fn shaded_png(
         let c = ViridisRGB.get_color_normalized(1.0 - k as f64 / bh as f64, 0.0, 1.0);
         root.draw(&Rectangle::new([(bx, by + k), (bx + 14, by + k + 1)], c.filled()))?;
     }
-    root.draw(&Text::new(
-        bar.top.clone(),
-        (bx + 17, by - 5),
-        ("sans-serif", 12).into_font(),
-    ))?;
-    root.draw(&Text::new(
-        bar.bottom.clone(),
-        (bx + 17, by + bh - 8),
-        ("sans-serif", 12).into_font(),
-    ))?;
-    root.draw(&Text::new(
-        bar.unit.clone(),
-        (bx, by + bh + 10),
-        ("sans-serif", 12).into_font(),
-    ))?;
+    for (text, at) in [
+        (&bar.top, (bx + 17, by - 5)),
+        (&bar.bottom, (bx + 17, by + bh - 8)),
+        (&bar.unit, (bx, by + bh + 10)),
+    ] {
+        root.draw(&Text::new(text.clone(), at, ("sans-serif", 12).into_font()))?;
+    }
     root.present()?;
     Ok(())
 }
