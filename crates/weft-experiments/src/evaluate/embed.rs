@@ -180,7 +180,7 @@ const EPHYS_RMS_TOLERANCE: f64 = 0.02;
 /// and its two predecessors reconstructed, M_rms of the frame, M_phys of the frame with
 /// the reconstructed predecessors (as on the test split). Only validation and training
 /// frames are read.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 struct ValidationScores {
     m_rms: f64,
     m_phys: f64,
@@ -283,24 +283,17 @@ fn windows(frames: &[FrameRef]) -> Vec<Vec<usize>> {
     out
 }
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Scores {
     m_rms: f64,
     m_sted: f64,
     m_phys: f64,
 }
 
-/// Writes `predictions/embed/<scene>/<method>.safetensors`: the reconstructed test frames
-/// beside the ground truth, with each frame's sequence and frame index.
-fn write_predictions(
-    ctx: &EvalContext,
-    scene: &str,
-    method: &str,
-    data: &EmbedData,
-    predicted: &[Vec<f64>],
-) -> crate::Result<()> {
-    let dir = ctx.out.join("predictions").join("embed").join(scene);
-    std::fs::create_dir_all(&dir)?;
+/// Writes `path` (`predictions/embed/<scene>/<method>.safetensors` in the report): the
+/// reconstructed test frames beside the ground truth, with each frame's sequence and frame
+/// index.
+fn write_predictions(path: &Path, data: &EmbedData, predicted: &[Vec<f64>]) -> crate::Result<()> {
     let (f, v) = (predicted.len(), data.num_vertices());
     let truth: Vec<f64> = data
         .test_frames
@@ -320,7 +313,7 @@ fn write_predictions(
             .into(),
     );
     Ok(write_safetensors(
-        &dir.join(format!("{method}.safetensors")),
+        path,
         &[
             Array::f64("positions", vec![f, v, 3], &predicted.concat()),
             Array::f64("ground_truth", vec![f, v, 3], &truth),
@@ -610,6 +603,7 @@ const IK_SCENES: [&str; 2] = ["sheet-ms", "sheet-fem"];
 const IK_TARGETS: usize = 6;
 
 /// One row of the inverse-kinematics table: means over the targets.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct IkRow {
     scene: String,
     targets: usize,
@@ -726,11 +720,161 @@ fn ik_table(rows: &[IkRow], settings: IkSettings) -> Table {
     }
 }
 
+/// What the experiment reads of one trained model, computed once after training and kept
+/// beside it as `scores.json`. Nothing later needs the weights, so a run carried to another
+/// machine by its small files (docs/EMBEDDING.md, "A run that spans machines") does not
+/// retrain the models it has scored.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct ModelScores {
+    /// The configuration the model trained under (a model of another is retrained).
+    config: EmbedTrainingConfig,
+    validation: ValidationScores,
+    test: Scores,
+    /// Seconds per test frame to reconstruct (encode and decode).
+    seconds_per_frame: f64,
+    /// Table IV's roll-out test.
+    rollout: Scores,
+    /// The roll-out test of the model after stage 2 (PB-loss models: Table IV's "2nd stage").
+    stage_2_rollout: Option<Scores>,
+    /// What a method's first seed adds: retrieval, plots, inverse kinematics.
+    first_seed: Option<FirstSeed>,
+}
+
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct FirstSeed {
+    ndcg: f64,
+    long_rollout: Curve,
+    scatter: Option<Scatter>,
+    ik: Option<IkRow>,
+}
+
+/// A model's place in the report: its scene, the method it is reported as, and whether it
+/// is that method's first seed (which draws the plots and writes the predictions).
+#[derive(Debug, Clone, Copy)]
+struct Role<'a> {
+    scene: &'a str,
+    method: &'a str,
+    first_seed: bool,
+}
+
+const SCORES_FILE: &str = "scores.json";
+
+/// A first seed's test reconstructions, kept in its model directory until the scene knows
+/// which model it reports (the λ_ephys choice), then copied to `predictions/`.
+const PREDICTIONS_FILE: &str = "test-predictions.safetensors";
+
+/// Trains (or resumes) the model in `dir` and scores it, or reads the scores an earlier run
+/// kept for the same configuration.
+fn scored_model(
+    ctx: &EvalContext,
+    data: &EmbedData,
+    config: &EmbedTrainingConfig,
+    dir: &Path,
+    role: Role,
+) -> crate::Result<ModelScores> {
+    let path = dir.join(SCORES_FILE);
+    if let Ok(kept) = weft_nn::checkpoint::read_json::<ModelScores>(&path) {
+        if config.trains_like(&kept.config) && (kept.first_seed.is_some() || !role.first_seed) {
+            return Ok(kept);
+        }
+    }
+    train(ctx, data, config, dir)?;
+    let model = EmbedModel::load(dir, data, 3)?;
+    let t = Instant::now();
+    let predicted = model.reconstruct(data, &data.test_frames, 16)?;
+    let seconds_per_frame = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
+    let pb = role.method == "ours";
+    let stage_2_rollout = if pb {
+        Some(rollout_scores(data, &EmbedModel::load(dir, data, 2)?)?)
+    } else {
+        None
+    };
+    let first_seed = if role.first_seed {
+        write_predictions(&dir.join(PREDICTIONS_FILE), data, &predicted)?;
+        let codes = model.codes(data, &data.test_frames)?;
+        Some(FirstSeed {
+            ndcg: full_ranking_ndcg(data, &codes)?,
+            long_rollout: long_rollout(role.scene, role.method, data, &model)?,
+            scatter: if pb && matches!(role.scene, "sheet-ms" | "ball-ms") {
+                Some(embedding_scatter(role.scene, role.method, data, &codes)?)
+            } else {
+                None
+            },
+            ik: if pb && IK_SCENES.contains(&role.scene) {
+                Some(inverse_kinematics(role.scene, data, &model)?)
+            } else {
+                None
+            },
+        })
+    } else {
+        None
+    };
+    let scores = ModelScores {
+        config: config.clone(),
+        validation: validation_scores(data, &model)?,
+        test: score(data, &predicted)?,
+        seconds_per_frame,
+        rollout: rollout_scores(data, &model)?,
+        stage_2_rollout,
+        first_seed,
+    };
+    weft_nn::checkpoint::write_json(&path, &scores)?;
+    Ok(scores)
+}
+
+/// Everything one scene adds to the experiment's output, kept as `embed/scenes/<scene>.json`
+/// once the scene is done: a later run under the same configuration reads it instead of
+/// generating the dataset and scoring the models again.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct SceneResults {
+    /// The experiment's configuration after the scene (the first scene chooses the
+    /// learning-rate schedule).
+    config: EmbedTrainingConfig,
+    /// The scene's records, curves, scatters, learning curves, notes and failures.
+    output: ExperimentOutput,
+    ephys_row: Option<(Vec<f64>, Vec<String>)>,
+    table_2: Vec<(String, Scores)>,
+    table_4: Vec<(String, String, Scores)>,
+    ik_rows: Vec<IkRow>,
+    schedule_rows: Vec<Vec<String>>,
+    /// Wall seconds of the run that finished the scene (its models may have trained in
+    /// earlier runs).
+    wall_seconds: f64,
+}
+
+/// The results kept at `path` if they were made under `config` (on the first scene, under
+/// any candidate schedule: the scene makes the choice); `None` to run the scene.
+fn restored_scene(
+    path: &Path,
+    config: &EmbedTrainingConfig,
+    schedules: &[(&str, Schedule)],
+    first: bool,
+) -> Option<SceneResults> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let kept: SceneResults = match serde_json::from_str(&text) {
+        Ok(k) => k,
+        Err(e) => {
+            eprintln!("embed: {} does not parse ({e}); running the scene", path.display());
+            return None;
+        }
+    };
+    let same = if first {
+        schedules.iter().any(|(_, s)| *s == kept.config.schedule)
+            && EmbedTrainingConfig {
+                schedule: config.schedule,
+                ..kept.config.clone()
+            } == *config
+    } else {
+        kept.config == *config
+    };
+    same.then_some(kept)
+}
+
 pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut out = ExperimentOutput::new("embed", ctx.size);
     let root = ctx.out.join("embed");
     let mut config = training_config(ctx.size);
-    std::fs::create_dir_all(&root)?;
+    std::fs::create_dir_all(root.join("scenes"))?;
     let config_path = root.join("config.json");
     std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
     out.notes.push(format!(
@@ -749,277 +893,52 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         config.weights.mphys,
         seeds(ctx.size).len(),
     ));
-    let seeds = seeds(ctx.size);
-    out.seeds = seeds.len();
+    out.seeds = seeds(ctx.size).len();
+    let schedules = schedule_candidates(ctx.size, &config);
     let mut ephys_rows: Vec<(Vec<f64>, Vec<String>)> = Vec::new();
     let mut table_2: Vec<(String, Scores)> = Vec::new();
-    let mut table_4: Vec<(String, &str, Scores)> = Vec::new();
+    let mut table_4: Vec<(String, String, Scores)> = Vec::new();
     let mut ik_rows: Vec<IkRow> = Vec::new();
     let mut schedule_rows: Vec<Vec<String>> = Vec::new();
-    for &scene in scenes() {
-        let data_dir = root.join("data").join(scene);
-        let stopped =
-            super::context::generate_dataset(ctx, scene, &data_dir).with_context(|| format!("dataset {scene}"))?;
-        out.failures.extend(stopped);
-        let gt = super::context::ground_truth_seconds(&data_dir)?;
-        let dataset = ClothDataset::load(&data_dir)?;
-        let data = EmbedData::new(dataset)?;
-        // A method's figures over its seeds: the mean, and the spread as the `-sd` record.
-        let push = |out: &mut ExperimentOutput, method: &str, runs: &[Scores], seconds: f64| {
-            let timing = Timing {
-                seconds_per_frame: Some(seconds),
-                ground_truth_seconds_per_frame: Some(gt),
-            };
-            let metrics: [(&str, &dyn Fn(&Scores) -> f64, &str); 3] = [
-                ("m-rms", &|s| s.m_rms, "mm"),
-                ("m-sted", &|s| s.m_sted, "1"),
-                ("m-phys", &|s| s.m_phys, "N^2"),
-            ];
-            for (metric, of, unit) in metrics {
-                let (mean, sd) = mean_sd(runs.iter().map(of));
-                out.record(scene, method, metric, mean, unit, timing);
-                if let Some(r) = out.records.last_mut() {
-                    r.split = Some("test".into());
-                }
-                let paper = TABLE_I
-                    .iter()
-                    .find(|t| t.0 == scene && t.1 == method)
-                    .map(|t| match metric {
-                        "m-rms" => t.2,
-                        "m-sted" => t.3,
-                        _ => t.4,
-                    });
-                if let Some(p) = paper {
-                    out.paper(p);
-                }
-                if runs.len() > 1 {
-                    out.record(scene, method, &format!("{metric}-sd"), sd, unit, Timing::default());
-                    if let Some(r) = out.records.last_mut() {
-                        r.split = Some("test".into());
-                    }
-                }
+    let mut scene_seconds = Vec::new();
+    for (i, &scene) in scenes().iter().enumerate() {
+        let path = root.join("scenes").join(format!("{scene}.json"));
+        let results = match restored_scene(&path, &config, &schedules, i == 0) {
+            Some(r) => {
+                eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
+                r
             }
-        };
-        let models = root.join("models").join(scene);
-        let seed_dir = |method: &str, seed: u64| models.join(method).join(format!("seed-{seed}"));
-        // The learning-rate schedule, on the first scene's validation windows: `no-pb`'s
-        // first seed under each candidate; every model of the experiment uses the choice.
-        let schedules = schedule_candidates(ctx.size, &config);
-        if scene == scenes()[0] && schedules.len() > 1 {
-            let mut scored = Vec::new();
-            for (name, schedule) in &schedules {
-                let dir = models.join("schedule-study").join(name);
-                let c = EmbedTrainingConfig {
-                    schedule: *schedule,
-                    ..with_seed(&method_config(&config, true), seeds[0])
-                };
-                train(ctx, &data, &c, &dir)?;
-                let v = validation_scores(&data, &EmbedModel::load(&dir, &data, 3)?)?;
-                let epochs: Vec<String> = (1..=3u8)
-                    .map(|stage| {
-                        TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage))
-                            .map_or("—".into(), |t| format!("{} (kept {})", t.epochs_done, t.best_epoch))
-                    })
-                    .collect();
-                schedule_rows.push(vec![
-                    (*name).to_string(),
-                    format!("{:.3}", v.m_rms),
-                    format!("{:.4e}", v.m_phys),
-                    epochs.join(" / "),
-                ]);
-                scored.push((*name, v));
-            }
-            let chosen = choose_schedule(&scored).context("no learning-rate schedule candidate")?;
-            for row in &mut schedule_rows {
-                row.push(if row[0] == chosen {
-                    "chosen".into()
-                } else {
-                    String::new()
-                });
-            }
-            config.schedule = schedules
-                .iter()
-                .find(|(n, _)| *n == chosen)
-                .map(|(_, s)| *s)
-                .context("the chosen schedule")?;
-            std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
-            out.notes.push(format!(
-                "embed: learning-rate schedule `{chosen}` chosen on `{scene}`'s validation windows (the schedule table)"
-            ));
-        }
-        // `no-pb`, every seed; its first seed is the baseline the λ_ephys choice compares to.
-        let mut baseline_dirs = Vec::new();
-        for &seed in &seeds {
-            let dir = seed_dir("no-pb", seed);
-            train(ctx, &data, &with_seed(&method_config(&config, true), seed), &dir)?;
-            baseline_dirs.push(dir);
-        }
-        let baseline_validation = validation_scores(&data, &EmbedModel::load(&baseline_dirs[0], &data, 3)?)?;
-        // `ours`: the first seed at every λ_ephys of the grid, scored on the validation
-        // windows only; the other seeds at the chosen weight.
-        let grid = ephys_grid(ctx.size, scene, &config);
-        let ours_config = |ephys: f64, seed: u64| {
-            let mut c = with_seed(&method_config(&config, false), seed);
-            c.weights.ephys = ephys;
-            c
-        };
-        let ours_method = |ephys: f64| format!("ours-ephys-{ephys}");
-        let mut candidates = Vec::new();
-        for &ephys in &grid {
-            let dir = seed_dir(&ours_method(ephys), seeds[0]);
-            train(ctx, &data, &ours_config(ephys, seeds[0]), &dir)?;
-            candidates.push((ephys, validation_scores(&data, &EmbedModel::load(&dir, &data, 3)?)?));
-        }
-        let chosen = choose_ephys(&candidates, baseline_validation).context("no λ_ephys candidate")?;
-        let mut ours_dirs = vec![seed_dir(&ours_method(chosen), seeds[0])];
-        for &seed in &seeds[1..] {
-            let dir = seed_dir(&ours_method(chosen), seed);
-            train(ctx, &data, &ours_config(chosen, seed), &dir)?;
-            ours_dirs.push(dir);
-        }
-        if grid.len() > 1 {
-            let mut row = vec![format!("`{scene}`")];
-            row.extend(
-                candidates
-                    .iter()
-                    .map(|(_, v)| format!("{:.3} / {:.4e}", v.m_rms, v.m_phys)),
-            );
-            row.push(format!(
-                "{:.3} / {:.4e}",
-                baseline_validation.m_rms, baseline_validation.m_phys
-            ));
-            row.push(format!("{chosen}"));
-            ephys_rows.push((grid.clone(), row));
-        }
-        out.lines.push(learning_curves(
-            scene,
-            &[("ours", &ours_dirs[0]), ("no-pb", &baseline_dirs[0])],
-        ));
-        let mut ndcg: Vec<(&str, f64)> = Vec::new();
-        for (method, dirs) in [("ours", &ours_dirs), ("no-pb", &baseline_dirs)] {
-            let mut scores = Vec::new();
-            let mut rollouts = Vec::new();
-            let mut snapshots = Vec::new();
-            let mut seconds = Vec::new();
-            for (k, dir) in dirs.iter().enumerate() {
-                let model = EmbedModel::load(dir, &data, 3)?;
+            None => {
                 let t = Instant::now();
-                let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
-                seconds.push(t.elapsed().as_secs_f64() / predicted.len().max(1) as f64);
-                scores.push(score(&data, &predicted)?);
-                rollouts.push(rollout_scores(&data, &model)?);
-                if method == "ours" {
-                    // The model after stage 2: the stage-1 autoencoder and stage-2 simulator.
-                    snapshots.push(rollout_scores(&data, &EmbedModel::load(dir, &data, 2)?)?);
-                }
-                // The first seed draws the plots, predictions and the inverse kinematics.
-                if k == 0 {
-                    let codes = model.codes(&data, &data.test_frames)?;
-                    ndcg.push((method, full_ranking_ndcg(&data, &codes)?));
-                    if method == "ours" && matches!(scene, "sheet-ms" | "ball-ms") {
-                        out.scatters.push(embedding_scatter(scene, method, &data, &codes)?);
-                    }
-                    out.curves.push(long_rollout(scene, method, &data, &model)?);
-                    write_predictions(ctx, scene, method, &data, &predicted)?;
-                    if method == "ours" && IK_SCENES.contains(&scene) {
-                        ik_rows.push(inverse_kinematics(scene, &data, &model)?);
-                    }
-                }
+                let mut r = run_scene(ctx, scene, &config, &schedules, i == 0)?;
+                r.wall_seconds = t.elapsed().as_secs_f64();
+                weft_data::files::write_json(&path, &r)?;
+                r
             }
-            push(&mut out, method, &scores, mean_sd(seconds.iter().copied()).0);
-            if method == "ours" {
-                table_4.push((scene.into(), "2nd stage", mean_scores(&snapshots)));
-                table_4.push((scene.into(), "3rd stage", mean_scores(&rollouts)));
-            } else {
-                // Table IV's baseline trains without L_mphys; ours has no such model
-                // and uses the "[46] + L_vert" one (no physics in any stage).
-                table_4.push((scene.into(), "baseline", mean_scores(&rollouts)));
-                if scene == "sheet-ms" {
-                    table_2.push(("[46] + L_vert".into(), scores[0]));
-                }
-            }
-        }
-        if scene == "sheet-ms" {
-            // Table II: the first seed at each of the paper's λ_ephys (the grid's models).
-            for ephys in [TABLE_II_EPHYS[0], config.weights.ephys, TABLE_II_EPHYS[1]] {
-                let dir = seed_dir(&ours_method(ephys), seeds[0]);
-                train(ctx, &data, &ours_config(ephys, seeds[0]), &dir)?;
-                let model = EmbedModel::load(&dir, &data, 3)?;
-                let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
-                table_2.push((format!("(1, 1, {ephys})"), score(&data, &predicted)?));
-            }
-        }
-        // PCA on the frames the embedding trains on (Tan's training frames less the
-        // validation ones), the autoencoder's latent size.
-        let train_frames: Vec<Vec<f64>> = data
-            .dataset
-            .sequences
-            .iter()
-            .flat_map(|s| {
-                (0..s.num_frames())
-                    .filter(|&m| weft_data::is_train_frame(m) && !weft_data::is_validation_frame(m))
-                    .map(|m| s.frame(m).to_vec())
-            })
-            .collect();
-        let pca = PositionPca::fit(&train_frames, config.autoencoder.latent)?;
-        // The same latent MLP on the PCA codes (issue 31's baseline for simulation): trained
-        // like stage 2, on the same windows, selected on the same validation windows.
-        let pca_config = PcaSimulatorConfig {
-            hidden: config.latent_hidden.clone(),
-            adam: config.adam,
-            batch: config.batch,
-            epochs: config.epochs[1].max(1),
-            seed: config.seed,
-            schedule: config.schedule,
         };
-        let pca_dir = models.join("pca-mlp");
-        let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok());
-        if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
-            std::fs::remove_dir_all(&pca_dir)?;
+        if results.config != config {
+            config = results.config.clone();
+            std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
         }
-        std::fs::create_dir_all(&pca_dir)?;
-        weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
-        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("embed/{scene}/pca-mlp"))?;
-        let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
-            .with_context(|| format!("training embed/{scene}/pca-mlp"))?;
-        drop(progress);
-        table_4.push((scene.into(), "pca + MLP", pca_rollout_scores(&data, &pca_sim)?));
-        out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
-        let t = Instant::now();
-        let predicted: Vec<Vec<f64>> = data
-            .test_frames
-            .iter()
-            .map(|f| pca.decode(&pca.encode(data.dataset.sequences[f.sequence].frame(f.frame))))
-            .collect();
-        let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
-        push(&mut out, "pca", &[score(&data, &predicted)?], seconds);
-        write_predictions(ctx, scene, "pca", &data, &predicted)?;
-        let codes: Vec<Vec<f64>> = data
-            .test_frames
-            .iter()
-            .map(|f| pca.encode(data.dataset.sequences[f.sequence].frame(f.frame)))
-            .collect();
-        ndcg.push(("pca", full_ranking_ndcg(&data, &codes)?));
-        let paper = match scene {
-            "sheet-ms" => " (Tan et al. §VI-C: 0.8045)",
-            "ball-ms" => " (Tan et al. §VI-C: 0.9128)",
-            _ => "",
-        };
-        out.notes.push(format!(
-            "embed/{scene}: {} vertices, {} training windows, {} test frames, PCA kept {} components; nDCG of \
-             motion-label retrieval in latent space over the full ranking: {}{paper}",
-            data.num_vertices(),
-            data.train_windows.len(),
-            data.test_frames.len(),
-            pca.num_components(),
-            ndcg.iter()
-                .map(|(m, v)| format!("{m} {v:.4}"))
-                .collect::<Vec<_>>()
-                .join(", "),
-        ));
+        let o = results.output;
+        out.records.extend(o.records);
+        out.curves.extend(o.curves);
+        out.scatters.extend(o.scatters);
+        out.lines.extend(o.lines);
+        out.notes.extend(o.notes);
+        out.failures.extend(o.failures);
+        ephys_rows.extend(results.ephys_row);
+        table_2.extend(results.table_2);
+        table_4.extend(results.table_4);
+        ik_rows.extend(results.ik_rows);
+        schedule_rows.extend(results.schedule_rows);
+        scene_seconds.push(format!("{scene} {:.0}", results.wall_seconds));
     }
+    out.notes.push(format!(
+        "embed: wall seconds of the run that finished each scene (models trained in earlier runs of the same \
+         command are not in it): {}",
+        scene_seconds.join(", ")
+    ));
     // The paper's orders: λ_ephys ascending then the baseline; baseline, 2nd, 3rd stage.
     table_2.sort_by_key(|(label, _)| TABLE_II.iter().position(|t| t.0 == label).unwrap_or(usize::MAX));
     let model_order = ["baseline", "2nd stage", "3rd stage", "pca + MLP"];
@@ -1074,6 +993,308 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     Ok(out)
 }
 
+/// One scene of the experiment: its dataset, every model trained (or resumed) and scored,
+/// PCA and PCA + MLP; on the first scene, the learning-rate schedule chosen first.
+fn run_scene(
+    ctx: &EvalContext,
+    scene: &str,
+    config: &EmbedTrainingConfig,
+    schedules: &[(&'static str, Schedule)],
+    first: bool,
+) -> crate::Result<SceneResults> {
+    let root = ctx.out.join("embed");
+    let mut r = SceneResults {
+        config: config.clone(),
+        output: ExperimentOutput::new("embed", ctx.size),
+        ephys_row: None,
+        table_2: Vec::new(),
+        table_4: Vec::new(),
+        ik_rows: Vec::new(),
+        schedule_rows: Vec::new(),
+        wall_seconds: 0.0,
+    };
+    let out = &mut r.output;
+    let seeds = seeds(ctx.size);
+    let data_dir = root.join("data").join(scene);
+    let stopped =
+        super::context::generate_dataset(ctx, scene, &data_dir).with_context(|| format!("dataset {scene}"))?;
+    out.failures.extend(stopped);
+    let gt = super::context::ground_truth_seconds(&data_dir)?;
+    let dataset = ClothDataset::load(&data_dir)?;
+    let data = EmbedData::new(dataset)?;
+    // A method's figures over its seeds: the mean, and the spread as the `-sd` record.
+    let push = |out: &mut ExperimentOutput, method: &str, runs: &[Scores], seconds: f64| {
+        let timing = Timing {
+            seconds_per_frame: Some(seconds),
+            ground_truth_seconds_per_frame: Some(gt),
+        };
+        let metrics: [(&str, &dyn Fn(&Scores) -> f64, &str); 3] = [
+            ("m-rms", &|s| s.m_rms, "mm"),
+            ("m-sted", &|s| s.m_sted, "1"),
+            ("m-phys", &|s| s.m_phys, "N^2"),
+        ];
+        for (metric, of, unit) in metrics {
+            let (mean, sd) = mean_sd(runs.iter().map(of));
+            out.record(scene, method, metric, mean, unit, timing);
+            if let Some(r) = out.records.last_mut() {
+                r.split = Some("test".into());
+            }
+            let paper = TABLE_I
+                .iter()
+                .find(|t| t.0 == scene && t.1 == method)
+                .map(|t| match metric {
+                    "m-rms" => t.2,
+                    "m-sted" => t.3,
+                    _ => t.4,
+                });
+            if let Some(p) = paper {
+                out.paper(p);
+            }
+            if runs.len() > 1 {
+                out.record(scene, method, &format!("{metric}-sd"), sd, unit, Timing::default());
+                if let Some(r) = out.records.last_mut() {
+                    r.split = Some("test".into());
+                }
+            }
+        }
+    };
+    let models = root.join("models").join(scene);
+    let seed_dir = |method: &str, seed: u64| models.join(method).join(format!("seed-{seed}"));
+    let role = |method, first_seed| Role {
+        scene,
+        method,
+        first_seed,
+    };
+    // The learning-rate schedule, on the first scene's validation windows: `no-pb`'s
+    // first seed under each candidate; every model of the experiment uses the choice.
+    if first && schedules.len() > 1 {
+        let mut scored = Vec::new();
+        for (name, schedule) in schedules {
+            let dir = models.join("schedule-study").join(name);
+            let c = EmbedTrainingConfig {
+                schedule: *schedule,
+                ..with_seed(&method_config(config, true), seeds[0])
+            };
+            let v = scored_model(ctx, &data, &c, &dir, role("no-pb", false))?.validation;
+            let epochs: Vec<String> = (1..=3u8)
+                .map(|stage| {
+                    TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage))
+                        .map_or("—".into(), |t| format!("{} (kept {})", t.epochs_done, t.best_epoch))
+                })
+                .collect();
+            r.schedule_rows.push(vec![
+                (*name).to_string(),
+                format!("{:.3}", v.m_rms),
+                format!("{:.4e}", v.m_phys),
+                epochs.join(" / "),
+            ]);
+            scored.push((*name, v));
+        }
+        let chosen = choose_schedule(&scored).context("no learning-rate schedule candidate")?;
+        for row in &mut r.schedule_rows {
+            row.push(if row[0] == chosen {
+                "chosen".into()
+            } else {
+                String::new()
+            });
+        }
+        r.config.schedule = schedules
+            .iter()
+            .find(|(n, _)| *n == chosen)
+            .map(|(_, s)| *s)
+            .context("the chosen schedule")?;
+        out.notes.push(format!(
+            "embed: learning-rate schedule `{chosen}` chosen on `{scene}`'s validation windows (the schedule table)"
+        ));
+    }
+    let config = &r.config;
+    // `no-pb`, every seed; its first seed is the baseline the λ_ephys choice compares to.
+    let mut baseline = Vec::new();
+    for (k, &seed) in seeds.iter().enumerate() {
+        let dir = seed_dir("no-pb", seed);
+        let c = with_seed(&method_config(config, true), seed);
+        baseline.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
+    }
+    let baseline_validation = baseline[0].1.validation;
+    // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation
+    // windows only; the other seeds at the chosen weight.
+    let grid = ephys_grid(ctx.size, scene, config);
+    let ours_config = |ephys: f64, seed: u64| {
+        let mut c = with_seed(&method_config(config, false), seed);
+        c.weights.ephys = ephys;
+        c
+    };
+    let ours_method = |ephys: f64| format!("ours-ephys-{ephys}");
+    let mut candidates = Vec::new();
+    for &ephys in &grid {
+        let dir = seed_dir(&ours_method(ephys), seeds[0]);
+        let s = scored_model(ctx, &data, &ours_config(ephys, seeds[0]), &dir, role("ours", true))?;
+        candidates.push((ephys, dir, s));
+    }
+    let validation: Vec<(f64, ValidationScores)> = candidates.iter().map(|(e, _, s)| (*e, s.validation)).collect();
+    let chosen = choose_ephys(&validation, baseline_validation).context("no λ_ephys candidate")?;
+    let first_ours = candidates
+        .iter()
+        .find(|(e, _, _)| *e == chosen)
+        .map(|(_, d, s)| (d.clone(), s.clone()))
+        .context("the chosen λ_ephys model")?;
+    let mut ours = vec![first_ours];
+    for &seed in &seeds[1..] {
+        let dir = seed_dir(&ours_method(chosen), seed);
+        let s = scored_model(ctx, &data, &ours_config(chosen, seed), &dir, role("ours", false))?;
+        ours.push((dir, s));
+    }
+    if grid.len() > 1 {
+        let mut row = vec![format!("`{scene}`")];
+        row.extend(
+            validation
+                .iter()
+                .map(|(_, v)| format!("{:.3} / {:.4e}", v.m_rms, v.m_phys)),
+        );
+        row.push(format!(
+            "{:.3} / {:.4e}",
+            baseline_validation.m_rms, baseline_validation.m_phys
+        ));
+        row.push(format!("{chosen}"));
+        r.ephys_row = Some((grid.clone(), row));
+    }
+    out.lines.push(learning_curves(
+        scene,
+        &[("ours", &ours[0].0), ("no-pb", &baseline[0].0)],
+    ));
+    let mut ndcg: Vec<(&str, f64)> = Vec::new();
+    for (method, runs) in [("ours", &ours), ("no-pb", &baseline)] {
+        let scores: Vec<Scores> = runs.iter().map(|(_, s)| s.test).collect();
+        let rollouts: Vec<Scores> = runs.iter().map(|(_, s)| s.rollout).collect();
+        let seconds = mean_sd(runs.iter().map(|(_, s)| s.seconds_per_frame)).0;
+        let (dir, first_seed) = (&runs[0].0, &runs[0].1);
+        let extras = first_seed.first_seed.as_ref().context("the first seed's plots")?;
+        ndcg.push((method, extras.ndcg));
+        out.curves.push(extras.long_rollout.clone());
+        out.scatters.extend(extras.scatter.clone());
+        r.ik_rows.extend(extras.ik.clone());
+        // The reported model's reconstructions; a model scored on another machine (its
+        // scores kept, its weights not) has none here.
+        let kept = dir.join(PREDICTIONS_FILE);
+        if kept.exists() {
+            let to = ctx.out.join("predictions").join("embed").join(scene);
+            std::fs::create_dir_all(&to)?;
+            std::fs::copy(&kept, to.join(format!("{method}.safetensors")))?;
+        } else {
+            out.notes.push(format!(
+                "embed/{scene}: {method}'s predictions are not in predictions/ (the model was scored in an earlier \
+                 run whose weights were not kept)"
+            ));
+        }
+        push(out, method, &scores, seconds);
+        if method == "ours" {
+            let snapshots: Vec<Scores> = runs
+                .iter()
+                .map(|(_, s)| s.stage_2_rollout.context("a PB-loss model's stage-2 roll-out"))
+                .collect::<crate::Result<_>>()?;
+            r.table_4
+                .push((scene.into(), "2nd stage".into(), mean_scores(&snapshots)));
+            r.table_4
+                .push((scene.into(), "3rd stage".into(), mean_scores(&rollouts)));
+        } else {
+            // Table IV's baseline trains without L_mphys; ours has no such model
+            // and uses the "[46] + L_vert" one (no physics in any stage).
+            r.table_4
+                .push((scene.into(), "baseline".into(), mean_scores(&rollouts)));
+            if scene == "sheet-ms" {
+                r.table_2.push(("[46] + L_vert".into(), scores[0]));
+            }
+        }
+    }
+    if scene == "sheet-ms" {
+        // Table II: the first seed at each of the paper's λ_ephys (the grid's models).
+        for ephys in [TABLE_II_EPHYS[0], config.weights.ephys, TABLE_II_EPHYS[1]] {
+            let s = match candidates.iter().find(|(e, _, _)| *e == ephys) {
+                Some((_, _, s)) => s.test,
+                None => {
+                    let dir = seed_dir(&ours_method(ephys), seeds[0]);
+                    scored_model(ctx, &data, &ours_config(ephys, seeds[0]), &dir, role("ours", true))?.test
+                }
+            };
+            r.table_2.push((format!("(1, 1, {ephys})"), s));
+        }
+    }
+    // PCA on the frames the embedding trains on (Tan's training frames less the
+    // validation ones), the autoencoder's latent size.
+    let train_frames: Vec<Vec<f64>> = data
+        .dataset
+        .sequences
+        .iter()
+        .flat_map(|s| {
+            (0..s.num_frames())
+                .filter(|&m| weft_data::is_train_frame(m) && !weft_data::is_validation_frame(m))
+                .map(|m| s.frame(m).to_vec())
+        })
+        .collect();
+    let pca = PositionPca::fit(&train_frames, config.autoencoder.latent)?;
+    // The same latent MLP on the PCA codes (issue 31's baseline for simulation): trained
+    // like stage 2, on the same windows, selected on the same validation windows.
+    let pca_config = PcaSimulatorConfig {
+        hidden: config.latent_hidden.clone(),
+        adam: config.adam,
+        batch: config.batch,
+        epochs: config.epochs[1].max(1),
+        seed: config.seed,
+        schedule: config.schedule,
+    };
+    let pca_dir = models.join("pca-mlp");
+    let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
+        std::fs::remove_dir_all(&pca_dir)?;
+    }
+    std::fs::create_dir_all(&pca_dir)?;
+    weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
+    let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("embed/{scene}/pca-mlp"))?;
+    let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
+        .with_context(|| format!("training embed/{scene}/pca-mlp"))?;
+    drop(progress);
+    r.table_4
+        .push((scene.into(), "pca + MLP".into(), pca_rollout_scores(&data, &pca_sim)?));
+    out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
+    let t = Instant::now();
+    let predicted: Vec<Vec<f64>> = data
+        .test_frames
+        .iter()
+        .map(|f| pca.decode(&pca.encode(data.dataset.sequences[f.sequence].frame(f.frame))))
+        .collect();
+    let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
+    push(out, "pca", &[score(&data, &predicted)?], seconds);
+    let to = ctx.out.join("predictions").join("embed").join(scene);
+    std::fs::create_dir_all(&to)?;
+    write_predictions(&to.join("pca.safetensors"), &data, &predicted)?;
+    let codes: Vec<Vec<f64>> = data
+        .test_frames
+        .iter()
+        .map(|f| pca.encode(data.dataset.sequences[f.sequence].frame(f.frame)))
+        .collect();
+    ndcg.push(("pca", full_ranking_ndcg(&data, &codes)?));
+    let paper = match scene {
+        "sheet-ms" => " (Tan et al. §VI-C: 0.8045)",
+        "ball-ms" => " (Tan et al. §VI-C: 0.9128)",
+        _ => "",
+    };
+    out.notes.push(format!(
+        "embed/{scene}: {} vertices, {} training windows, {} test frames, PCA kept {} components; nDCG of \
+         motion-label retrieval in latent space over the full ranking: {}{paper}",
+        data.num_vertices(),
+        data.train_windows.len(),
+        data.test_frames.len(),
+        pca.num_components(),
+        ndcg.iter()
+            .map(|(m, v)| format!("{m} {v:.4}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    ));
+    Ok(r)
+}
+
 fn tan_table_2(columns: &[(String, Scores)]) -> Table {
     let paper = |label: &str| TABLE_II.iter().find(|t| t.0 == label).map(|t| (t.1, t.2));
     let mut header = vec!["metric".to_string()];
@@ -1097,7 +1318,7 @@ fn tan_table_2(columns: &[(String, Scores)]) -> Table {
     }
 }
 
-fn tan_table_4(rows: &[(String, &str, Scores)]) -> Table {
+fn tan_table_4(rows: &[(String, String, Scores)]) -> Table {
     Table {
         title: "Tan et al. Table IV — the latent simulator given 2 frames, predicting 3, paper / ours".into(),
         caption: "In each 5-frame test window the first two frames are encoded and the latent MLP predicts the \
@@ -1178,7 +1399,9 @@ pub fn score_model(
             r.split = Some("test".into());
         }
     }
-    write_predictions(ctx, &scene, method, &data, &predicted)?;
+    let dir = ctx.out.join("predictions").join("embed").join(&scene);
+    std::fs::create_dir_all(&dir)?;
+    write_predictions(&dir.join(format!("{method}.safetensors")), &data, &predicted)?;
     Ok(out)
 }
 
@@ -1326,6 +1549,126 @@ mod tests {
         assert_eq!(plot.series[0].y[0], first.initial_validation);
         assert_eq!(plot.series[0].y[2], first.history[1].validation);
         assert_eq!(plot.series[1].x, [0.0, 1.0]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Every file of `dir` (recursively) that is not JSON: what a checkpoint of the run
+    /// leaves behind (docs/EMBEDDING.md).
+    fn weights(dir: &Path) -> Vec<std::path::PathBuf> {
+        let mut out = Vec::new();
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                out.extend(weights(&p));
+            } else if p.extension().and_then(|e| e.to_str()) != Some("json") {
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    /// A model scored once keeps its scores beside it: a later run reads them back without
+    /// the weights (a run carried to another machine by its JSON files) and trains
+    /// nothing, and a model of another configuration is retrained and scored afresh.
+    #[test]
+    fn a_scored_model_is_read_back_without_its_weights_and_rescored_under_another_configuration() {
+        let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
+        let root = std::env::temp_dir().join(format!("weft-embed-scores-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let ctx = EvalContext {
+            size: Size::Quick,
+            out: root.clone(),
+            quiet: true,
+            code_version: "test".into(),
+        };
+        let dir = root.join("model");
+        let config = EmbedTrainingConfig {
+            epochs: [1, 1, 1],
+            ..training_config(Size::Quick)
+        };
+        // `ball-ms` labels the model so that it draws the embedding scatter.
+        let role = Role {
+            scene: "ball-ms",
+            method: "ours",
+            first_seed: true,
+        };
+        let first = scored_model(&ctx, &data, &config, &dir, role).unwrap();
+        let extras = first.first_seed.as_ref().unwrap();
+        assert!(extras.scatter.is_some() && extras.ik.is_none());
+        assert_eq!(extras.long_rollout.method, "ours");
+        assert!(first.stage_2_rollout.is_some());
+        assert!(first.test.m_rms.is_finite() && first.test.m_rms > 0.0);
+        assert!(dir.join(PREDICTIONS_FILE).exists());
+        for w in weights(&dir) {
+            std::fs::remove_file(w).unwrap();
+        }
+        let again = scored_model(&ctx, &data, &config, &dir, role).unwrap();
+        assert_eq!(
+            serde_json::to_string(&again).unwrap(),
+            serde_json::to_string(&first).unwrap()
+        );
+        assert!(weights(&dir).is_empty(), "nothing was trained again");
+        let longer = EmbedTrainingConfig {
+            epochs: [1, 1, 2],
+            ..config.clone()
+        };
+        let other = scored_model(&ctx, &data, &longer, &dir, role).unwrap();
+        assert_eq!(other.config, longer);
+        assert!(!weights(&dir).is_empty(), "the other configuration was trained");
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    /// A finished scene is read back only under the configuration it ran with; the first
+    /// scene's, under whichever candidate schedule it chose, and that choice is adopted.
+    #[test]
+    fn a_finished_scene_is_read_back_only_under_its_configuration() {
+        let dir = std::env::temp_dir().join(format!("weft-embed-scene-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("sheet-ms.json");
+        let config = training_config(Size::Standard);
+        let schedules = schedule_candidates(Size::Standard, &config);
+        let chosen = EmbedTrainingConfig {
+            schedule: schedules[1].1,
+            ..config.clone()
+        };
+        let results = |config: &EmbedTrainingConfig| SceneResults {
+            config: config.clone(),
+            output: ExperimentOutput::new("embed", Size::Standard),
+            ephys_row: Some((vec![0.1, 0.5], vec!["`sheet-ms`".into()])),
+            table_2: Vec::new(),
+            table_4: vec![(
+                "sheet-ms".into(),
+                "baseline".into(),
+                Scores {
+                    m_rms: 1.0,
+                    m_sted: 0.01,
+                    m_phys: 3.0,
+                },
+            )],
+            ik_rows: Vec::new(),
+            schedule_rows: Vec::new(),
+            wall_seconds: 12.0,
+        };
+        assert!(restored_scene(&path, &config, &schedules, true).is_none(), "no file");
+        weft_data::files::write_json(&path, &results(&chosen)).unwrap();
+        let first = restored_scene(&path, &config, &schedules, true).unwrap();
+        assert_eq!(first.config, chosen);
+        assert_eq!(first.table_4[0].2.m_phys, 3.0);
+        assert!(restored_scene(&path, &chosen, &schedules, false).is_some());
+        assert!(restored_scene(&path, &config, &schedules, false).is_none());
+        let mut more = config.clone();
+        more.epochs[0] += 1;
+        assert!(restored_scene(&path, &more, &schedules, true).is_none());
+        let mut odd = chosen.clone();
+        odd.schedule.early_stopping_patience = Some(9);
+        weft_data::files::write_json(&path, &results(&odd)).unwrap();
+        assert!(
+            restored_scene(&path, &config, &schedules, true).is_none(),
+            "not a candidate"
+        );
+        std::fs::write(&path, "{").unwrap();
+        assert!(restored_scene(&path, &config, &schedules, true).is_none());
         let _ = std::fs::remove_dir_all(&dir);
     }
 
