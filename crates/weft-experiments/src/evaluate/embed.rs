@@ -117,11 +117,16 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
 /// sizes): the validation loss has flattened.
 const EARLY_STOPPING_PATIENCE: usize = 5;
 
+/// Stage-1 epochs allowed in the budget study: five times the paper's 30. At standard size
+/// an epoch holds 4 × 170 frames against the paper's 4 × 2400, so the paper's 30 epochs are
+/// fewer steps here; the study shows on validation what more epochs would buy.
+const BUDGET_STUDY_EPOCHS: usize = 150;
+
 /// The learning-rate schedules tried, by name, beside the configuration's constant rate
 /// (Tan et al.'s): halving the rate whenever the validation loss has not improved for two
-/// epochs. The first scene's `no-pb` model (first seed) is trained under each, and the one
-/// with the lowest validation M_rms is used by every model of the experiment. Quick runs
-/// keep the configuration's.
+/// epochs. The first scene's `no-pb` models (every seed) are trained under each, and the one
+/// with the lowest mean validation M_rms is used by every model of the experiment. Quick
+/// runs keep the configuration's.
 fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'static str, Schedule)> {
     let constant = config.schedule;
     if size == Size::Quick {
@@ -511,16 +516,24 @@ fn pca_long_rollout(scene: &str, data: &EmbedData, sim: &PcaSimulator) -> crate:
     Ok(curve)
 }
 
-/// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
-/// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
-/// ground truth shows how the error grows with the number of frames N.
 /// The learning curves of `models` (method, model directory): each stage's validation loss
 /// after every epoch (0: the stage's starting weights). Each stage has its own objective,
 /// so the stages are separate lines.
 fn learning_curves(scene: &str, models: &[(&str, &Path)]) -> LinePlot {
+    stage_curves(
+        format!("{scene}-learning-curves"),
+        format!("embed / {scene}: validation loss per epoch (first seed)"),
+        models,
+        &[1, 2, 3],
+    )
+}
+
+/// The validation loss after every epoch of `stages` of each model, one line per model and
+/// stage, as the plot `name`.
+fn stage_curves(name: String, title: String, models: &[(&str, &Path)], stages: &[u8]) -> LinePlot {
     let mut series = Vec::new();
     for (method, dir) in models {
-        for stage in 1..=3u8 {
+        for &stage in stages {
             let Ok(state) = TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage)) else {
                 continue;
             };
@@ -538,8 +551,8 @@ fn learning_curves(scene: &str, models: &[(&str, &Path)]) -> LinePlot {
     }
     let log_y = series.iter().all(|s| s.y.iter().all(|v| *v > 0.0));
     LinePlot {
-        name: format!("{scene}-learning-curves"),
-        title: format!("embed / {scene}: validation loss per epoch (first seed)"),
+        name,
+        title,
         x_label: "epoch of the stage".into(),
         y_label: "validation loss of the stage (each stage its own objective)".into(),
         log_y,
@@ -547,6 +560,9 @@ fn learning_curves(scene: &str, models: &[(&str, &Path)]) -> LinePlot {
     }
 }
 
+/// Tan et al. §V-B: a latent roll-out of the whole first sequence from the codes of its
+/// frames 0 and 1 and its controls, every frame decoded; the per-frame M_rms against the
+/// ground truth shows how the error grows with the number of frames N.
 fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel) -> crate::Result<Curve> {
     let seq = &data.dataset.sequences[0];
     let mut rollout = rollout_from(data, model, [0, 1].map(|frame| FrameRef { sequence: 0, frame }))?;
@@ -837,6 +853,9 @@ struct SceneResults {
     table_4: Vec<(String, String, Scores)>,
     ik_rows: Vec<IkRow>,
     schedule_rows: Vec<Vec<String>>,
+    /// The budget study's rows (first scene, beyond the quick size).
+    #[serde(default)]
+    budget_rows: Vec<Vec<String>>,
     /// Wall seconds of the run that finished the scene (its models may have trained in
     /// earlier runs).
     wall_seconds: f64,
@@ -900,6 +919,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut table_4: Vec<(String, String, Scores)> = Vec::new();
     let mut ik_rows: Vec<IkRow> = Vec::new();
     let mut schedule_rows: Vec<Vec<String>> = Vec::new();
+    let mut budget_rows: Vec<Vec<String>> = Vec::new();
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
@@ -932,6 +952,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         table_4.extend(results.table_4);
         ik_rows.extend(results.ik_rows);
         schedule_rows.extend(results.schedule_rows);
+        budget_rows.extend(results.budget_rows);
         scene_seconds.push(format!("{scene} {:.0}", results.wall_seconds));
     }
     out.notes.push(format!(
@@ -969,22 +990,44 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         out.tables.push(Table {
             title: "Tan et al. learning-rate schedule chosen on the validation windows".into(),
             caption: format!(
-                "`no-pb`, first seed, on `{}`: validation M_rms (mm) and M_phys (N²) after training under each \
+                "`no-pb`, every seed, on `{}`: validation M_rms (mm) and M_phys (N²) after training under each \
                  schedule (every stage stops once its validation loss has not improved for {EARLY_STOPPING_PATIENCE} \
                  epochs), and the epochs each stage trained (the kept epoch in brackets). The schedule with the lowest \
-                 validation M_rms trains every model; the test split plays no part.",
+                 mean validation M_rms trains every model, and its models are the scene's `no-pb`; the test split \
+                 plays no part.",
                 scenes()[0]
             ),
             header: [
                 "schedule",
-                "validation M_rms (mm)",
-                "validation M_phys (N²)",
-                "epochs, stages 1 / 2 / 3",
+                "mean validation M_rms (mm)",
+                "validation M_rms per seed (mm)",
+                "validation M_phys per seed (N²)",
+                "epochs per seed, stages 1 / 2 / 3 (kept epoch)",
                 "chosen",
             ]
             .map(String::from)
             .to_vec(),
             rows: schedule_rows,
+        });
+    }
+    if !budget_rows.is_empty() {
+        out.tables.push(Table {
+            title: "Tan et al. budget study: more stage-1 epochs on the validation windows".into(),
+            caption: format!(
+                "`no-pb`, first seed, on `{}`, under the chosen schedule: the paper's stage-1 epochs and {}                  (each stage still stops once its validation loss has not improved for {EARLY_STOPPING_PATIENCE}                  epochs). An epoch here is 4 sequences of 170 frames, the paper's 4 of 2400, so its 30 epochs are                  about 14 times fewer steps here. Validation M_rms (mm) and M_phys (N²); the test split plays no                  part.",
+                scenes()[0],
+                BUDGET_STUDY_EPOCHS
+            ),
+            header: [
+                "stage-1 epochs allowed",
+                "epochs, stages 1 / 2 / 3",
+                "validation M_rms (mm)",
+                "validation M_phys (N²)",
+                "training seconds",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: budget_rows,
         });
     }
     out.tables.push(tan_table_2(&table_2));
@@ -1011,6 +1054,7 @@ fn run_scene(
         table_4: Vec::new(),
         ik_rows: Vec::new(),
         schedule_rows: Vec::new(),
+        budget_rows: Vec::new(),
         wall_seconds: 0.0,
     };
     let out = &mut r.output;
@@ -1065,30 +1109,52 @@ fn run_scene(
         method,
         first_seed,
     };
-    // The learning-rate schedule, on the first scene's validation windows: `no-pb`'s
-    // first seed under each candidate; every model of the experiment uses the choice.
+    // The learning-rate schedule, on the first scene's validation windows: `no-pb` under
+    // each candidate, every seed (one seed's M_rms varies too much to choose on); the
+    // chosen candidate's models are the scene's `no-pb`, and every other model of the
+    // experiment trains under it.
+    let mut study: Vec<(&str, Vec<(std::path::PathBuf, ModelScores)>)> = Vec::new();
     if first && schedules.len() > 1 {
         let mut scored = Vec::new();
         for (name, schedule) in schedules {
-            let dir = models.join("schedule-study").join(name);
-            let c = EmbedTrainingConfig {
-                schedule: *schedule,
-                ..with_seed(&method_config(config, true), seeds[0])
+            let mut runs = Vec::new();
+            for (k, &seed) in seeds.iter().enumerate() {
+                let dir = models.join("schedule-study").join(name).join(format!("seed-{seed}"));
+                let c = EmbedTrainingConfig {
+                    schedule: *schedule,
+                    ..with_seed(&method_config(config, true), seed)
+                };
+                runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
+            }
+            let mean = ValidationScores {
+                m_rms: mean_sd(runs.iter().map(|(_, s)| s.validation.m_rms)).0,
+                m_phys: mean_sd(runs.iter().map(|(_, s)| s.validation.m_phys)).0,
             };
-            let v = scored_model(ctx, &data, &c, &dir, role("no-pb", false))?.validation;
-            let epochs: Vec<String> = (1..=3u8)
-                .map(|stage| {
-                    TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage))
-                        .map_or("—".into(), |t| format!("{} (kept {})", t.epochs_done, t.best_epoch))
+            let epochs: Vec<String> = runs
+                .iter()
+                .map(|(dir, _)| {
+                    (1..=3u8)
+                        .map(|stage| {
+                            TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage))
+                                .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
+                        })
+                        .collect::<Vec<_>>()
+                        .join(" / ")
                 })
                 .collect();
+            let (rms, phys) = (
+                runs.iter().map(|(_, s)| format!("{:.3}", s.validation.m_rms)),
+                runs.iter().map(|(_, s)| format!("{:.4e}", s.validation.m_phys)),
+            );
             r.schedule_rows.push(vec![
                 (*name).to_string(),
-                format!("{:.3}", v.m_rms),
-                format!("{:.4e}", v.m_phys),
-                epochs.join(" / "),
+                format!("{:.3}", mean.m_rms),
+                rms.collect::<Vec<_>>().join(", "),
+                phys.collect::<Vec<_>>().join(", "),
+                epochs.join("; "),
             ]);
-            scored.push((*name, v));
+            scored.push((*name, mean));
+            study.push((*name, runs));
         }
         let chosen = choose_schedule(&scored).context("no learning-rate schedule candidate")?;
         for row in &mut r.schedule_rows {
@@ -1106,16 +1172,69 @@ fn run_scene(
         out.notes.push(format!(
             "embed: learning-rate schedule `{chosen}` chosen on `{scene}`'s validation windows (the schedule table)"
         ));
+        study.retain(|(n, _)| *n == chosen);
     }
     let config = &r.config;
-    // `no-pb`, every seed; its first seed is the baseline the λ_ephys choice compares to.
-    let mut baseline = Vec::new();
-    for (k, &seed) in seeds.iter().enumerate() {
-        let dir = seed_dir("no-pb", seed);
-        let c = with_seed(&method_config(config, true), seed);
-        baseline.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
-    }
+    // `no-pb`, every seed (on the first scene, the schedule study's chosen models); its
+    // first seed is the baseline the λ_ephys choice compares to.
+    let baseline = match study.pop() {
+        Some((_, runs)) => runs,
+        None => {
+            let mut runs = Vec::new();
+            for (k, &seed) in seeds.iter().enumerate() {
+                let dir = seed_dir("no-pb", seed);
+                let c = with_seed(&method_config(config, true), seed);
+                runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
+            }
+            runs
+        }
+    };
     let baseline_validation = baseline[0].1.validation;
+    // The budget study: `no-pb`'s first seed again with five times the stage-1 epochs,
+    // scored on validation only.
+    if first && ctx.size != Size::Quick {
+        let mut long = with_seed(&method_config(config, true), seeds[0]);
+        long.epochs[0] = BUDGET_STUDY_EPOCHS;
+        let dir = models
+            .join("budget-study")
+            .join(format!("stage-1-{BUDGET_STUDY_EPOCHS}"));
+        let v = scored_model(ctx, &data, &long, &dir, role("no-pb", false))?.validation;
+        let paper = config.epochs[0];
+        for (epochs, d, v) in [
+            (paper, &baseline[0].0, baseline_validation),
+            (BUDGET_STUDY_EPOCHS, &dir, v),
+        ] {
+            let states: Vec<Option<TrainingState>> = (1..=3u8)
+                .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(d, stage)).ok())
+                .collect();
+            let trained: Vec<String> = states
+                .iter()
+                .map(|t| {
+                    t.as_ref()
+                        .map_or("—".into(), |t| format!("{} (kept {})", t.epochs_done, t.best_epoch))
+                })
+                .collect();
+            let seconds: f64 = states.iter().flatten().map(TrainingState::train_seconds).sum();
+            r.budget_rows.push(vec![
+                epochs.to_string(),
+                trained.join(" / "),
+                format!("{:.3}", v.m_rms),
+                format!("{:.4e}", v.m_phys),
+                format!("{seconds:.0}"),
+            ]);
+        }
+        out.lines.push(stage_curves(
+            format!("{scene}-budget-study"),
+            format!(
+                "embed / {scene}: `no-pb` stage-1 validation loss with {paper} and {BUDGET_STUDY_EPOCHS} epochs allowed"
+            ),
+            &[
+                (&format!("{paper} epochs"), &baseline[0].0),
+                (&format!("{BUDGET_STUDY_EPOCHS} epochs"), &dir),
+            ],
+            &[1],
+        ));
+    }
     // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation
     // windows only; the other seeds at the chosen weight.
     let grid = ephys_grid(ctx.size, scene, config);
@@ -1648,6 +1767,7 @@ mod tests {
             )],
             ik_rows: Vec::new(),
             schedule_rows: Vec::new(),
+            budget_rows: Vec::new(),
             wall_seconds: 12.0,
         };
         assert!(restored_scene(&path, &config, &schedules, true).is_none(), "no file");
