@@ -82,13 +82,28 @@ const TABLE_IV: [(&str, &str, f64, f64, f64); 6] = [
     ("sheet-ms-holes", "3rd stage", 17.412, 0.02633, 28393.81),
 ];
 
-/// `paper / ours` cells of M_rms, M_STED and M_phys.
-fn score_cells(paper: Option<(f64, f64, f64)>, s: &Scores) -> [String; 3] {
-    [
-        cell(paper.map(|p| p.0), s.m_rms, 3),
-        cell(paper.map(|p| p.1), s.m_sted, 5),
-        cell(paper.map(|p| p.2), s.m_phys, 2),
-    ]
+/// `paper / ours` cells of M_rms, M_STED and M_phys: the mean over `runs` (the seeds),
+/// with their spread (`± sd`) where there are several.
+fn score_cells(paper: Option<(f64, f64, f64)>, runs: &[Scores]) -> [String; 3] {
+    let metric: [(Option<f64>, fn(&Scores) -> f64, usize); 3] = [
+        (paper.map(|p| p.0), |s| s.m_rms, 3),
+        (paper.map(|p| p.1), |s| s.m_sted, 5),
+        (paper.map(|p| p.2), |s| s.m_phys, 2),
+    ];
+    metric.map(|(paper, of, digits)| seeds_cell(paper, runs.iter().map(of), digits))
+}
+
+/// `paper / mean ± sd` of `samples` (one per seed), `digits` after the point; no spread for
+/// one sample.
+fn seeds_cell(paper: Option<f64>, samples: impl Iterator<Item = f64>, digits: usize) -> String {
+    let v: Vec<f64> = samples.collect();
+    let (mean, sd) = mean_sd(v.iter().copied());
+    let c = cell(paper, mean, digits);
+    if v.len() > 1 {
+        format!("{c} ± {sd:.digits$}")
+    } else {
+        c
+    }
 }
 
 /// The training configuration of each evaluation size. `standard` and `paper` train for
@@ -228,15 +243,6 @@ fn choose_ephys(candidates: &[(f64, ValidationScores)], baseline: ValidationScor
         .min_by(|a, b| a.1.m_phys.total_cmp(&b.1.m_phys))
         .or_else(|| candidates.iter().min_by(|a, b| a.1.m_rms.total_cmp(&b.1.m_rms)))
         .map(|(e, _)| *e)
-}
-
-/// The mean of each score over seeds.
-fn mean_scores(runs: &[Scores]) -> Scores {
-    Scores {
-        m_rms: mean_sd(runs.iter().map(|s| s.m_rms)).0,
-        m_sted: mean_sd(runs.iter().map(|s| s.m_sted)).0,
-        m_phys: mean_sd(runs.iter().map(|s| s.m_phys)).0,
-    }
 }
 
 /// The configuration a method trains under: `no-pb` zeroes the physics weights.
@@ -849,8 +855,9 @@ struct SceneResults {
     /// The scene's records, curves, scatters, learning curves, notes and failures.
     output: ExperimentOutput,
     ephys_row: Option<(Vec<f64>, Vec<String>)>,
-    table_2: Vec<(String, Scores)>,
-    table_4: Vec<(String, String, Scores)>,
+    /// Table II's columns and Table IV's rows, each with its scores per seed.
+    table_2: Vec<(String, Vec<Scores>)>,
+    table_4: Vec<(String, String, Vec<Scores>)>,
     ik_rows: Vec<IkRow>,
     schedule_rows: Vec<Vec<String>>,
     /// The budget study's rows (first scene, beyond the quick size).
@@ -900,8 +907,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         "embed: {} graph convolution(s), {}-D latent, latent MLP hidden {:?}, epochs per stage {:?}, batch {}, \
          Adam lr {}; λ_ephys chosen per scene on the validation windows (the λ_ephys table; {} without a \
          choice), λ_mphys = {} for `ours`, 0 for `no-pb`; {} seed(s) per model (each figure their mean, its `-sd` \
-         record their spread; Table II, plots, predictions and inverse kinematics from the first seed); PCA with the \
-         same latent size; STED with the 1-ring, s = 1 m/s, c = 1",
+         record their spread; plots, predictions and inverse kinematics from the first seed); PCA with the same \
+         latent size, the PCA + MLP simulator with every seed; STED with the 1-ring, s = 1 m/s, c = 1",
         config.autoencoder.conv_layers,
         config.autoencoder.latent,
         config.latent_hidden,
@@ -915,8 +922,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     out.seeds = seeds(ctx.size).len();
     let schedules = schedule_candidates(ctx.size, &config);
     let mut ephys_rows: Vec<(Vec<f64>, Vec<String>)> = Vec::new();
-    let mut table_2: Vec<(String, Scores)> = Vec::new();
-    let mut table_4: Vec<(String, String, Scores)> = Vec::new();
+    let mut table_2: Vec<(String, Vec<Scores>)> = Vec::new();
+    let mut table_4: Vec<(String, String, Vec<Scores>)> = Vec::new();
     let mut ik_rows: Vec<IkRow> = Vec::new();
     let mut schedule_rows: Vec<Vec<String>> = Vec::new();
     let mut budget_rows: Vec<Vec<String>> = Vec::new();
@@ -1311,31 +1318,28 @@ fn run_scene(
                 .iter()
                 .map(|(_, s)| s.stage_2_rollout.context("a PB-loss model's stage-2 roll-out"))
                 .collect::<crate::Result<_>>()?;
-            r.table_4
-                .push((scene.into(), "2nd stage".into(), mean_scores(&snapshots)));
-            r.table_4
-                .push((scene.into(), "3rd stage".into(), mean_scores(&rollouts)));
+            r.table_4.push((scene.into(), "2nd stage".into(), snapshots));
+            r.table_4.push((scene.into(), "3rd stage".into(), rollouts));
         } else {
             // Table IV's baseline trains without L_mphys; ours has no such model
             // and uses the "[46] + L_vert" one (no physics in any stage).
-            r.table_4
-                .push((scene.into(), "baseline".into(), mean_scores(&rollouts)));
+            r.table_4.push((scene.into(), "baseline".into(), rollouts));
             if scene == "sheet-ms" {
-                r.table_2.push(("[46] + L_vert".into(), scores[0]));
+                r.table_2.push(("[46] + L_vert".into(), scores.clone()));
             }
         }
     }
     if scene == "sheet-ms" {
-        // Table II: the first seed at each of the paper's λ_ephys (the grid's models).
+        // Table II: every seed at each of the paper's λ_ephys (the chosen weight's are
+        // `ours`; the others' first seeds are the grid's models).
         for ephys in [TABLE_II_EPHYS[0], config.weights.ephys, TABLE_II_EPHYS[1]] {
-            let s = match candidates.iter().find(|(e, _, _)| *e == ephys) {
-                Some((_, _, s)) => s.test,
-                None => {
-                    let dir = seed_dir(&ours_method(ephys), seeds[0]);
-                    scored_model(ctx, &data, &ours_config(ephys, seeds[0]), &dir, role("ours", true))?.test
-                }
-            };
-            r.table_2.push((format!("(1, 1, {ephys})"), s));
+            let mut runs = Vec::new();
+            for (k, &seed) in seeds.iter().enumerate() {
+                let dir = seed_dir(&ours_method(ephys), seed);
+                let c = ours_config(ephys, seed);
+                runs.push(scored_model(ctx, &data, &c, &dir, role("ours", k == 0))?.test);
+            }
+            r.table_2.push((format!("(1, 1, {ephys})"), runs));
         }
     }
     // PCA on the frames the embedding trains on (Tan's training frames less the
@@ -1352,31 +1356,38 @@ fn run_scene(
         .collect();
     let pca = PositionPca::fit(&train_frames, config.autoencoder.latent)?;
     // The same latent MLP on the PCA codes (issue 31's baseline for simulation): trained
-    // like stage 2, on the same windows, selected on the same validation windows.
-    let pca_config = PcaSimulatorConfig {
-        hidden: config.latent_hidden.clone(),
-        adam: config.adam,
-        batch: config.batch,
-        epochs: config.epochs[1].max(1),
-        seed: config.seed,
-        schedule: config.schedule,
-    };
-    let pca_dir = models.join("pca-mlp");
-    let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
-    if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
-        std::fs::remove_dir_all(&pca_dir)?;
+    // like stage 2, on the same windows, selected on the same validation windows, with
+    // every seed; the first draws the long roll-out.
+    let mut pca_rollouts = Vec::new();
+    for (k, &seed) in seeds.iter().enumerate() {
+        let pca_config = PcaSimulatorConfig {
+            hidden: config.latent_hidden.clone(),
+            adam: config.adam,
+            batch: config.batch,
+            epochs: config.epochs[1].max(1),
+            seed,
+            schedule: config.schedule,
+        };
+        let pca_dir = models.join("pca-mlp").join(format!("seed-{seed}"));
+        let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
+            std::fs::remove_dir_all(&pca_dir)?;
+        }
+        std::fs::create_dir_all(&pca_dir)?;
+        weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
+        let label = format!("embed/{scene}/pca-mlp/seed-{seed}");
+        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+        let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
+            .with_context(|| format!("training {label}"))?;
+        drop(progress);
+        pca_rollouts.push(pca_rollout_scores(&data, &pca_sim)?);
+        if k == 0 {
+            out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
+        }
     }
-    std::fs::create_dir_all(&pca_dir)?;
-    weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
-    let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("embed/{scene}/pca-mlp"))?;
-    let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
-        .with_context(|| format!("training embed/{scene}/pca-mlp"))?;
-    drop(progress);
-    r.table_4
-        .push((scene.into(), "pca + MLP".into(), pca_rollout_scores(&data, &pca_sim)?));
-    out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
+    r.table_4.push((scene.into(), "pca + MLP".into(), pca_rollouts));
     let t = Instant::now();
     let predicted: Vec<Vec<f64>> = data
         .test_frames
@@ -1414,30 +1425,37 @@ fn run_scene(
     Ok(r)
 }
 
-fn tan_table_2(columns: &[(String, Scores)]) -> Table {
+fn tan_table_2(columns: &[(String, Vec<Scores>)]) -> Table {
     let paper = |label: &str| TABLE_II.iter().find(|t| t.0 == label).map(|t| (t.1, t.2));
     let mut header = vec!["metric".to_string()];
     header.extend(columns.iter().map(|(l, _)| l.clone()));
-    let row = |name: &str, f: &dyn Fn(&str, &Scores) -> String| {
+    let row = |name: &str, f: &dyn Fn(&str, &[Scores]) -> String| {
         let mut r = vec![name.to_string()];
-        r.extend(columns.iter().map(|(l, s)| f(l, s)));
+        r.extend(columns.iter().map(|(l, runs)| f(l, runs)));
         r
     };
     Table {
         title: "Tan et al. Table II — sensitivity to the loss weights (λ_recon, λ_vert, λ_ephys), paper / ours".into(),
-        caption: "`sheet-ms` (SHEET+[11]), test split, each model's first seed. The paper prints no M_rms here. λ_mphys stays at the \
-                  configuration's value for every PB-loss column."
-            .into(),
+        caption:
+            "`sheet-ms` (SHEET+[11]), test split, mean ± sd over the seeds. The paper prints no M_rms here. λ_mphys \
+                  stays at the configuration's value for every PB-loss column."
+                .into(),
         header,
         rows: vec![
-            row("M_rms (mm)", &|_, s| cell(None, s.m_rms, 3)),
-            row("M_STED", &|l, s| cell(paper(l).map(|p| p.0), s.m_sted, 5)),
-            row("M_phys (N²)", &|l, s| cell(paper(l).map(|p| p.1), s.m_phys, 2)),
+            row("M_rms (mm)", &|_, runs| {
+                seeds_cell(None, runs.iter().map(|s| s.m_rms), 3)
+            }),
+            row("M_STED", &|l, runs| {
+                seeds_cell(paper(l).map(|p| p.0), runs.iter().map(|s| s.m_sted), 5)
+            }),
+            row("M_phys (N²)", &|l, runs| {
+                seeds_cell(paper(l).map(|p| p.1), runs.iter().map(|s| s.m_phys), 2)
+            }),
         ],
     }
 }
 
-fn tan_table_4(rows: &[(String, String, Scores)]) -> Table {
+fn tan_table_4(rows: &[(String, String, Vec<Scores>)]) -> Table {
     Table {
         title: "Tan et al. Table IV — the latent simulator given 2 frames, predicting 3, paper / ours".into(),
         caption: "In each 5-frame test window the first two frames are encoded and the latent MLP predicts the \
@@ -1445,7 +1463,8 @@ fn tan_table_4(rows: &[(String, String, Scores)]) -> Table {
                   (λ_ephys = λ_mphys = 0); 2nd stage: `ours` before the stage-3 fine-tuning; 3rd stage: `ours`; \
                   pca + MLP: the same latent MLP trained on the codes of a PCA of the same size (ours only). \
                   M_rms over the predicted frames (mm), M_STED over the whole window, M_phys of the predicted \
-                  frames (N²). The paper prints SHEET+[11] (`sheet-ms`) and +holes only."
+                  frames (N²). Mean ± sd over the seeds (the MLP's own seeds for pca + MLP). The paper prints \
+                  SHEET+[11] (`sheet-ms`) and +holes only."
             .into(),
         header: ["scene", "model", "M_rms", "M_STED", "M_phys"]
             .map(String::from)
@@ -1737,6 +1756,27 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
+    /// Table II and IV cells: the mean over the seeds with the population spread, the
+    /// paper's figure first; one seed has no spread.
+    #[test]
+    fn seed_cells_print_the_mean_and_spread_beside_the_paper() {
+        assert_eq!(
+            seeds_cell(Some(9.724), [10.0, 12.0, 14.0].into_iter(), 3),
+            "9.724 / 12.000 ± 1.633"
+        );
+        assert_eq!(seeds_cell(None, [2.5].into_iter(), 2), "— / 2.50");
+        let s = |m_rms, m_sted, m_phys| Scores { m_rms, m_sted, m_phys };
+        let cells = score_cells(Some((1.0, 0.5, 100.0)), &[s(2.0, 0.1, 10.0), s(4.0, 0.3, 30.0)]);
+        assert_eq!(
+            cells,
+            [
+                "1.000 / 3.000 ± 1.000",
+                "0.50000 / 0.20000 ± 0.10000",
+                "100.00 / 20.00 ± 10.00"
+            ]
+        );
+    }
+
     /// A finished scene is read back only under the configuration it ran with; the first
     /// scene's, under whichever candidate schedule it chose, and that choice is adopted.
     #[test]
@@ -1759,11 +1799,11 @@ mod tests {
             table_4: vec![(
                 "sheet-ms".into(),
                 "baseline".into(),
-                Scores {
+                vec![Scores {
                     m_rms: 1.0,
                     m_sted: 0.01,
                     m_phys: 3.0,
-                },
+                }],
             )],
             ik_rows: Vec::new(),
             schedule_rows: Vec::new(),
@@ -1774,7 +1814,7 @@ mod tests {
         weft_data::files::write_json(&path, &results(&chosen)).unwrap();
         let first = restored_scene(&path, &config, &schedules, true).unwrap();
         assert_eq!(first.config, chosen);
-        assert_eq!(first.table_4[0].2.m_phys, 3.0);
+        assert_eq!(first.table_4[0].2[0].m_phys, 3.0);
         assert!(restored_scene(&path, &chosen, &schedules, false).is_some());
         assert!(restored_scene(&path, &config, &schedules, false).is_none());
         let mut more = config.clone();
