@@ -134,8 +134,19 @@ const EARLY_STOPPING_PATIENCE: usize = 5;
 
 /// Stage-1 epochs allowed in the budget study: five times the paper's 30. At standard size
 /// an epoch holds 4 × 170 frames against the paper's 4 × 2400, so the paper's 30 epochs are
-/// fewer steps here; the study shows on validation what more epochs would buy.
+/// fewer steps here; the study measures on validation what more epochs buy, and the budget
+/// with the lower validation M_rms trains every model.
 const BUDGET_STUDY_EPOCHS: usize = 150;
+
+/// The stage-1 epochs the first scene chooses between on validation: the paper's and
+/// [`BUDGET_STUDY_EPOCHS`] (quick runs keep the configuration's).
+fn budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+    if size == Size::Quick {
+        vec![config.epochs[0]]
+    } else {
+        vec![config.epochs[0], BUDGET_STUDY_EPOCHS]
+    }
+}
 
 /// The learning-rate schedules tried, by name, beside the configuration's constant rate
 /// (Tan et al.'s): halving the rate whenever the validation loss has not improved for two
@@ -157,9 +168,9 @@ fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'stati
     vec![("constant", constant), ("halve-on-plateau", plateau)]
 }
 
-/// The schedule to keep from `(name, validation scores)` candidates: the lowest validation
-/// M_rms (ties: the first).
-fn choose_schedule(candidates: &[(&'static str, ValidationScores)]) -> Option<&'static str> {
+/// The candidate to keep from `(candidate, validation scores)`: the lowest validation M_rms
+/// (ties: the first). Chooses the learning-rate schedule and the stage-1 budget.
+fn lowest_m_rms<T: Copy>(candidates: &[(T, ValidationScores)]) -> Option<T> {
     candidates
         .iter()
         .min_by(|a, b| a.1.m_rms.total_cmp(&b.1.m_rms))
@@ -869,11 +880,13 @@ struct SceneResults {
 }
 
 /// The results kept at `path` if they were made under `config` (on the first scene, under
-/// any candidate schedule: the scene makes the choice); `None` to run the scene.
+/// any candidate schedule and stage-1 budget: the scene makes the choices); `None` to run
+/// the scene.
 fn restored_scene(
     path: &Path,
     config: &EmbedTrainingConfig,
     schedules: &[(&str, Schedule)],
+    budgets: &[usize],
     first: bool,
 ) -> Option<SceneResults> {
     let text = std::fs::read_to_string(path).ok()?;
@@ -885,11 +898,14 @@ fn restored_scene(
         }
     };
     let same = if first {
+        let mut before_the_studies = EmbedTrainingConfig {
+            schedule: config.schedule,
+            ..kept.config.clone()
+        };
+        before_the_studies.epochs[0] = config.epochs[0];
         schedules.iter().any(|(_, s)| *s == kept.config.schedule)
-            && EmbedTrainingConfig {
-                schedule: config.schedule,
-                ..kept.config.clone()
-            } == *config
+            && budgets.contains(&kept.config.epochs[0])
+            && before_the_studies == *config
     } else {
         kept.config == *config
     };
@@ -921,6 +937,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     ));
     out.seeds = seeds(ctx.size).len();
     let schedules = schedule_candidates(ctx.size, &config);
+    let budgets = budget_candidates(ctx.size, &config);
     let mut ephys_rows: Vec<(Vec<f64>, Vec<String>)> = Vec::new();
     let mut table_2: Vec<(String, Vec<Scores>)> = Vec::new();
     let mut table_4: Vec<(String, String, Vec<Scores>)> = Vec::new();
@@ -930,14 +947,14 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
-        let results = match restored_scene(&path, &config, &schedules, i == 0) {
+        let results = match restored_scene(&path, &config, &schedules, &budgets, i == 0) {
             Some(r) => {
                 eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
                 r
             }
             None => {
                 let t = Instant::now();
-                let mut r = run_scene(ctx, scene, &config, &schedules, i == 0)?;
+                let mut r = run_scene(ctx, scene, &config, &schedules, &budgets, i == 0)?;
                 r.wall_seconds = t.elapsed().as_secs_f64();
                 weft_data::files::write_json(&path, &r)?;
                 r
@@ -1019,9 +1036,14 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     }
     if !budget_rows.is_empty() {
         out.tables.push(Table {
-            title: "Tan et al. budget study: more stage-1 epochs on the validation windows".into(),
+            title: "Tan et al. stage-1 budget chosen on the validation windows".into(),
             caption: format!(
-                "`no-pb`, first seed, on `{}`, under the chosen schedule: the paper's stage-1 epochs and {}                  (each stage still stops once its validation loss has not improved for {EARLY_STOPPING_PATIENCE}                  epochs). An epoch here is 4 sequences of 170 frames, the paper's 4 of 2400, so its 30 epochs are                  about 14 times fewer steps here. Validation M_rms (mm) and M_phys (N²); the test split plays no                  part.",
+                "`no-pb`, first seed, on `{}`, under the chosen schedule, with the paper's stage-1 epochs and with \
+                 up to {} (every stage still stops once its validation loss has not improved for \
+                 {EARLY_STOPPING_PATIENCE} epochs; the kept epoch in brackets). An epoch here is 4 sequences of 170 \
+                 frames, the paper's 4 of 2400, so its 30 epochs are about 14 times fewer steps here. Validation \
+                 M_rms (mm) and M_phys (N²); the budget with the lower validation M_rms trains every model; the test \
+                 split plays no part.",
                 scenes()[0],
                 BUDGET_STUDY_EPOCHS
             ),
@@ -1031,6 +1053,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                 "validation M_rms (mm)",
                 "validation M_phys (N²)",
                 "training seconds",
+                "chosen",
             ]
             .map(String::from)
             .to_vec(),
@@ -1050,6 +1073,7 @@ fn run_scene(
     scene: &str,
     config: &EmbedTrainingConfig,
     schedules: &[(&'static str, Schedule)],
+    budgets: &[usize],
     first: bool,
 ) -> crate::Result<SceneResults> {
     let root = ctx.out.join("embed");
@@ -1120,7 +1144,9 @@ fn run_scene(
     // each candidate, every seed (one seed's M_rms varies too much to choose on); the
     // chosen candidate's models are the scene's `no-pb`, and every other model of the
     // experiment trains under it.
-    let mut study: Vec<(&str, Vec<(std::path::PathBuf, ModelScores)>)> = Vec::new();
+    // Every model the first scene's studies train: `no-pb` models, reused below where one
+    // has the configuration a `no-pb` seed needs.
+    let mut study: Vec<(std::path::PathBuf, ModelScores)> = Vec::new();
     if first && schedules.len() > 1 {
         let mut scored = Vec::new();
         for (name, schedule) in schedules {
@@ -1161,9 +1187,9 @@ fn run_scene(
                 epochs.join("; "),
             ]);
             scored.push((*name, mean));
-            study.push((*name, runs));
+            study.extend(runs);
         }
-        let chosen = choose_schedule(&scored).context("no learning-rate schedule candidate")?;
+        let chosen = lowest_m_rms(&scored).context("no learning-rate schedule candidate")?;
         for row in &mut r.schedule_rows {
             row.push(if row[0] == chosen {
                 "chosen".into()
@@ -1179,40 +1205,25 @@ fn run_scene(
         out.notes.push(format!(
             "embed: learning-rate schedule `{chosen}` chosen on `{scene}`'s validation windows (the schedule table)"
         ));
-        study.retain(|(n, _)| *n == chosen);
     }
-    let config = &r.config;
-    // `no-pb`, every seed (on the first scene, the schedule study's chosen models); its
-    // first seed is the baseline the λ_ephys choice compares to.
-    let baseline = match study.pop() {
-        Some((_, runs)) => runs,
-        None => {
-            let mut runs = Vec::new();
-            for (k, &seed) in seeds.iter().enumerate() {
-                let dir = seed_dir("no-pb", seed);
-                let c = with_seed(&method_config(config, true), seed);
-                runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
-            }
-            runs
-        }
-    };
-    let baseline_validation = baseline[0].1.validation;
-    // The budget study: `no-pb`'s first seed again with five times the stage-1 epochs,
-    // scored on validation only.
-    if first && ctx.size != Size::Quick {
-        let mut long = with_seed(&method_config(config, true), seeds[0]);
-        long.epochs[0] = BUDGET_STUDY_EPOCHS;
-        let dir = models
-            .join("budget-study")
-            .join(format!("stage-1-{BUDGET_STUDY_EPOCHS}"));
-        let v = scored_model(ctx, &data, &long, &dir, role("no-pb", false))?.validation;
-        let paper = config.epochs[0];
-        for (epochs, d, v) in [
-            (paper, &baseline[0].0, baseline_validation),
-            (BUDGET_STUDY_EPOCHS, &dir, v),
-        ] {
+    // The stage-1 budget, on the same validation windows: `no-pb`'s first seed under the
+    // chosen schedule with the paper's epochs (a model of the schedule study) and with
+    // [`BUDGET_STUDY_EPOCHS`] allowed; every model of the experiment trains with the
+    // choice.
+    if first && budgets.len() > 1 {
+        let mut scored = Vec::new();
+        let mut curves = Vec::new();
+        for &epochs in budgets {
+            let mut c = with_seed(&method_config(&r.config, true), seeds[0]);
+            c.epochs[0] = epochs;
+            let dir = study
+                .iter()
+                .find(|(_, s)| c.trains_like(&s.config))
+                .map(|(d, _)| d.clone())
+                .unwrap_or_else(|| models.join("budget-study").join(format!("stage-1-{epochs}")));
+            let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", true))?;
             let states: Vec<Option<TrainingState>> = (1..=3u8)
-                .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(d, stage)).ok())
+                .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage)).ok())
                 .collect();
             let trained: Vec<String> = states
                 .iter()
@@ -1225,23 +1236,51 @@ fn run_scene(
             r.budget_rows.push(vec![
                 epochs.to_string(),
                 trained.join(" / "),
-                format!("{:.3}", v.m_rms),
-                format!("{:.4e}", v.m_phys),
+                format!("{:.3}", scores.validation.m_rms),
+                format!("{:.4e}", scores.validation.m_phys),
                 format!("{seconds:.0}"),
             ]);
+            scored.push((epochs, scores.validation));
+            curves.push((format!("{epochs} epochs allowed"), dir.clone()));
+            if !study.iter().any(|(d, _)| *d == dir) {
+                study.push((dir, scores));
+            }
         }
+        let chosen = lowest_m_rms(&scored).context("no stage-1 budget candidate")?;
+        for row in &mut r.budget_rows {
+            row.push(if row[0] == chosen.to_string() {
+                "chosen".into()
+            } else {
+                String::new()
+            });
+        }
+        r.config.epochs[0] = chosen;
+        out.notes.push(format!(
+            "embed: {chosen} stage-1 epochs allowed, chosen on `{scene}`'s validation windows (the budget table)"
+        ));
+        let curves: Vec<(&str, &Path)> = curves.iter().map(|(l, d)| (l.as_str(), d.as_path())).collect();
         out.lines.push(stage_curves(
             format!("{scene}-budget-study"),
-            format!(
-                "embed / {scene}: `no-pb` stage-1 validation loss with {paper} and {BUDGET_STUDY_EPOCHS} epochs allowed"
-            ),
-            &[
-                (&format!("{paper} epochs"), &baseline[0].0),
-                (&format!("{BUDGET_STUDY_EPOCHS} epochs"), &dir),
-            ],
+            format!("embed / {scene}: `no-pb` stage-1 validation loss under each budget (first seed)"),
+            &curves,
             &[1],
         ));
     }
+    let config = &r.config;
+    // `no-pb`, every seed (on the first scene, a study's model where one has the seed's
+    // configuration); its first seed is the baseline the λ_ephys choice compares to.
+    let mut baseline = Vec::new();
+    for (k, &seed) in seeds.iter().enumerate() {
+        let c = with_seed(&method_config(config, true), seed);
+        let dir = study
+            .iter()
+            .find(|(_, s)| c.trains_like(&s.config))
+            .map(|(d, _)| d.clone())
+            .unwrap_or_else(|| seed_dir("no-pb", seed));
+        let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?;
+        baseline.push((dir, scores));
+    }
+    let baseline_validation = baseline[0].1.validation;
     // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation
     // windows only; the other seeds at the chosen weight.
     let grid = ephys_grid(ctx.size, scene, config);
@@ -1657,14 +1696,20 @@ mod tests {
         );
         let v = |m_rms, m_phys| ValidationScores { m_rms, m_phys };
         assert_eq!(
-            choose_schedule(&[("constant", v(9.0, 1.0)), ("halve-on-plateau", v(8.5, 50.0))]),
+            lowest_m_rms(&[("constant", v(9.0, 1.0)), ("halve-on-plateau", v(8.5, 50.0))]),
             Some("halve-on-plateau")
         );
         assert_eq!(
-            choose_schedule(&[("constant", v(8.0, 99.0)), ("halve-on-plateau", v(8.5, 1.0))]),
+            lowest_m_rms(&[("constant", v(8.0, 99.0)), ("halve-on-plateau", v(8.5, 1.0))]),
             Some("constant")
         );
-        assert_eq!(choose_schedule(&[]), None);
+        assert_eq!(lowest_m_rms::<&str>(&[]), None);
+        // The stage-1 budget by the same rule.
+        assert_eq!(
+            lowest_m_rms(&[(30, v(25.0, 2611.0)), (150, v(12.4, 1104.0))]),
+            Some(150)
+        );
+        assert_eq!(budget_candidates(Size::Quick, &quick), [quick.epochs[0]]);
     }
 
     /// The learning curves read each stage's training state: one line per method and stage,
@@ -1778,7 +1823,8 @@ mod tests {
     }
 
     /// A finished scene is read back only under the configuration it ran with; the first
-    /// scene's, under whichever candidate schedule it chose, and that choice is adopted.
+    /// scene's, under whichever candidate schedule and stage-1 budget it chose, and those
+    /// choices are adopted.
     #[test]
     fn a_finished_scene_is_read_back_only_under_its_configuration() {
         let dir = std::env::temp_dir().join(format!("weft-embed-scene-{}", std::process::id()));
@@ -1789,6 +1835,7 @@ mod tests {
         let schedules = schedule_candidates(Size::Standard, &config);
         let chosen = EmbedTrainingConfig {
             schedule: schedules[1].1,
+            epochs: [BUDGET_STUDY_EPOCHS, 30, 10],
             ..config.clone()
         };
         let results = |config: &EmbedTrainingConfig| SceneResults {
@@ -1810,25 +1857,37 @@ mod tests {
             budget_rows: Vec::new(),
             wall_seconds: 12.0,
         };
-        assert!(restored_scene(&path, &config, &schedules, true).is_none(), "no file");
+        let budgets = budget_candidates(Size::Standard, &config);
+        assert_eq!(budgets, [30, BUDGET_STUDY_EPOCHS]);
+        let restored = |c: &EmbedTrainingConfig, first| restored_scene(&path, c, &schedules, &budgets, first);
+        assert!(restored(&config, true).is_none(), "no file");
         weft_data::files::write_json(&path, &results(&chosen)).unwrap();
-        let first = restored_scene(&path, &config, &schedules, true).unwrap();
-        assert_eq!(first.config, chosen);
+        let first = restored(&config, true).unwrap();
+        assert_eq!(first.config, chosen, "the first scene's choices are adopted");
         assert_eq!(first.table_4[0].2[0].m_phys, 3.0);
-        assert!(restored_scene(&path, &chosen, &schedules, false).is_some());
-        assert!(restored_scene(&path, &config, &schedules, false).is_none());
+        assert!(restored(&chosen, false).is_some());
+        assert!(restored(&config, false).is_none());
         let mut more = config.clone();
-        more.epochs[0] += 1;
-        assert!(restored_scene(&path, &more, &schedules, true).is_none());
-        let mut odd = chosen.clone();
-        odd.schedule.early_stopping_patience = Some(9);
-        weft_data::files::write_json(&path, &results(&odd)).unwrap();
-        assert!(
-            restored_scene(&path, &config, &schedules, true).is_none(),
-            "not a candidate"
-        );
+        more.epochs[1] += 1;
+        assert!(restored(&more, true).is_none());
+        for odd in [
+            EmbedTrainingConfig {
+                schedule: Schedule {
+                    early_stopping_patience: Some(9),
+                    ..chosen.schedule
+                },
+                ..chosen.clone()
+            },
+            EmbedTrainingConfig {
+                epochs: [77, 30, 10],
+                ..chosen.clone()
+            },
+        ] {
+            weft_data::files::write_json(&path, &results(&odd)).unwrap();
+            assert!(restored(&config, true).is_none(), "not a candidate: {odd:?}");
+        }
         std::fs::write(&path, "{").unwrap();
-        assert!(restored_scene(&path, &config, &schedules, true).is_none());
+        assert!(restored(&config, true).is_none());
         let _ = std::fs::remove_dir_all(&dir);
     }
 
