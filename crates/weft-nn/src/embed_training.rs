@@ -175,6 +175,19 @@ impl EmbedTrainingConfig {
     }
 
     /// The trainer's configuration of `stage` (1, 2 or 3).
+    /// Whether a model trained under `self` can be continued under `other`: it
+    /// [trains like](Self::trains_like) `other` but for the stages' epoch counts and the
+    /// early-stopping patience, within what every stage's trainer accepts
+    /// ([`crate::trainer::TrainerConfig::continues_as`]: the patience may only grow).
+    pub fn continues_as(&self, other: &Self) -> bool {
+        let mut same = Self {
+            epochs: other.epochs,
+            ..self.clone()
+        };
+        same.schedule.early_stopping_patience = other.schedule.early_stopping_patience;
+        (1..=3u8).all(|s| self.trainer(s).continues_as(&other.trainer(s))) && same.trains_like(other)
+    }
+
     pub fn trainer(&self, stage: u8) -> crate::trainer::TrainerConfig {
         crate::trainer::TrainerConfig {
             epochs: self.epochs[stage as usize - 1],
@@ -854,15 +867,36 @@ pub fn stage_dir(dir: &std::path::Path, stage: u8) -> std::path::PathBuf {
     dir.join(format!("stage-{stage}"))
 }
 
-/// Whether stage `stage` of the model in `dir` has trained all `epochs` (or stopped early).
-pub fn stage_done(dir: &std::path::Path, stage: u8, epochs: usize) -> bool {
-    crate::trainer::TrainingState::read(&stage_dir(dir, stage))
-        .is_ok_and(|s| s.stopped_early || s.epochs_done >= epochs)
+/// Whether stage `stage` of the model in `dir` is complete under `config` (all its epochs
+/// trained, or stopped by `config`'s early stopping).
+pub fn stage_done(dir: &std::path::Path, stage: u8, config: &crate::trainer::TrainerConfig) -> bool {
+    crate::trainer::TrainingState::read(&stage_dir(dir, stage)).is_ok_and(|s| s.finished_under(config))
+}
+
+/// Whether training the model in `dir` on under `config` gives exactly the model a fresh
+/// directory would: it was trained under a configuration that
+/// [continues as](EmbedTrainingConfig::continues_as) `config`, no stage has trained
+/// more epochs than `config` allows it, and every trained stage still has its weights.
+/// `false` when `dir` holds no model.
+pub fn continues_exactly(dir: &std::path::Path, config: &EmbedTrainingConfig) -> bool {
+    let Ok(have) = crate::checkpoint::read_json::<EmbedTrainingConfig>(&dir.join("config.json")) else {
+        return false;
+    };
+    have.continues_as(config)
+        && (1..=3u8).all(|stage| {
+            let run = stage_dir(dir, stage);
+            !crate::trainer::has_run(&run)
+                || crate::trainer::TrainingState::read(&run)
+                    .is_ok_and(|s| s.continues_exactly_as(&config.trainer(stage)))
+                    && crate::trainer::has_checkpoints(&run)
+        })
 }
 
 /// Trains `stages` (ascending) of `model` in the model directory `dir`, one trainer run
 /// per stage (`stage-1/`, `stage-2/`, `stage-3/`), resuming where a run stopped. A stage
 /// already complete is loaded at its best weights instead; a stage of 0 epochs is skipped.
+/// A stage that trains on (more epochs, a longer patience) discards the later stages'
+/// runs: they started from its old weights.
 /// Every stage's Adam starts afresh (each is a new objective). Returns each trained
 /// stage's state.
 pub fn train_stages(
@@ -890,10 +924,23 @@ pub fn train_stages(
             continue;
         }
         let run = stage_dir(dir, stage);
-        let state = if stage_done(dir, stage, config.epochs) {
+        let state = if stage_done(dir, stage, &config) {
             crate::trainer::load_weights(&run.join("best"), &model.stage_groups(stage))?;
             crate::trainer::TrainingState::read(&run)?
         } else {
+            for later in stage + 1..=3 {
+                let stale = stage_dir(dir, later);
+                if stale.exists() {
+                    observer.epoch(&format!(
+                        "{label} stage {later}: discarded, it was trained from stage {stage}'s weights before \
+                         stage {stage} trained on"
+                    ));
+                    std::fs::remove_dir_all(&stale).map_err(|source| Error::Io {
+                        path: stale.display().to_string(),
+                        source,
+                    })?;
+                }
+            }
             let trainer = crate::trainer::Trainer::new(format!("{label} stage {stage}"), config);
             trainer.run(&run, &mut EmbedStage::new(model, data, stage), observer)?
         };
@@ -930,7 +977,8 @@ fn check_stages(dir: &std::path::Path, config: &EmbedTrainingConfig, stages: &[u
 /// Trains (or continues) the embedding on `data` into the model directory `dir`:
 /// `config.json`, `normalization.json` (the ACAP feature normalisation fitted on the
 /// training frames) and one trainer run per stage ([`train_stages`]). A directory trained
-/// under another configuration is an error (only the epoch counts may change).
+/// under another configuration is an error (only the epoch counts may change, and the
+/// early-stopping patience grow: [`EmbedTrainingConfig::continues_as`]).
 pub fn train_model(
     dir: &std::path::Path,
     data: &EmbedData,
@@ -949,12 +997,13 @@ pub fn train_model(
     let config_path = dir.join("config.json");
     if config_path.exists() {
         let stored: EmbedTrainingConfig = crate::checkpoint::read_json(&config_path)?;
-        let stored = EmbedTrainingConfig {
+        // The error names the fields that forbid continuing, not the epochs that may differ.
+        let shown = EmbedTrainingConfig {
             epochs: config.epochs,
             kernels: config.kernels,
-            ..stored
+            ..stored.clone()
         };
-        crate::checkpoint::check_continues(&config_path, stored.trains_like(config), &stored, config)?;
+        crate::checkpoint::check_continues(&config_path, stored.continues_as(config), &shown, config)?;
     }
     crate::checkpoint::write_json(&config_path, config)?;
     crate::checkpoint::write_json(&dir.join("normalization.json"), &data.normalization)?;

@@ -191,13 +191,30 @@ impl TrainerConfig {
         self.schedule.validate("schedule")
     }
 
-    /// Whether a run trained under `self` can be continued under `other` (only the epoch
-    /// count may differ).
-    fn continues_as(&self, other: &Self) -> bool {
-        Self {
-            epochs: other.epochs,
-            ..*self
-        } == *other
+    /// Whether a run trained under `self` can be continued under `other`: only the epoch
+    /// count may differ, and the early-stopping patience may grow (`None` is unlimited).
+    /// A longer patience stops no earlier, so every epoch already trained is one a fresh
+    /// run under `other` trains too; no schedule depends on the epoch count.
+    pub fn continues_as(&self, other: &Self) -> bool {
+        let longer = match (
+            self.schedule.early_stopping_patience,
+            other.schedule.early_stopping_patience,
+        ) {
+            (_, None) => true,
+            (None, Some(_)) => false,
+            (Some(a), Some(b)) => b >= a,
+        };
+        let mut same = *self;
+        same.epochs = other.epochs;
+        same.schedule.early_stopping_patience = other.schedule.early_stopping_patience;
+        longer && same == *other
+    }
+
+    /// Whether a run that has gone `epochs_since_best` epochs without improving stops here.
+    fn stops(&self, epochs_since_best: usize) -> bool {
+        self.schedule
+            .early_stopping_patience
+            .is_some_and(|p| epochs_since_best >= p)
     }
 }
 
@@ -339,6 +356,20 @@ impl TrainingState {
         }
     }
 
+    /// Whether the run is complete under `config` (its epochs all trained, or stopped by
+    /// `config`'s early stopping), so continuing it would train nothing more.
+    pub fn finished_under(&self, config: &TrainerConfig) -> bool {
+        self.epochs_done >= config.epochs || config.stops(self.epochs_since_best)
+    }
+
+    /// Whether continuing this run under `config` gives exactly the run a fresh trainer
+    /// under `config` would make: `config` continues the run's configuration
+    /// ([`TrainerConfig::continues_as`]) and allows at least the epochs already trained
+    /// (a shorter budget could have kept another epoch's weights).
+    pub fn continues_exactly_as(&self, config: &TrainerConfig) -> bool {
+        self.config.continues_as(config) && self.epochs_done <= config.epochs
+    }
+
     /// Training batches skipped over the run, and the first reason.
     pub fn skipped(&self) -> (usize, Option<&str>) {
         (
@@ -440,6 +471,18 @@ pub fn has_run(dir: &Path) -> bool {
     dir.join("training.json").is_file()
 }
 
+/// Whether the run in `dir` still holds its weights: a complete checkpoint of every
+/// parameter group under both `last/` and `best/` (a copy of the small files alone, a
+/// run's `training.json` without them, cannot be continued).
+pub fn has_checkpoints(dir: &Path) -> bool {
+    ["last", "best"].iter().all(|kind| {
+        std::fs::read_dir(dir.join(kind)).is_ok_and(|entries| {
+            let groups: Vec<PathBuf> = entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()).collect();
+            !groups.is_empty() && groups.iter().all(|g| crate::checkpoint::exists(g))
+        })
+    })
+}
+
 /// Epoch order: Fisher–Yates over `0..n` drawn from SplitMix64(`seed`).
 pub fn shuffled(n: usize, seed: u64) -> Vec<usize> {
     let mut order: Vec<usize> = (0..n).collect();
@@ -499,7 +542,8 @@ impl Trainer {
                 return Err(Error::Checkpoint {
                     path: state_path.display().to_string(),
                     reason: format!(
-                        "the run was trained under {:?}, not {:?} (only the epoch count may change)",
+                        "the run was trained under {:?}, not {:?} (only the epoch count may change, and the \
+                         early-stopping patience grow)",
                         state.config, self.config
                     ),
                 });
@@ -512,6 +556,8 @@ impl Trainer {
             }
             let mut state = state;
             state.config = self.config;
+            // Under a longer patience a run that stopped early goes on.
+            state.stopped_early = self.config.stops(state.epochs_since_best);
             state
         } else {
             let t = Instant::now();
@@ -651,9 +697,7 @@ impl Trainer {
                         state.lr_factor *= factor;
                     }
                 }
-                if let Some(p) = self.config.schedule.early_stopping_patience {
-                    state.stopped_early = state.epochs_since_best >= p;
-                }
+                state.stopped_early = self.config.stops(state.epochs_since_best);
             }
             save_groups(&dir.join("last"), &groups, &adams)?;
             drop(groups);
@@ -909,6 +953,60 @@ mod tests {
             }
         }
         assert!(factor < 1.0);
+    }
+
+    #[test]
+    fn a_run_stopped_early_continues_under_a_longer_patience_as_a_fresh_run_would() {
+        let with_patience = |epochs: usize, p: Option<usize>| {
+            let mut c = config(epochs);
+            c.schedule = Schedule {
+                decay: Decay::ReduceOnPlateau {
+                    factor: 0.5,
+                    patience: 1,
+                },
+                early_stopping_patience: p,
+                ..Schedule::default()
+            };
+            c
+        };
+        let (a, b) = (tmp("patient"), tmp("extended"));
+        let mut fresh = Line::new(2.0);
+        let f = Trainer::new("t", with_patience(30, Some(4)))
+            .run(&a, &mut fresh, &mut Silent)
+            .unwrap();
+        let short = Trainer::new("t", with_patience(30, Some(1)))
+            .run(&b, &mut Line::new(2.0), &mut Silent)
+            .unwrap();
+        assert!(short.stopped_early);
+        assert!(
+            short.epochs_done < f.epochs_done,
+            "the longer patience must train more epochs for this test to bite"
+        );
+        assert!(!short.finished_under(&with_patience(30, Some(4))));
+        assert!(short.finished_under(&with_patience(30, Some(1))));
+        assert!(short.continues_exactly_as(&with_patience(30, Some(4))));
+        assert!(!short.continues_exactly_as(&with_patience(short.epochs_done - 1, Some(4))));
+        // A shorter patience could have stopped before the epochs already trained.
+        assert!(!f.config.continues_as(&with_patience(30, Some(1))));
+        assert!(f.config.continues_as(&with_patience(30, None)));
+        assert!(!with_patience(30, None).continues_as(&f.config));
+        let mut extended = Line::new(2.0);
+        let e = Trainer::new("t", with_patience(30, Some(4)))
+            .run(&b, &mut extended, &mut Silent)
+            .unwrap();
+        assert_eq!(fresh.weight().to_bits(), extended.weight().to_bits());
+        let strip = |s: &TrainingState| -> Vec<(f64, f64, f64)> {
+            s.history
+                .iter()
+                .map(|h| (h.loss, h.validation, h.learning_rate))
+                .collect()
+        };
+        assert_eq!(strip(&f), strip(&e));
+        assert_eq!((f.best_epoch, f.stopped_early), (e.best_epoch, e.stopped_early));
+        let shorter = Trainer::new("t", with_patience(30, Some(2)))
+            .run(&a, &mut Line::new(2.0), &mut Silent)
+            .unwrap_err();
+        assert!(shorter.to_string().contains("patience grow"), "{shorter}");
     }
 
     #[test]

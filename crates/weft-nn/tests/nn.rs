@@ -1283,6 +1283,44 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
 }
 
 #[test]
+fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_trains() {
+    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, stage_dir, train_model};
+    use weft_nn::trainer::TrainingState;
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let short = EmbedTrainingConfig {
+        epochs: [1, 1, 1],
+        ..small_embed_config()
+    };
+    let long = EmbedTrainingConfig {
+        epochs: [2, 1, 1],
+        ..short.clone()
+    };
+    let base = std::env::temp_dir().join(format!("weft-nn-train-on-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let (fresh, extended) = (base.join("fresh"), base.join("extended"));
+    let silent = &mut weft_nn::trainer::Silent;
+    train_model(&fresh, &data, &long, &[1, 2, 3], silent).unwrap();
+    train_model(&extended, &data, &short, &[1, 2, 3], silent).unwrap();
+    assert!(weft_nn::embed_training::continues_exactly(&extended, &long));
+    assert!(!weft_nn::embed_training::continues_exactly(&fresh, &short));
+    train_model(&extended, &data, &long, &[1, 2, 3], silent).unwrap();
+    // Stages 2 and 3 started from stage 1's one-epoch weights; they are trained again from
+    // its two-epoch ones, so every stage matches the fresh run's.
+    for stage in 1..=3u8 {
+        let history = |dir: &std::path::Path| -> Vec<(u64, u64)> {
+            TrainingState::read(&stage_dir(dir, stage))
+                .unwrap()
+                .history
+                .iter()
+                .map(|h| (h.loss.to_bits(), h.validation.to_bits()))
+                .collect()
+        };
+        assert_eq!(history(&fresh), history(&extended), "stage {stage}");
+    }
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
 fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_depth() {
     use weft_nn::embed_training::EmbedTrainingConfig;
     let c: EmbedTrainingConfig =
