@@ -105,7 +105,8 @@ pub struct Common {
     /// Base learning rate (overrides the configuration).
     #[arg(long)]
     pub lr: Option<f64>,
-    /// Continue the model in --out (same configuration; the epochs may grow).
+    /// Continue the model in --out (same configuration; the epochs and the early-stopping
+    /// patience may grow: a run that stopped early goes on under a longer patience).
     #[arg(long)]
     pub resume: bool,
     /// No progress bars and no epoch lines (they are in the model's train.log).

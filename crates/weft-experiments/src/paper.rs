@@ -68,12 +68,18 @@ fn paper_and_ours(records: &[Record], scene: &str, method: &str, metric: &str, d
 /// the seeds' spread (`± sd`) where the evaluation trained several.
 fn embed_cells(records: &[Record], scene: &str, method: &str) -> [String; 3] {
     [("m-rms", 3), ("m-sted", 5), ("m-phys", 2)].map(|(metric, digits)| {
-        let cell = paper_and_ours(records, scene, method, metric, digits);
-        match find(records, scene, method, &format!("{metric}-sd")) {
-            Some(sd) => format!("{cell} ± {:.digits$}", sd.value),
-            None => cell,
-        }
+        let sd = find(records, scene, method, &format!("{metric}-sd")).map(|r| r.value);
+        with_spread(paper_and_ours(records, scene, method, metric, digits), sd, digits)
     })
+}
+
+/// `cell ± sd`, the spread with `digits` after the point; the cell alone without one (a
+/// single seed).
+pub(crate) fn with_spread(cell: String, sd: Option<f64>, digits: usize) -> String {
+    match sd {
+        Some(sd) => format!("{cell} ± {sd:.digits$}"),
+        None => cell,
+    }
 }
 
 /// Tan et al. Table I: the embedding's M_rms, M_STED and M_phys per scene and method on

@@ -1037,7 +1037,11 @@ pub fn train_model(
             epochs: config.epochs,
             ..stored
         };
-        crate::checkpoint::check_continues(&config_path, stored == config, &stored, &config)?;
+        // The early-stopping patience may grow too (the trainer's rule).
+        let mut same = stored.clone();
+        same.schedule.early_stopping_patience = config.schedule.early_stopping_patience;
+        let continues = stored.trainer().continues_as(&config.trainer()) && same == config;
+        crate::checkpoint::check_continues(&config_path, continues, &stored, &config)?;
         crate::checkpoint::read_json(&standardization_path)?
     } else {
         let s = Standardization::fit(&train_x, &train_y)?;

@@ -1091,6 +1091,32 @@ fn warp_dataset_where_more_data_helps() -> weft_data::WarpDataset {
 }
 
 #[test]
+fn an_nnwarp_model_continues_under_a_longer_patience_and_refuses_a_shorter_one() {
+    use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
+    let data = warp_dataset_where_more_data_helps().with_training_prefix(1);
+    let dir = std::env::temp_dir().join(format!("weft-nnwarp-patience-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let with = |epochs: usize, patience: usize| {
+        let mut c = WarpTrainingConfig {
+            hidden: vec![8],
+            batch: 32,
+            epochs,
+            ..WarpTrainingConfig::default()
+        };
+        c.schedule.early_stopping_patience = Some(patience);
+        c
+    };
+    let silent = &mut weft_nn::trainer::Silent;
+    let (first, _, _) = train_model(&dir, &data, &with(2, 1), silent).unwrap();
+    let (longer, _, _) = train_model(&dir, &data, &with(4, 3), silent).unwrap();
+    assert!(longer.epochs_done > first.epochs_done || longer.stopped_early);
+    assert_eq!(longer.config.schedule.early_stopping_patience, Some(3));
+    let e = train_model(&dir, &data, &with(6, 1), silent).unwrap_err().to_string();
+    assert!(e.contains("early_stopping_patience: 3 vs 1"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_the_loads() {
     use weft_nn::nnwarp::{WarpTrainingConfig, collect_pairs, correction_rms, load_model, train_model};
     let full = warp_dataset_where_more_data_helps();

@@ -22,7 +22,7 @@ use weft_nn::rollout::LatentRollout;
 use weft_nn::trainer::{Decay, Schedule, TrainingState};
 
 use super::context::EvalContext;
-use crate::paper::{Table, format_ms, paper_cell as cell};
+use crate::paper::{Table, format_ms, paper_cell as cell, with_spread};
 use crate::records::{Curve, ExperimentOutput, LinePlot, Scatter, Series, Timing, mean_sd};
 use weft_data::Size;
 use weft_data::files::{Array, write_safetensors};
@@ -98,12 +98,7 @@ fn score_cells(paper: Option<(f64, f64, f64)>, runs: &[Scores]) -> [String; 3] {
 fn seeds_cell(paper: Option<f64>, samples: impl Iterator<Item = f64>, digits: usize) -> String {
     let v: Vec<f64> = samples.collect();
     let (mean, sd) = mean_sd(v.iter().copied());
-    let c = cell(paper, mean, digits);
-    if v.len() > 1 {
-        format!("{c} ± {sd:.digits$}")
-    } else {
-        c
-    }
+    with_spread(cell(paper, mean, digits), (v.len() > 1).then_some(sd), digits)
 }
 
 /// The training configuration of each evaluation size. `standard` and `paper` train for
@@ -1150,6 +1145,13 @@ fn run_scene(
     // Every model the first scene's studies train: `no-pb` models, reused below where one
     // has the configuration a `no-pb` seed needs.
     let mut study: Vec<(std::path::PathBuf, ModelScores)> = Vec::new();
+    // The directory of a study model trained under `c`, else `otherwise`.
+    let study_dir_or = |study: &[(std::path::PathBuf, ModelScores)], c: &EmbedTrainingConfig, otherwise| {
+        study
+            .iter()
+            .find(|(_, s)| c.trains_like(&s.config))
+            .map_or(otherwise, |(d, _)| d.clone())
+    };
     if first && schedules.len() > 1 {
         let mut scored = Vec::new();
         for (name, schedule) in schedules {
@@ -1219,11 +1221,11 @@ fn run_scene(
         for &epochs in budgets {
             let mut c = with_seed(&method_config(&r.config, true), seeds[0]);
             c.epochs[0] = epochs;
-            let dir = study
-                .iter()
-                .find(|(_, s)| c.trains_like(&s.config))
-                .map(|(d, _)| d.clone())
-                .unwrap_or_else(|| models.join("budget-study").join(format!("stage-1-{epochs}")));
+            let dir = study_dir_or(
+                &study,
+                &c,
+                models.join("budget-study").join(format!("stage-1-{epochs}")),
+            );
             let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", true))?;
             let states: Vec<Option<TrainingState>> = (1..=3u8)
                 .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage)).ok())
@@ -1275,11 +1277,7 @@ fn run_scene(
     let mut baseline = Vec::new();
     for (k, &seed) in seeds.iter().enumerate() {
         let c = with_seed(&method_config(config, true), seed);
-        let dir = study
-            .iter()
-            .find(|(_, s)| c.trains_like(&s.config))
-            .map(|(d, _)| d.clone())
-            .unwrap_or_else(|| seed_dir("no-pb", seed));
+        let dir = study_dir_or(&study, &c, seed_dir("no-pb", seed));
         let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?;
         baseline.push((dir, scores));
     }

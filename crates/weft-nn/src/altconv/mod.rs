@@ -1091,7 +1091,11 @@ pub fn train_model(
             kernels: config.kernels,
             ..stored
         };
-        crate::checkpoint::check_continues(&config_path, stored == *config, &stored, config)?;
+        // The early-stopping patience may grow too (the trainer's rule).
+        let mut same = stored.clone();
+        same.schedule.early_stopping_patience = config.schedule.early_stopping_patience;
+        let continues = stored.trainer().continues_as(&config.trainer()) && same == *config;
+        crate::checkpoint::check_continues(&config_path, continues, &stored, config)?;
         crate::checkpoint::read_json(&scaling_path)?
     } else {
         let s = Scaling::fit(&train, config.variant, config.steps)?;
