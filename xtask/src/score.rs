@@ -16,7 +16,8 @@ pub struct ScoreArgs {
     /// A dataset directory of the model's kind (`cargo xtask dataset`), of any seed or size.
     #[arg(long)]
     data: PathBuf,
-    /// The split scored: train, validation or test (embed: test, Tan et al.'s test frames).
+    /// The split scored: train, validation or test (embed: test, Tan et al.'s test frames,
+    /// or validation, its windows with M_phys split into its inertial and potential forces).
     #[arg(long, default_value = "test")]
     split: String,
     /// Where results.json (tidy records, docs/RESULTS.md) and predictions/ are written.

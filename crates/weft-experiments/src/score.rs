@@ -59,7 +59,8 @@ pub struct ScoreOptions {
     pub model: PathBuf,
     /// The dataset directory.
     pub data: PathBuf,
-    /// `train`, `validation` or `test` (embed: `test` only, Tan et al.'s test frames).
+    /// `train`, `validation` or `test` (embed: `test`, Tan et al.'s test frames, or
+    /// `validation`, the windows the evaluation chooses on).
     pub split: String,
     /// Where `results.json` and `predictions/` are written.
     pub out: PathBuf,

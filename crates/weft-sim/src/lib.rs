@@ -44,8 +44,8 @@ pub mod warp;
 pub use energy::Energy;
 pub use error::{Error, Result};
 pub use integrators::{
-    ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear, Quasistatic,
-    QuasistaticReport, RayleighDamping, StepReport,
+    ForceResidual, ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear,
+    Quasistatic, QuasistaticReport, RayleighDamping, StepReport,
 };
 pub use newton::{Globalization, HessianProjection, NewtonReport, NewtonSettings, NewtonSolver};
 pub use scenes::{

@@ -704,6 +704,23 @@ fn l_phys_gradient_is_exact_and_vanishes_on_simulated_frames() {
     let noisy: Vec<f64> = p.iter().map(|v| v + rng.uniform(-1e-3, 1e-3)).collect();
     assert!(ie.m_phys(p2, p1, &noisy).unwrap() > 1e3 * mphys.max(1e-30));
     assert!(ie.m_phys(p2, p1, &noisy[1..]).is_err());
+    // The split: the inertial force is M(p − 2p₁ + p₂)/Δt² by hand, and on a simulated
+    // frame it and the potential's force cancel down to the solver's residual.
+    let parts = ie.m_phys_parts(p2, p1, p).unwrap();
+    weft_testkit::assert_close!(parts.total, mphys, rtol = 1e-12, atol = 1e-300);
+    let dt2 = ie.dt() * ie.dt();
+    let by_hand: f64 = (0..p.len())
+        .filter(|&i| !ie.fixed()[i])
+        .map(|i| (ie.masses()[i / 3] * (p[i] - 2.0 * p1[i] + p2[i]) / dt2).powi(2))
+        .sum();
+    weft_testkit::assert_close!(parts.inertial, by_hand, rtol = 1e-12, atol = 0.0);
+    assert!(parts.inertial > 1e6 * mphys, "{parts:?}");
+    weft_testkit::assert_close!(parts.potential, parts.inertial, rtol = 1e-3, atol = 0.0);
+    // At rest in time (p₂ = p₁ = p) there is no inertial force: M_phys is the potential's.
+    let still = ie.m_phys_parts(&noisy, &noisy, &noisy).unwrap();
+    assert_eq!(still.inertial, 0.0);
+    weft_testkit::assert_close!(still.total, still.potential, rtol = 1e-12, atol = 0.0);
+    assert!(ie.m_phys_parts(p2, &p1[1..], p).is_err());
 }
 
 #[test]

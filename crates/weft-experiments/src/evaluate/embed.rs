@@ -20,6 +20,7 @@ use weft_nn::pca::PositionPca;
 use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
 use weft_nn::rollout::LatentRollout;
 use weft_nn::trainer::{Decay, Schedule, TrainingState};
+use weft_sim::ForceResidual;
 
 use super::context::EvalContext;
 use crate::paper::{Table, format_ms, paper_cell as cell, with_spread};
@@ -189,26 +190,56 @@ fn with_seed(config: &EmbedTrainingConfig, seed: u64) -> EmbedTrainingConfig {
     EmbedTrainingConfig { seed, ..config.clone() }
 }
 
-/// The λ_ephys tried for `ours` on `scene`, one chosen on the validation windows
-/// ([`choose_ephys`]): the configuration's and ten and a hundred times it (0.5, 5, 50).
-/// Tan et al. tuned λ_ephys per dataset among Table II's 0.1, 0.5 and 1, but under their
-/// own scale of `L_phys`; under weft's curvature scale λ_ephys = 1 gives `L_ephys` a
-/// curvature about half `L_vert`'s, and `L_vert` ends stage 1 near a tenth of `L_recon`.
-/// On `sheet-ms` the paper's three weights left the validation M_phys at or above
-/// `no-pb`'s (253–320 N² against 244, first seeds; docs/EMBEDDING.md), so the grid reaches
-/// up to where the term can act. Table II still trains the paper's three on `sheet-ms`.
-/// Quick runs keep the configuration's, except on `sheet-ms`, where the grid is Table
+/// The λ_ephys grid of a scene, one chosen on the validation windows ([`choose_ephys`]). Tan et al. tuned λ_ephys per dataset among Table II's 0.1,
+/// 0.5 and 1, under their own scale of `L_phys`. Weft's curvature scale makes the term's
+/// *mean* curvature that of `L_vert`, but a trained autoencoder's errors lie in soft
+/// directions, where `L_ephys` is far weaker: the weight at which it pulls a frame as
+/// hard as `L_vert` ([`ephys_parity`], measured on `no-pb`'s first seed, validation
+/// windows only) was about 200 on `sheet-ms`, and the fixed grids tried before (0.1 to 50)
+/// left the validation M_phys at or above `no-pb`'s (docs/EMBEDDING.md). Beyond the quick
+/// size the grid is that weight, rounded to one significant digit, and a decade either
+/// side; without it (a baseline with no residual) the configuration's weight. Quick runs
+/// keep fixed weights: the configuration's, except on `sheet-ms`, where the grid is Table
 /// II's weights (trained at every size anyway).
-fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingConfig) -> Vec<f64> {
+fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingConfig, parity: Option<f64>) -> Vec<f64> {
     let e = config.weights.ephys;
-    let mut grid = match (size, scene) {
-        (Size::Quick, "sheet-ms") => vec![TABLE_II_EPHYS[0], e, TABLE_II_EPHYS[1]],
-        (Size::Quick, _) => vec![e],
-        _ => vec![e, 10.0 * e, 100.0 * e],
+    let mut grid = match (size, scene, parity.and_then(one_significant_digit)) {
+        (Size::Quick, "sheet-ms", _) => vec![TABLE_II_EPHYS[0], e, TABLE_II_EPHYS[1]],
+        (Size::Quick, _, _) | (_, _, None) => vec![e],
+        (_, _, Some((digit, exponent))) => (exponent - 1..=exponent + 1).map(|k| decimal(digit, k)).collect(),
     };
     grid.sort_by(f64::total_cmp);
     grid.dedup();
     grid
+}
+
+/// `x > 0` as `(d, k)` with `d · 10^k` its value rounded to one significant digit
+/// (`d` in 1..=9, or 1 after rounding up to the next power of ten).
+fn one_significant_digit(x: f64) -> Option<(u32, i32)> {
+    if !(x.is_finite() && x > 0.0) {
+        return None;
+    }
+    let k = x.log10().floor() as i32;
+    let d = (x / 10f64.powi(k)).round() as u32;
+    Some(if d >= 10 { (1, k + 1) } else { (d.max(1), k) })
+}
+
+/// `d · 10^k` as the nearest f64 to the decimal (so 2 · 10¹ prints as `20`, not
+/// `20.000000000000004`: the value names a model directory).
+fn decimal(d: u32, k: i32) -> f64 {
+    format!("{d}e{k}").parse().unwrap_or(f64::NAN)
+}
+
+/// The λ_ephys at which `L_ephys` pulls a frame as hard as `L_vert` at a model with
+/// validation scores `v`: on a frame `L_vert`'s gradient is `2δ` and `λ L_ephys`'s is
+/// `λ s ∇_p L_phys` (`s` the physics scale, m/N), so the two are equal in norm at
+/// `λ* = 2‖δ‖ / (s ‖∇_p L_phys‖)`, with `‖δ‖² = 3V M_rms²` and `‖∇_p L_phys‖² = M_phys`,
+/// each the mean over the windows. Well below `λ*` the term barely moves a model that
+/// `L_vert` and `L_recon` train. `None` without a residual or scale to divide by.
+fn ephys_parity(num_vertices: usize, v: ValidationScores, scale: f64) -> Option<f64> {
+    let delta = (3.0 * num_vertices as f64).sqrt() * v.m_rms * 1e-3;
+    let parity = 2.0 * delta / (scale * v.m_phys.sqrt());
+    (parity.is_finite() && parity > 0.0).then_some(parity)
 }
 
 /// How far above `no-pb`'s validation M_rms a λ_ephys may take `ours` and still be
@@ -226,9 +257,14 @@ struct ValidationScores {
 }
 
 fn validation_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<ValidationScores> {
+    Ok(validation_breakdown(data, model)?.0)
+}
+
+/// The validation windows' frames, each window's two predecessors before it.
+fn validation_frames(data: &EmbedData) -> crate::Result<Vec<FrameRef>> {
     let windows = &data.validation_windows;
     crate::error::ensure!(!windows.is_empty(), "the dataset has no validation window");
-    let frames: Vec<FrameRef> = windows
+    Ok(windows
         .iter()
         .flat_map(|w| {
             (0..3).rev().map(move |back| FrameRef {
@@ -236,18 +272,48 @@ fn validation_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<Vali
                 frame: w.frame - back,
             })
         })
-        .collect();
+        .collect())
+}
+
+/// [`validation_scores`] and the mean over the validation windows of M_phys's two forces
+/// squared apart ([`weft_sim::ImplicitEuler::m_phys_parts`]).
+fn validation_breakdown(data: &EmbedData, model: &EmbedModel) -> crate::Result<(ValidationScores, ForceResidual)> {
+    let frames = validation_frames(data)?;
     let predicted = model.reconstruct(data, &frames, 16)?;
+    let windows = &data.validation_windows;
     let map: Vec<usize> = (0..data.num_vertices()).collect();
     let mut acc = RmsAccumulator::default();
-    let mut phys = 0.0;
     for (w, p) in windows.iter().zip(predicted.chunks_exact(3)) {
         acc.add(&p[2], data.dataset.sequences[w.sequence].frame(w.frame), &map);
-        phys += m_phys(data, &p[0], &p[1], &p[2], *w)?;
     }
-    Ok(ValidationScores {
+    let parts = mean_force_residual(data, &predicted)?;
+    let scores = ValidationScores {
         m_rms: acc.m_rms_mm(),
-        m_phys: phys / windows.len() as f64,
+        m_phys: parts.total,
+    };
+    Ok((scores, parts))
+}
+
+/// The mean over the validation windows of M_phys's parts, each window's three frames
+/// taken from `positions` (laid out as [`validation_frames`]).
+fn mean_force_residual(data: &EmbedData, positions: &[Vec<f64>]) -> crate::Result<ForceResidual> {
+    let windows = &data.validation_windows;
+    let mut sum = ForceResidual {
+        total: 0.0,
+        inertial: 0.0,
+        potential: 0.0,
+    };
+    for (w, p) in windows.iter().zip(positions.chunks_exact(3)) {
+        let r = m_phys_parts(data, &p[0], &p[1], &p[2], *w)?;
+        sum.total += r.total;
+        sum.inertial += r.inertial;
+        sum.potential += r.potential;
+    }
+    let n = windows.len() as f64;
+    Ok(ForceResidual {
+        total: sum.total / n,
+        inertial: sum.inertial / n,
+        potential: sum.potential / n,
     })
 }
 
@@ -369,9 +435,20 @@ struct Window {
 /// positions; one that does not (`pca`) is not charged twice for the miss, which M_rms
 /// already counts. N².
 fn m_phys(data: &EmbedData, prev2: &[f64], prev1: &[f64], p: &[f64], at: FrameRef) -> crate::Result<f64> {
+    Ok(m_phys_parts(data, prev2, prev1, p, at)?.total)
+}
+
+/// [`m_phys`] with its inertial and potential forces squared apart.
+fn m_phys_parts(
+    data: &EmbedData,
+    prev2: &[f64],
+    prev1: &[f64],
+    p: &[f64],
+    at: FrameRef,
+) -> crate::Result<ForceResidual> {
     let q = data.dataset.sequences[at.sequence].control(at.frame);
     let prescribed = data.dataset.with_grasp_at(p, q)?;
-    Ok(data.integrator.m_phys(prev2, prev1, &prescribed)?)
+    Ok(data.integrator.m_phys_parts(prev2, prev1, &prescribed)?)
 }
 
 /// M_rms over the scored frames, M_STED per window (all its frames), and M_phys of every
@@ -1002,14 +1079,17 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     });
     if let Some((grid, _)) = ephys_rows.first() {
         let mut header = vec!["scene".to_string()];
-        header.extend(grid.iter().map(|e| format!("λ_ephys {e}")));
+        header.push("parity λ*".into());
+        header.extend((1..=grid.len()).map(|i| format!("λ_ephys #{i}")));
         header.push("no-pb".into());
         header.push("chosen".into());
         out.tables.push(Table {
             title: "Tan et al. λ_ephys chosen per scene on the validation windows".into(),
             caption: format!(
-                "Validation M_rms (mm) / M_phys (N²) of the first seed of `ours` at each λ_ephys and of `no-pb`; \
-                 the chosen weight has the lowest M_phys among those within {} % of `no-pb`'s M_rms (else the \
+                "Validation M_rms (mm) / M_phys (N²) of the first seed of `ours` at each λ_ephys (`λ: M_rms / \
+                 M_phys`) and of `no-pb`. The grid is `no-pb`'s parity λ* (the weight at which L_ephys pulls a \
+                 frame as hard as L_vert, docs/EMBEDDING.md) to one significant digit and a decade either side. \
+                 The chosen weight has the lowest M_phys among those within {} % of `no-pb`'s M_rms (else the \
                  lowest M_rms). The other seeds train at it; the test split plays no part.",
                 100.0 * EPHYS_RMS_TOLERANCE
             ),
@@ -1293,7 +1373,18 @@ fn run_scene(
     let baseline_validation = baseline[0].1.validation;
     // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation
     // windows only; the other seeds at the chosen weight.
-    let grid = ephys_grid(ctx.size, scene, config);
+    let parity = ephys_parity(
+        data.num_vertices(),
+        baseline_validation,
+        data.phys_scale(config.phys_scale),
+    );
+    let grid = ephys_grid(ctx.size, scene, config, parity);
+    if let Some(parity) = parity.filter(|_| grid.len() > 1) {
+        out.notes.push(format!(
+            "embed/{scene}: `no-pb`'s first seed has λ_ephys parity {parity:.3} on the validation windows; \
+             the λ_ephys grid is {grid:?}"
+        ));
+    }
     let ours_config = |ephys: f64, seed: u64| {
         let mut c = with_seed(&method_config(config, false), seed);
         c.weights.ephys = ephys;
@@ -1320,11 +1411,11 @@ fn run_scene(
         ours.push((dir, s));
     }
     if grid.len() > 1 {
-        let mut row = vec![format!("`{scene}`")];
+        let mut row = vec![format!("`{scene}`"), parity.map_or("—".into(), |p| format!("{p:.1}"))];
         row.extend(
             validation
                 .iter()
-                .map(|(_, v)| format!("{:.3} / {:.4e}", v.m_rms, v.m_phys)),
+                .map(|(e, v)| format!("{e}: {:.3} / {:.4e}", v.m_rms, v.m_phys)),
         );
         row.push(format!(
             "{:.3} / {:.4e}",
@@ -1532,21 +1623,28 @@ fn tan_table_4(rows: &[(String, String, Vec<Scores>)]) -> Table {
     }
 }
 
-/// Scores the model in `model_dir` (`cargo xtask train embed`) on the test frames (the
-/// last 5 of every 17, Tan et al. §VI) of the cloth dataset in `data_dir`, with the
-/// evaluation's metrics (`m-rms`, `m-sted`, `m-phys`) and its reconstructions under
-/// `ctx.out/predictions/embed/<scene>/`. The features are normalised by the model's own
-/// `normalization.json`, so a dataset of another seed or size is read as the model was
-/// trained. The method is `ours`, or `no-pb` for a model trained without the physics terms.
+/// Scores the model in `model_dir` (`cargo xtask train embed`) on the cloth dataset in
+/// `data_dir`. The features are normalised by the model's own `normalization.json`, so a
+/// dataset of another seed or size is read as the model was trained. The method is
+/// `ours`, or `no-pb` for a model trained without the physics terms.
+///
+/// - `test`: Tan et al.'s test frames (the last 5 of every 17, §VI), with the
+///   evaluation's metrics (`m-rms`, `m-sted`, `m-phys`) and its reconstructions under
+///   `ctx.out/predictions/embed/<scene>/`.
+/// - `validation`: the validation windows the evaluation chooses on (each frame with its
+///   two predecessors reconstructed), `m-rms` and `m-phys` as the choice reads them, and
+///   M_phys's two forces squared apart (`m-phys-inertial`, `m-phys-potential`), beside the
+///   same three of the ground-truth frames (method `ground-truth`): how large the forces
+///   are that the residual is measured against.
 pub fn score_model(
     ctx: &EvalContext,
     model_dir: &Path,
     data_dir: &Path,
     split: &str,
 ) -> crate::Result<ExperimentOutput> {
-    if split != "test" {
+    if !matches!(split, "test" | "validation") {
         return Err(crate::Error::Invalid(format!(
-            "embed models are scored on Tan et al.'s test frames (the last 5 of every 17), not {split:?}: use --split test"
+            "embed models are scored on Tan et al.'s test frames (the last 5 of every 17) or on the validation windows, not {split:?}: use --split test or --split validation"
         )));
     }
     let dataset = ClothDataset::load(data_dir)?;
@@ -1561,6 +1659,9 @@ pub fn score_model(
     } else {
         "ours"
     };
+    if split == "validation" {
+        return score_validation(ctx, model_dir, &scene, method, &data, &model);
+    }
     let t = Instant::now();
     let predicted = model.reconstruct(&data, &data.test_frames, 16)?;
     let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
@@ -1589,6 +1690,53 @@ pub fn score_model(
     let dir = ctx.out.join("predictions").join("embed").join(&scene);
     std::fs::create_dir_all(&dir)?;
     write_predictions(&dir.join(format!("{method}.safetensors")), &data, &predicted)?;
+    Ok(out)
+}
+
+/// [`score_model`] on the validation windows.
+fn score_validation(
+    ctx: &EvalContext,
+    model_dir: &Path,
+    scene: &str,
+    method: &str,
+    data: &EmbedData,
+    model: &EmbedModel,
+) -> crate::Result<ExperimentOutput> {
+    let (scores, parts) = validation_breakdown(data, model)?;
+    let frames = validation_frames(data)?;
+    let truth: Vec<Vec<f64>> = frames
+        .iter()
+        .map(|f| data.dataset.sequences[f.sequence].frame(f.frame).to_vec())
+        .collect();
+    let floor = mean_force_residual(data, &truth)?;
+    let mut out = ExperimentOutput::new("embed", ctx.size);
+    out.notes.push(format!(
+        "embed score: {} ({method}) on the {} validation windows of {}",
+        model_dir.display(),
+        data.validation_windows.len(),
+        scene
+    ));
+    let scale = data.phys_scale(model.config.phys_scale);
+    out.notes.push(format!(
+        "physics scale s = {scale:.4e} m/N ({:?})",
+        model.config.phys_scale
+    ));
+    let mut record = |method: &str, metric: &str, value: f64, unit: &str| {
+        out.record(scene, method, metric, value, unit, Timing::default());
+        if let Some(r) = out.records.last_mut() {
+            r.split = Some("validation".into());
+        }
+    };
+    record(method, "m-rms", scores.m_rms, "mm");
+    // How hard PB-loss pulls at this model (the weight the λ_ephys grid centres on).
+    if let Some(parity) = ephys_parity(data.num_vertices(), scores, scale) {
+        record(method, "ephys-parity", parity, "1");
+    }
+    for (who, r) in [(method, parts), ("ground-truth", floor)] {
+        record(who, "m-phys", r.total, "N^2");
+        record(who, "m-phys-inertial", r.inertial, "N^2");
+        record(who, "m-phys-potential", r.potential, "N^2");
+    }
     Ok(out)
 }
 
@@ -1643,15 +1791,63 @@ mod tests {
     /// read no test frame: poisoning every test frame changes the test scores and leaves
     /// the validation scores, hence the choice, bit for bit as they were.
     #[test]
-    fn the_ephys_grid_spans_two_decades_beyond_the_quick_size() {
+    fn the_ephys_grid_spans_a_decade_either_side_of_parity_beyond_the_quick_size() {
         let config = training_config(Size::Standard);
         assert_eq!(config.weights.ephys, 0.5);
         for scene in ["sheet-ms", "ball-fem"] {
-            assert_eq!(ephys_grid(Size::Standard, scene, &config), [0.5, 5.0, 50.0]);
+            assert_eq!(
+                ephys_grid(Size::Standard, scene, &config, Some(205.8)),
+                [20.0, 200.0, 2000.0]
+            );
+            assert_eq!(ephys_grid(Size::Standard, scene, &config, None), [0.5]);
         }
+        // Rounding up across a power of ten, and below one: exact decimals, as named.
+        assert_eq!(
+            ephys_grid(Size::Paper, "ball-ms", &config, Some(9.7)),
+            [1.0, 10.0, 100.0]
+        );
+        let small = ephys_grid(Size::Standard, "ball-ms", &config, Some(0.0316));
+        assert_eq!(small, [0.003, 0.03, 0.3]);
+        assert_eq!(format!("{}", small[0]), "0.003");
+        assert_eq!(one_significant_digit(0.0), None);
+        assert_eq!(one_significant_digit(f64::NAN), None);
         let quick = training_config(Size::Quick);
-        assert_eq!(ephys_grid(Size::Quick, "sheet-ms", &quick), [0.1, 0.5, 1.0]);
-        assert_eq!(ephys_grid(Size::Quick, "ball-fem", &quick), [0.5]);
+        assert_eq!(
+            ephys_grid(Size::Quick, "sheet-ms", &quick, Some(200.0)),
+            [0.1, 0.5, 1.0]
+        );
+        assert_eq!(ephys_grid(Size::Quick, "ball-fem", &quick, Some(200.0)), [0.5]);
+    }
+
+    /// Parity is where the two gradients are equal: at λ*, λ* s ‖∇L_phys‖ = 2‖δ‖ with the
+    /// norms the scores imply; it scales as M_rms / √M_phys / s.
+    #[test]
+    fn ephys_parity_balances_the_two_gradients() {
+        let v = ValidationScores {
+            m_rms: 6.92,
+            m_phys: 243.7,
+        };
+        let (n, s) = (4225, 2.0e-4);
+        let parity = ephys_parity(n, v, s).unwrap();
+        let delta = (3.0 * n as f64 * (v.m_rms * 1e-3).powi(2)).sqrt();
+        assert!((parity * s * v.m_phys.sqrt() - 2.0 * delta).abs() < 1e-12 * delta);
+        let doubled = ValidationScores {
+            m_rms: 2.0 * v.m_rms,
+            m_phys: 4.0 * v.m_phys,
+        };
+        assert!((ephys_parity(n, doubled, s).unwrap() - parity).abs() < 1e-12 * parity);
+        assert_eq!(
+            ephys_parity(
+                n,
+                ValidationScores {
+                    m_rms: 1.0,
+                    m_phys: 0.0
+                },
+                s
+            ),
+            None
+        );
+        assert_eq!(ephys_parity(n, v, 0.0), None);
     }
 
     #[test]
@@ -1698,6 +1894,34 @@ mod tests {
             (a - b).abs() > 1e-3 * a,
             "the poison reaches the test scores: {a} vs {b}"
         );
+    }
+
+    /// M_phys split into its forces: on the ground truth the inertial and potential forces
+    /// cancel down to the solver's tolerance, and a model's split sums to the M_phys the
+    /// λ_ephys choice reads.
+    #[test]
+    fn the_validation_breakdown_splits_m_phys_and_the_ground_truth_balances() {
+        let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
+        let frames = validation_frames(&data).unwrap();
+        let truth: Vec<Vec<f64>> = frames
+            .iter()
+            .map(|f| data.dataset.sequences[f.sequence].frame(f.frame).to_vec())
+            .collect();
+        let floor = mean_force_residual(&data, &truth).unwrap();
+        assert!(floor.inertial > 0.0, "{floor:?}");
+        assert!(floor.total < 1e-6 * floor.inertial, "{floor:?}");
+        assert!(
+            (floor.potential - floor.inertial).abs() < 1e-3 * floor.inertial,
+            "{floor:?}"
+        );
+        let model = EmbedModel::new(training_config(Size::Quick), &data).unwrap();
+        let (scores, parts) = validation_breakdown(&data, &model).unwrap();
+        assert_eq!(scores, validation_scores(&data, &model).unwrap());
+        assert_eq!(scores.m_phys, parts.total);
+        // An untrained decoder is far from force balance: the residual is of the forces' size.
+        assert!(parts.total > 1e3 * floor.total, "{parts:?} vs {floor:?}");
+        // Squared parts of a sum: |a + b|² ≤ (|a| + |b|)².
+        assert!(parts.total.sqrt() <= parts.inertial.sqrt() + parts.potential.sqrt() + 1e-9);
     }
 
     /// Beyond the quick size every stage stops once flat and two schedules compete; the

@@ -28,6 +28,18 @@ pub struct StepReport {
     pub seconds: f64,
 }
 
+/// Tan et al.'s `M_phys` with its two forces squared apart
+/// ([`ImplicitEuler::m_phys_parts`]); N².
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ForceResidual {
+    /// `‖∂L_phys/∂p_m‖²`: `M_phys`.
+    pub total: f64,
+    /// `‖M(p_m − 2p_{m−1} + p_{m−2})/Δt²‖²`.
+    pub inertial: f64,
+    /// `‖∇P(p_m)‖²`.
+    pub potential: f64,
+}
+
 /// The implicit Euler integrator over a list of potential terms.
 #[derive(Debug)]
 pub struct ImplicitEuler {
@@ -203,6 +215,28 @@ impl ImplicitEuler {
             .filter(|(_, f)| !**f)
             .map(|(g, _)| g * g)
             .sum())
+    }
+
+    /// [`ImplicitEuler::m_phys`] and the two forces it sums, each squared on its own over
+    /// the free DOFs: the inertial force `M(p_m − 2p_{m−1} + p_{m−2})/Δt²` and the
+    /// potential's `∇P(p_m)` (elastic, bending, gravity, contact). On a simulated frame the
+    /// two cancel and the total is the solver's tolerance; on reconstructed frames the
+    /// split says which one a residual comes from. The inertial force of three frames with
+    /// independent position errors of size ε is of order `4 m ε / Δt²`, so it can dominate
+    /// whatever the elastic forces do (docs/EMBEDDING.md). N².
+    pub fn m_phys_parts(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<ForceResidual> {
+        let inertia = self.history_inertia(prev2, prev1, p)?;
+        let (mut inertial, mut potential) = (vec![0.0; p.len()], vec![0.0; p.len()]);
+        inertia.add_gradient(p, &mut inertial);
+        let terms: Vec<&dyn Energy> = self.terms.iter().map(|t| t.as_ref()).collect();
+        total_gradient(&terms, p, &mut potential);
+        let free_sum =
+            |f: &dyn Fn(usize) -> f64| -> f64 { (0..p.len()).filter(|&i| !self.fixed[i]).map(|i| f(i).powi(2)).sum() };
+        Ok(ForceResidual {
+            total: free_sum(&|i| inertial[i] + potential[i]),
+            inertial: free_sum(&|i| inertial[i]),
+            potential: free_sum(&|i| potential[i]),
+        })
     }
 
     fn history_inertia(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Inertia> {

@@ -13,7 +13,7 @@ pub mod newmark;
 pub mod prefactorized;
 pub mod quasistatic;
 
-pub use implicit_euler::{ImplicitEuler, StepReport};
+pub use implicit_euler::{ForceResidual, ImplicitEuler, StepReport};
 pub use newmark::{Newmark, NewmarkReport};
 pub use prefactorized::{LinearSolve, LinearStepReport, PrefactorizedLinear, RayleighDamping};
 pub use quasistatic::{Quasistatic, QuasistaticReport};
