@@ -80,6 +80,16 @@ pub struct EmbedTrainingConfig {
     /// default, as Tan et al.).
     #[serde(default)]
     pub schedule: crate::trainer::Schedule,
+    /// Adam's learning rate in stage 3, which fine-tunes both networks from a fresh
+    /// optimiser; `None`: `adam.learning_rate`, as in the other stages. A fresh Adam's
+    /// first steps move every weight by about the learning rate whatever its gradient's
+    /// size (the moments are empty), and at 10⁻³ stage 3's first epoch raised the
+    /// validation loss 4–8-fold (docs/EMBEDDING.md). Only stage 3 reads it: a model
+    /// trained under another value keeps stages 1 and 2
+    /// ([`EmbedTrainingConfig::stages_continuing_as`]). Not written when `None`, so a
+    /// stored configuration from before the field reads as the same.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fine_tune_learning_rate: Option<f64>,
     /// The fused autoencoder ops (default) or candle's autograd, the reference. Not part
     /// of what a resumed run must match.
     #[serde(default)]
@@ -158,6 +168,9 @@ impl EmbedTrainingConfig {
             }
         }
         check_adam("adam", &self.adam)?;
+        if let Some(lr) = self.fine_tune_learning_rate {
+            crate::trainer::check_learning_rate("fine_tune_learning_rate", lr)?;
+        }
         check_count("batch", self.batch, MAX_BATCH)?;
         for (i, &e) in self.epochs.iter().enumerate() {
             if e > MAX_EPOCHS {
@@ -186,6 +199,33 @@ impl EmbedTrainingConfig {
         };
         same.schedule.early_stopping_patience = other.schedule.early_stopping_patience;
         (1..=3u8).all(|s| self.trainer(s).continues_as(&other.trainer(s))) && same.trains_like(other)
+    }
+
+    /// How many leading stages of a model trained under `self` continue under `other`:
+    /// 3 when it [continues as](Self::continues_as) `other`; 2 when they differ only in
+    /// what stage 3 alone reads ([`EmbedTrainingConfig::fine_tune_learning_rate`]), stage 3
+    /// then training afresh from stage 2's weights; 0 otherwise.
+    pub fn stages_continuing_as(&self, other: &Self) -> u8 {
+        if self.continues_as(other) {
+            return 3;
+        }
+        let but_stage_3 = Self {
+            fine_tune_learning_rate: other.fine_tune_learning_rate,
+            ..self.clone()
+        };
+        if but_stage_3.continues_as(other) { 2 } else { 0 }
+    }
+
+    /// Adam's settings in `stage`: [`EmbedTrainingConfig::adam`], with stage 3's learning
+    /// rate [`EmbedTrainingConfig::fine_tune_learning_rate`] when set.
+    pub fn stage_adam(&self, stage: u8) -> AdamSettings {
+        match (stage, self.fine_tune_learning_rate) {
+            (3, Some(learning_rate)) => AdamSettings {
+                learning_rate,
+                ..self.adam
+            },
+            _ => self.adam,
+        }
     }
 
     pub fn trainer(&self, stage: u8) -> crate::trainer::TrainerConfig {
@@ -217,6 +257,7 @@ impl Default for EmbedTrainingConfig {
             phys_scale: PhysScale::default(),
             ephys_warmup: 0,
             schedule: crate::trainer::Schedule::default(),
+            fine_tune_learning_rate: None,
             kernels: crate::Kernels::default(),
         }
     }
@@ -517,15 +558,16 @@ impl EmbedModel {
     /// The parameter groups stage `stage` trains: the autoencoder (1), the latent
     /// simulator (2), both (3).
     pub fn stage_groups(&self, stage: u8) -> Vec<crate::trainer::Group<'_>> {
+        let adam = self.config.stage_adam(stage);
         let ae = crate::trainer::Group {
             name: "autoencoder",
             params: &self.autoencoder_params,
-            adam: self.config.adam,
+            adam,
         };
         let sim = crate::trainer::Group {
             name: "simulator",
             params: &self.simulator_params,
-            adam: self.config.adam,
+            adam,
         };
         match stage {
             1 => vec![ae],
@@ -874,16 +916,18 @@ pub fn stage_done(dir: &std::path::Path, stage: u8, config: &crate::trainer::Tra
 }
 
 /// Whether training the model in `dir` on under `config` gives exactly the model a fresh
-/// directory would: it was trained under a configuration that
-/// [continues as](EmbedTrainingConfig::continues_as) `config`, no stage has trained
-/// more epochs than `config` allows it, and every trained stage still has its weights.
-/// `false` when `dir` holds no model.
+/// directory would: it was trained under a configuration whose leading stages
+/// [continue](EmbedTrainingConfig::stages_continuing_as) under `config` (the others are
+/// trained afresh by [`train_model`]), none of those stages has trained more epochs than
+/// `config` allows it, and each of them that trained still has its weights. `false` when
+/// `dir` holds no model.
 pub fn continues_exactly(dir: &std::path::Path, config: &EmbedTrainingConfig) -> bool {
     let Ok(have) = crate::checkpoint::read_json::<EmbedTrainingConfig>(&dir.join("config.json")) else {
         return false;
     };
-    have.continues_as(config)
-        && (1..=3u8).all(|stage| {
+    let kept = have.stages_continuing_as(config);
+    kept > 0
+        && (1..=kept).all(|stage| {
             let run = stage_dir(dir, stage);
             !crate::trainer::has_run(&run)
                 || crate::trainer::TrainingState::read(&run)
@@ -978,7 +1022,9 @@ fn check_stages(dir: &std::path::Path, config: &EmbedTrainingConfig, stages: &[u
 /// `config.json`, `normalization.json` (the ACAP feature normalisation fitted on the
 /// training frames) and one trainer run per stage ([`train_stages`]). A directory trained
 /// under another configuration is an error (only the epoch counts may change, and the
-/// early-stopping patience grow: [`EmbedTrainingConfig::continues_as`]).
+/// early-stopping patience grow: [`EmbedTrainingConfig::continues_as`]), except that a
+/// model trained under another stage-3 learning rate keeps stages 1 and 2 and has its
+/// stage 3 discarded ([`EmbedTrainingConfig::stages_continuing_as`]).
 pub fn train_model(
     dir: &std::path::Path,
     data: &EmbedData,
@@ -1003,7 +1049,18 @@ pub fn train_model(
             kernels: config.kernels,
             ..stored.clone()
         };
-        crate::checkpoint::check_continues(&config_path, stored.continues_as(config), &shown, config)?;
+        let kept = stored.stages_continuing_as(config);
+        crate::checkpoint::check_continues(&config_path, kept > 0, &shown, config)?;
+        for stage in kept + 1..=3 {
+            let run = stage_dir(dir, stage);
+            if run.exists() {
+                observer.epoch(&format!(
+                    "embed/{} stage {stage}: discarded, it was trained under another stage-{stage} configuration",
+                    data.dataset.name
+                ));
+                std::fs::remove_dir_all(&run).map_err(|e| io(&run, e))?;
+            }
+        }
     }
     crate::checkpoint::write_json(&config_path, config)?;
     crate::checkpoint::write_json(&dir.join("normalization.json"), &data.normalization)?;

@@ -1308,10 +1308,25 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Every stage of the embeddings in `a` and `b` trained the same epochs, bit for bit.
+fn assert_same_stage_histories(a: &std::path::Path, b: &std::path::Path) {
+    use weft_nn::embed_training::stage_dir;
+    for stage in 1..=3u8 {
+        let history = |dir: &std::path::Path| -> Vec<(u64, u64)> {
+            weft_nn::trainer::TrainingState::read(&stage_dir(dir, stage))
+                .unwrap()
+                .history
+                .iter()
+                .map(|h| (h.loss.to_bits(), h.validation.to_bits()))
+                .collect()
+        };
+        assert_eq!(history(a), history(b), "stage {stage}");
+    }
+}
+
 #[test]
 fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_trains() {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, stage_dir, train_model};
-    use weft_nn::trainer::TrainingState;
+    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let short = EmbedTrainingConfig {
         epochs: [1, 1, 1],
@@ -1332,17 +1347,61 @@ fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_tra
     train_model(&extended, &data, &long, &[1, 2, 3], silent).unwrap();
     // Stages 2 and 3 started from stage 1's one-epoch weights; they are trained again from
     // its two-epoch ones, so every stage matches the fresh run's.
-    for stage in 1..=3u8 {
-        let history = |dir: &std::path::Path| -> Vec<(u64, u64)> {
-            TrainingState::read(&stage_dir(dir, stage))
-                .unwrap()
-                .history
-                .iter()
-                .map(|h| (h.loss.to_bits(), h.validation.to_bits()))
-                .collect()
-        };
-        assert_eq!(history(&fresh), history(&extended), "stage {stage}");
-    }
+    assert_same_stage_histories(&fresh, &extended);
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
+fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_trains_stage_3_afresh() {
+    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, continues_exactly, stage_dir, train_model};
+    let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
+    let before = EmbedTrainingConfig {
+        epochs: [1, 1, 2],
+        ..small_embed_config()
+    };
+    let after = EmbedTrainingConfig {
+        fine_tune_learning_rate: Some(1e-4),
+        ..before.clone()
+    };
+    assert_eq!(before.stages_continuing_as(&after), 2);
+    assert_eq!(after.stages_continuing_as(&before), 2);
+    assert_eq!(after.stages_continuing_as(&after), 3);
+    let reseeded = EmbedTrainingConfig {
+        seed: 7,
+        ..after.clone()
+    };
+    assert_eq!(before.stages_continuing_as(&reseeded), 0);
+    assert_eq!(before.stage_adam(1), before.adam);
+    assert_eq!(after.stage_adam(3).learning_rate, 1e-4);
+    assert_eq!(after.stage_adam(2), before.adam);
+    assert!(
+        EmbedTrainingConfig {
+            fine_tune_learning_rate: Some(-1.0),
+            ..after.clone()
+        }
+        .validate()
+        .is_err()
+    );
+
+    let base = std::env::temp_dir().join(format!("weft-nn-fine-tune-rate-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let (fresh, switched) = (base.join("fresh"), base.join("switched"));
+    let silent = &mut weft_nn::trainer::Silent;
+    train_model(&fresh, &data, &after, &[1, 2, 3], silent).unwrap();
+    train_model(&switched, &data, &before, &[1, 2, 3], silent).unwrap();
+    let state = |dir: &std::path::Path, stage: u8| std::fs::read(stage_dir(dir, stage).join("training.json")).unwrap();
+    let (stage_1, stage_2, old_stage_3) = (state(&switched, 1), state(&switched, 2), state(&switched, 3));
+    assert!(continues_exactly(&switched, &after));
+    train_model(&switched, &data, &after, &[1, 2, 3], silent).unwrap();
+    // Stages 1 and 2 were kept as they were, stage 3 trained again at the new rate: the
+    // model is the one a fresh run at that rate trains, stage by stage and bit for bit.
+    assert_eq!(state(&switched, 1), stage_1);
+    assert_eq!(state(&switched, 2), stage_2);
+    assert_ne!(state(&switched, 3), old_stage_3);
+    assert_same_stage_histories(&fresh, &switched);
+    // Without the field, a stored configuration reads as before it existed.
+    let text = serde_json::to_string(&before).unwrap();
+    assert!(!text.contains("fine_tune_learning_rate"));
     let _ = std::fs::remove_dir_all(&base);
 }
 

@@ -168,8 +168,68 @@ fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'stati
     vec![("constant", constant), ("halve-on-plateau", plateau)]
 }
 
+/// Stage 3's learning rates the first scene chooses between on validation: the
+/// configuration's (Tan et al.'s one rate for every stage) and a tenth of it. Stage 3
+/// starts a fresh Adam on both trained networks; at the full rate its first epoch raised
+/// the validation loss 4–8-fold and six of eight `sheet-ms` models kept their stage-2
+/// weights (docs/EMBEDDING.md). Quick runs keep the configuration's.
+fn fine_tune_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<Option<f64>> {
+    if size == Size::Quick {
+        vec![config.fine_tune_learning_rate]
+    } else {
+        vec![
+            config.fine_tune_learning_rate,
+            Some(0.1 * config.stage_adam(3).learning_rate),
+        ]
+    }
+}
+
+/// What the first scene chooses on its validation windows before the other models train,
+/// each study's candidates in order (the configuration's first).
+#[derive(Debug, Clone)]
+struct Studies {
+    schedules: Vec<(&'static str, Schedule)>,
+    budgets: Vec<usize>,
+    fine_tune: Vec<Option<f64>>,
+}
+
+impl Studies {
+    fn new(size: Size, config: &EmbedTrainingConfig) -> Self {
+        Self {
+            schedules: schedule_candidates(size, config),
+            budgets: budget_candidates(size, config),
+            fine_tune: fine_tune_candidates(size, config),
+        }
+    }
+}
+
+/// The name of a stage-3 learning rate in the report and in directory names.
+fn fine_tune_name(config: &EmbedTrainingConfig, rate: Option<f64>) -> String {
+    match rate {
+        None => format!("{} (every stage's)", config.adam.learning_rate),
+        Some(r) => format!("{r}"),
+    }
+}
+
+/// Ends each study row with "chosen" when its first cell names the `chosen` candidate.
+fn mark_chosen(rows: &mut [Vec<String>], chosen: &str) {
+    for row in rows {
+        let mark = if row[0] == chosen { "chosen" } else { "" };
+        row.push(mark.into());
+    }
+}
+
+/// The mean validation scores of a study candidate's models (one per seed).
+fn mean_validation(runs: &[(std::path::PathBuf, ModelScores)]) -> ValidationScores {
+    ValidationScores {
+        m_rms: mean_sd(runs.iter().map(|(_, s)| s.validation.m_rms)).0,
+        m_phys: mean_sd(runs.iter().map(|(_, s)| s.validation.m_phys)).0,
+    }
+}
+
 /// The candidate to keep from `(candidate, validation scores)`: the lowest validation M_rms
-/// (ties: the first). Chooses the learning-rate schedule and the stage-1 budget.
+/// (ties: the first). Chooses the learning-rate schedule, the stage-1 budget and stage 3's
+/// learning rate.
 fn lowest_m_rms<T: Copy>(candidates: &[(T, ValidationScores)]) -> Option<T> {
     candidates
         .iter()
@@ -346,6 +406,26 @@ fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConf
 /// `config` trains ([`weft_nn::embed_training::continues_exactly`]).
 fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
     dir.join("config.json").exists() && !weft_nn::embed_training::continues_exactly(dir, config)
+}
+
+/// Makes `to` a model directory holding `from`'s configuration, normalisation and trained
+/// stages 1 and 2 (copies, so neither model's later training touches the other's files),
+/// for a stage 3 trained under another learning rate
+/// ([`weft_nn::embed_training::train_model`] then discards nothing and trains stage 3).
+fn share_stages_1_and_2(from: &Path, to: &Path) -> crate::Result<()> {
+    std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
+    for stage in 1..=2u8 {
+        let run = weft_nn::embed_training::stage_dir(from, stage);
+        if run.exists() {
+            super::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
+        }
+    }
+    // The configuration last: a directory with it is a model (a copy cut short is redone).
+    for file in ["normalization.json", "config.json"] {
+        std::fs::copy(from.join(file), to.join(file))
+            .with_context(|| format!("copying {} to {}", from.join(file).display(), to.display()))?;
+    }
+    Ok(())
 }
 
 /// Trains (or resumes) one model of the experiment into `dir`, all three stages; a model
@@ -958,6 +1038,9 @@ struct SceneResults {
     /// The budget study's rows (first scene, beyond the quick size).
     #[serde(default)]
     budget_rows: Vec<Vec<String>>,
+    /// The stage-3 learning-rate study's rows (first scene, beyond the quick size).
+    #[serde(default)]
+    fine_tune_rows: Vec<Vec<String>>,
     /// Wall seconds of the run that finished the scene (its models may have trained in
     /// earlier runs).
     wall_seconds: f64,
@@ -966,13 +1049,7 @@ struct SceneResults {
 /// The results kept at `path` if they were made under `config` (on the first scene, under
 /// any candidate schedule and stage-1 budget: the scene makes the choices); `None` to run
 /// the scene.
-fn restored_scene(
-    path: &Path,
-    config: &EmbedTrainingConfig,
-    schedules: &[(&str, Schedule)],
-    budgets: &[usize],
-    first: bool,
-) -> Option<SceneResults> {
+fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> Option<SceneResults> {
     let text = std::fs::read_to_string(path).ok()?;
     let kept: SceneResults = match serde_json::from_str(&text) {
         Ok(k) => k,
@@ -984,11 +1061,13 @@ fn restored_scene(
     let same = if first {
         let mut before_the_studies = EmbedTrainingConfig {
             schedule: config.schedule,
+            fine_tune_learning_rate: config.fine_tune_learning_rate,
             ..kept.config.clone()
         };
         before_the_studies.epochs[0] = config.epochs[0];
-        schedules.iter().any(|(_, s)| *s == kept.config.schedule)
-            && budgets.contains(&kept.config.epochs[0])
+        studies.schedules.iter().any(|(_, s)| *s == kept.config.schedule)
+            && studies.budgets.contains(&kept.config.epochs[0])
+            && studies.fine_tune.contains(&kept.config.fine_tune_learning_rate)
             && before_the_studies == *config
     } else {
         kept.config == *config
@@ -1020,25 +1099,25 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         seeds(ctx.size).len(),
     ));
     out.seeds = seeds(ctx.size).len();
-    let schedules = schedule_candidates(ctx.size, &config);
-    let budgets = budget_candidates(ctx.size, &config);
+    let studies = Studies::new(ctx.size, &config);
     let mut ephys_rows: Vec<(Vec<f64>, Vec<String>)> = Vec::new();
     let mut table_2: Vec<(String, Vec<Scores>)> = Vec::new();
     let mut table_4: Vec<(String, String, Vec<Scores>)> = Vec::new();
     let mut ik_rows: Vec<IkRow> = Vec::new();
     let mut schedule_rows: Vec<Vec<String>> = Vec::new();
     let mut budget_rows: Vec<Vec<String>> = Vec::new();
+    let mut fine_tune_rows: Vec<Vec<String>> = Vec::new();
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
-        let results = match restored_scene(&path, &config, &schedules, &budgets, i == 0) {
+        let results = match restored_scene(&path, &config, &studies, i == 0) {
             Some(r) => {
                 eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
                 r
             }
             None => {
                 let t = Instant::now();
-                let mut r = run_scene(ctx, scene, &config, &schedules, &budgets, i == 0)?;
+                let mut r = run_scene(ctx, scene, &config, &studies, i == 0)?;
                 r.wall_seconds = t.elapsed().as_secs_f64();
                 weft_data::files::write_json(&path, &r)?;
                 r
@@ -1061,6 +1140,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         ik_rows.extend(results.ik_rows);
         schedule_rows.extend(results.schedule_rows);
         budget_rows.extend(results.budget_rows);
+        fine_tune_rows.extend(results.fine_tune_rows);
         scene_seconds.push(format!("{scene} {:.0}", results.wall_seconds));
     }
     out.notes.push(format!(
@@ -1147,6 +1227,30 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             rows: budget_rows,
         });
     }
+    if !fine_tune_rows.is_empty() {
+        out.tables.push(Table {
+            title: "Tan et al. stage-3 learning rate chosen on the validation windows".into(),
+            caption: format!(
+                "`no-pb`, every seed, on `{}`, under the chosen schedule and budget: stage 3 (both networks \
+                 fine-tuned from a fresh Adam) trained from the same stages 1 and 2 under each learning rate. \
+                 Validation M_rms (mm) and M_phys (N²) of the stage-3 model, and the epochs stage 3 trained (the \
+                 kept epoch in brackets; 0 keeps the stage-2 weights). The rate with the lowest mean validation \
+                 M_rms fine-tunes every model; the test split plays no part.",
+                scenes()[0]
+            ),
+            header: [
+                "stage-3 learning rate",
+                "mean validation M_rms (mm)",
+                "validation M_rms per seed (mm)",
+                "validation M_phys per seed (N²)",
+                "stage-3 epochs per seed (kept epoch)",
+                "chosen",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: fine_tune_rows,
+        });
+    }
     out.tables.push(tan_table_2(&table_2));
     out.tables.push(tan_table_4(&table_4));
     out.tables.push(ik_table(&ik_rows, IkSettings::default()));
@@ -1159,10 +1263,10 @@ fn run_scene(
     ctx: &EvalContext,
     scene: &str,
     config: &EmbedTrainingConfig,
-    schedules: &[(&'static str, Schedule)],
-    budgets: &[usize],
+    studies: &Studies,
     first: bool,
 ) -> crate::Result<SceneResults> {
+    let (schedules, budgets) = (&studies.schedules, &studies.budgets);
     let root = ctx.out.join("embed");
     let mut r = SceneResults {
         config: config.clone(),
@@ -1173,6 +1277,7 @@ fn run_scene(
         ik_rows: Vec::new(),
         schedule_rows: Vec::new(),
         budget_rows: Vec::new(),
+        fine_tune_rows: Vec::new(),
         wall_seconds: 0.0,
     };
     let out = &mut r.output;
@@ -1253,10 +1358,7 @@ fn run_scene(
                 };
                 runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
             }
-            let mean = ValidationScores {
-                m_rms: mean_sd(runs.iter().map(|(_, s)| s.validation.m_rms)).0,
-                m_phys: mean_sd(runs.iter().map(|(_, s)| s.validation.m_phys)).0,
-            };
+            let mean = mean_validation(&runs);
             let epochs: Vec<String> = runs
                 .iter()
                 .map(|(dir, _)| {
@@ -1284,13 +1386,7 @@ fn run_scene(
             study.extend(runs);
         }
         let chosen = lowest_m_rms(&scored).context("no learning-rate schedule candidate")?;
-        for row in &mut r.schedule_rows {
-            row.push(if row[0] == chosen {
-                "chosen".into()
-            } else {
-                String::new()
-            });
-        }
+        mark_chosen(&mut r.schedule_rows, chosen);
         r.config.schedule = schedules
             .iter()
             .find(|(n, _)| *n == chosen)
@@ -1341,13 +1437,7 @@ fn run_scene(
             }
         }
         let chosen = lowest_m_rms(&scored).context("no stage-1 budget candidate")?;
-        for row in &mut r.budget_rows {
-            row.push(if row[0] == chosen.to_string() {
-                "chosen".into()
-            } else {
-                String::new()
-            });
-        }
+        mark_chosen(&mut r.budget_rows, &chosen.to_string());
         r.config.epochs[0] = chosen;
         out.notes.push(format!(
             "embed: {chosen} stage-1 epochs allowed, chosen on `{scene}`'s validation windows (the budget table)"
@@ -1358,6 +1448,86 @@ fn run_scene(
             format!("embed / {scene}: `no-pb` stage-1 validation loss under each budget (first seed)"),
             &curves,
             &[1],
+        ));
+    }
+    // Stage 3's learning rate, on the same validation windows: `no-pb`, every seed, with
+    // stage 3 trained under each candidate from the same stages 1 and 2 (copied from the
+    // model under the configuration's rate, the first candidate); every model of the
+    // experiment fine-tunes at the choice.
+    if first && studies.fine_tune.len() > 1 {
+        let mut scored = Vec::new();
+        let mut curves = Vec::new();
+        let current = r.config.fine_tune_learning_rate;
+        for &rate in &studies.fine_tune {
+            let mut runs = Vec::new();
+            for (k, &seed) in seeds.iter().enumerate() {
+                let at = |rate| EmbedTrainingConfig {
+                    fine_tune_learning_rate: rate,
+                    ..with_seed(&method_config(&r.config, true), seed)
+                };
+                let source = study_dir_or(&study, &at(current), seed_dir("no-pb", seed));
+                let dir = if rate == current {
+                    source
+                } else {
+                    let dir = models
+                        .join("stage-3-study")
+                        .join(format!("lr-{}", fine_tune_name(&r.config, rate)))
+                        .join(format!("seed-{seed}"));
+                    if !dir.join("config.json").exists() {
+                        share_stages_1_and_2(&source, &dir)?;
+                    }
+                    dir
+                };
+                runs.push((
+                    dir.clone(),
+                    scored_model(ctx, &data, &at(rate), &dir, role("no-pb", k == 0))?,
+                ));
+            }
+            let mean = mean_validation(&runs);
+            let kept: Vec<String> = runs
+                .iter()
+                .map(|(dir, _)| {
+                    TrainingState::read(&weft_nn::embed_training::stage_dir(dir, 3))
+                        .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
+                })
+                .collect();
+            r.fine_tune_rows.push(vec![
+                fine_tune_name(&r.config, rate),
+                format!("{:.3}", mean.m_rms),
+                runs.iter()
+                    .map(|(_, s)| format!("{:.3}", s.validation.m_rms))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                runs.iter()
+                    .map(|(_, s)| format!("{:.4e}", s.validation.m_phys))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                kept.join("; "),
+            ]);
+            scored.push((rate, mean));
+            curves.push((
+                format!("stage-3 rate {}", fine_tune_name(&r.config, rate)),
+                runs[0].0.clone(),
+            ));
+            for run in runs {
+                if !study.iter().any(|(d, _)| *d == run.0) {
+                    study.push(run);
+                }
+            }
+        }
+        let chosen = lowest_m_rms(&scored).context("no stage-3 learning-rate candidate")?;
+        let chosen_name = fine_tune_name(&r.config, chosen);
+        mark_chosen(&mut r.fine_tune_rows, &chosen_name);
+        r.config.fine_tune_learning_rate = chosen;
+        out.notes.push(format!(
+            "embed: stage-3 learning rate {chosen_name} chosen on `{scene}`'s validation windows (the stage-3 table)"
+        ));
+        let curves: Vec<(&str, &Path)> = curves.iter().map(|(l, d)| (l.as_str(), d.as_path())).collect();
+        out.lines.push(stage_curves(
+            format!("{scene}-stage-3-study"),
+            format!("embed / {scene}: `no-pb` stage-3 validation loss under each learning rate (first seed)"),
+            &curves,
+            &[3],
         ));
     }
     let config = &r.config;
@@ -2047,6 +2217,59 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
+    /// The stage-3 study's model is the source model's stages 1 and 2 with its own stage 3:
+    /// the copy leaves the source as it was, and only stage 3 is trained.
+    #[test]
+    fn a_stage_3_study_model_shares_stages_1_and_2_and_fine_tunes_at_its_own_rate() {
+        let quick = training_config(Size::Quick);
+        assert_eq!(fine_tune_candidates(Size::Quick, &quick), [None]);
+        let standard = training_config(Size::Standard);
+        assert_eq!(fine_tune_candidates(Size::Standard, &standard), [None, Some(1e-4)]);
+        assert_eq!(fine_tune_name(&standard, Some(1e-4)), "0.0001");
+        assert_eq!(fine_tune_name(&standard, None), "0.001 (every stage's)");
+
+        let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
+        let root = std::env::temp_dir().join(format!("weft-embed-fine-tune-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let ctx = EvalContext {
+            size: Size::Quick,
+            out: root.clone(),
+            quiet: true,
+            code_version: "test".into(),
+        };
+        let config = EmbedTrainingConfig {
+            epochs: [1, 1, 2],
+            ..method_config(&quick, true)
+        };
+        let role = Role {
+            scene: "sheet-ms",
+            method: "no-pb",
+            first_seed: false,
+        };
+        let (source, study) = (root.join("source"), root.join("study"));
+        scored_model(&ctx, &data, &config, &source, role).unwrap();
+        let state = |dir: &Path, stage: u8| {
+            std::fs::read(weft_nn::embed_training::stage_dir(dir, stage).join("training.json")).unwrap()
+        };
+        let source_stage_3 = state(&source, 3);
+        share_stages_1_and_2(&source, &study).unwrap();
+        assert!(!weft_nn::embed_training::stage_dir(&study, 3).exists());
+        let slower = EmbedTrainingConfig {
+            fine_tune_learning_rate: Some(1e-4),
+            ..config.clone()
+        };
+        let scores = scored_model(&ctx, &data, &slower, &study, role).unwrap();
+        assert_eq!(scores.config, slower);
+        for stage in 1..=2 {
+            assert_eq!(state(&study, stage), state(&source, stage), "stage {stage}");
+        }
+        assert_ne!(state(&study, 3), source_stage_3);
+        assert_eq!(state(&source, 3), source_stage_3, "the source is untouched");
+        let stored: EmbedTrainingConfig = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
+        assert_eq!(stored.fine_tune_learning_rate, Some(1e-4));
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
     /// Table II and IV cells: the mean over the seeds with the population spread, the
     /// paper's figure first; one seed has no spread.
     #[test]
@@ -2082,6 +2305,7 @@ mod tests {
         let chosen = EmbedTrainingConfig {
             schedule: schedules[1].1,
             epochs: [BUDGET_STUDY_EPOCHS, 30, 10],
+            fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
         let results = |config: &EmbedTrainingConfig| SceneResults {
@@ -2101,11 +2325,18 @@ mod tests {
             ik_rows: Vec::new(),
             schedule_rows: Vec::new(),
             budget_rows: Vec::new(),
+            fine_tune_rows: Vec::new(),
             wall_seconds: 12.0,
         };
         let budgets = budget_candidates(Size::Standard, &config);
         assert_eq!(budgets, [30, BUDGET_STUDY_EPOCHS]);
-        let restored = |c: &EmbedTrainingConfig, first| restored_scene(&path, c, &schedules, &budgets, first);
+        let studies = Studies {
+            schedules: schedules.clone(),
+            budgets: budgets.clone(),
+            fine_tune: fine_tune_candidates(Size::Standard, &config),
+        };
+        assert_eq!(studies.fine_tune, [None, Some(1e-4)]);
+        let restored = |c: &EmbedTrainingConfig, first| restored_scene(&path, c, &studies, first);
         assert!(restored(&config, true).is_none(), "no file");
         weft_data::files::write_json(&path, &results(&chosen)).unwrap();
         let first = restored(&config, true).unwrap();
@@ -2126,6 +2357,10 @@ mod tests {
             },
             EmbedTrainingConfig {
                 epochs: [77, 30, 10],
+                ..chosen.clone()
+            },
+            EmbedTrainingConfig {
+                fine_tune_learning_rate: Some(0.5),
                 ..chosen.clone()
             },
         ] {
