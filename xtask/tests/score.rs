@@ -153,7 +153,10 @@ fn every_model_kind_is_scored_on_a_dataset_of_another_seed() {
     ]);
     let r = score("embed", &emb, &cloth1, &root.join("score-emb"));
     assert!(value(&r, "ours", "m-rms") > 0.0);
-    let refused = run(&[
+    // The validation windows: M_phys with its two forces apart, beside the ground truth's,
+    // which balance to the solver's tolerance.
+    let out = root.join("score-emb-validation");
+    ok(&[
         "score",
         "embed",
         "--model",
@@ -163,10 +166,31 @@ fn every_model_kind_is_scored_on_a_dataset_of_another_seed() {
         "--split",
         "validation",
         "--out",
+        s(&out),
+    ]);
+    let v: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert!(v.iter().all(|r| r["split"] == "validation"), "{v:?}");
+    for metric in ["m-phys", "m-phys-inertial", "m-phys-potential"] {
+        assert!(value(&v, "ours", metric) >= 0.0);
+        assert!(value(&v, "ground-truth", metric) >= 0.0);
+    }
+    assert!(value(&v, "ours", "m-rms") > 0.0 && value(&v, "ours", "ephys-parity") > 0.0);
+    assert!(value(&v, "ground-truth", "m-phys") < 1e-6 * value(&v, "ground-truth", "m-phys-inertial"));
+    let refused = run(&[
+        "score",
+        "embed",
+        "--model",
+        s(&emb),
+        "--data",
+        s(&cloth1),
+        "--split",
+        "train",
+        "--out",
         s(&root.join("refused")),
     ]);
     assert!(!refused.status.success());
-    assert!(String::from_utf8_lossy(&refused.stderr).contains("--split test"));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--split test or --split validation"));
 
     // A drape network.
     let (drape0, drape1) = (root.join("drape0"), root.join("drape1"));
