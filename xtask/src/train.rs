@@ -28,6 +28,8 @@ Configuration file (--config, JSON; omitted fields keep their defaults):
   schedule         {\"decay\": {\"kind\": \"constant\"}, \"warmup_epochs\": 0,
                     \"clip_grad_norm\": null, \"early_stopping_patience\": null}
                    decay kinds: constant | exponential {per_epoch} | reduce-on-plateau {factor, patience}
+  fine_tune_learning_rate  null: stage 3's Adam learning rate (null: adam.learning_rate);
+                   a model continued under another value keeps stages 1 and 2 and retrains stage 3
 Validation: the last two training frames of every 17 (frames 10 and 11 mod 17).";
 
 const NNWARP_CONFIG: &str = "\
@@ -497,4 +499,24 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     );
     eprintln!("model → {}", args.out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// `train embed --help` lists every field a configuration file may set (the kernels
+    /// are the `--autograd` flag's).
+    #[test]
+    fn the_embed_configuration_help_names_every_field() {
+        let config = weft_nn::embed_training::EmbedTrainingConfig {
+            fine_tune_learning_rate: Some(1e-4),
+            ..Default::default()
+        };
+        let fields = serde_json::to_value(&config).unwrap();
+        for key in fields.as_object().unwrap().keys().filter(|k| *k != "kernels") {
+            assert!(
+                super::EMBED_CONFIG.contains(&format!("  {key} ")),
+                "{key} is not in the help"
+            );
+        }
+    }
 }

@@ -211,6 +211,18 @@ fn fine_tune_name(config: &EmbedTrainingConfig, rate: Option<f64>) -> String {
     }
 }
 
+/// A study's plot on `scene`: `no-pb`'s validation loss in `stage` under each candidate
+/// (`(label, model directory)`, first seed).
+fn study_curves(scene: &str, study: &str, what: &str, curves: &[(String, std::path::PathBuf)], stage: u8) -> LinePlot {
+    let curves: Vec<(&str, &Path)> = curves.iter().map(|(l, d)| (l.as_str(), d.as_path())).collect();
+    stage_curves(
+        format!("{scene}-{study}"),
+        format!("embed / {scene}: `no-pb` stage-{stage} validation loss under each {what} (first seed)"),
+        &curves,
+        &[stage],
+    )
+}
+
 /// Ends each study row with "chosen" when its first cell names the `chosen` candidate.
 fn mark_chosen(rows: &mut [Vec<String>], chosen: &str) {
     for row in rows {
@@ -1442,13 +1454,8 @@ fn run_scene(
         out.notes.push(format!(
             "embed: {chosen} stage-1 epochs allowed, chosen on `{scene}`'s validation windows (the budget table)"
         ));
-        let curves: Vec<(&str, &Path)> = curves.iter().map(|(l, d)| (l.as_str(), d.as_path())).collect();
-        out.lines.push(stage_curves(
-            format!("{scene}-budget-study"),
-            format!("embed / {scene}: `no-pb` stage-1 validation loss under each budget (first seed)"),
-            &curves,
-            &[1],
-        ));
+        out.lines
+            .push(study_curves(scene, "budget-study", "budget", &curves, 1));
     }
     // Stage 3's learning rate, on the same validation windows: `no-pb`, every seed, with
     // stage 3 trained under each candidate from the same stages 1 and 2 (copied from the
@@ -1522,13 +1529,8 @@ fn run_scene(
         out.notes.push(format!(
             "embed: stage-3 learning rate {chosen_name} chosen on `{scene}`'s validation windows (the stage-3 table)"
         ));
-        let curves: Vec<(&str, &Path)> = curves.iter().map(|(l, d)| (l.as_str(), d.as_path())).collect();
-        out.lines.push(stage_curves(
-            format!("{scene}-stage-3-study"),
-            format!("embed / {scene}: `no-pb` stage-3 validation loss under each learning rate (first seed)"),
-            &curves,
-            &[3],
-        ));
+        out.lines
+            .push(study_curves(scene, "stage-3-study", "learning rate", &curves, 3));
     }
     let config = &r.config;
     // `no-pb`, every seed (on the first scene, a study's model where one has the seed's
