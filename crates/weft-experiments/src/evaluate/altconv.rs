@@ -25,8 +25,7 @@ use weft_nn::graph::NormalizedAdjacency;
 
 use super::context::EvalContext;
 use crate::paper::Table;
-use crate::records::mean_sd;
-use crate::records::{ExperimentOutput, LinePlot, Series, Timing};
+use crate::records::{ExperimentOutput, LinePlot, Series, Timing, mean_and_spread, mean_sd};
 use crate::render::{View, error_colors, error_png};
 use weft_data::Size;
 
@@ -547,7 +546,7 @@ fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: 
                     }));
                     let paper = paper_value(split, method, single_step, w)
                         .map_or("—".to_string(), |(p, s)| format!("{p:.2}±{s:.2}"));
-                    row.push(format!("{paper} / {m:.2}±{sd:.2}"));
+                    row.push(format!("{paper} / {}", mean_and_spread(m, sd)));
                 }
                 rows.push(row);
             }

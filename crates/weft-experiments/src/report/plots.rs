@@ -118,6 +118,28 @@ fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
     decades.into_iter().step_by(step).collect()
 }
 
+/// An axis tick's label, as short as its value allows: "4", "0.02", "2000" from 10⁻³ to
+/// 10⁵ (three significant digits, trailing zeros dropped) and "1e-7", "2.5e6" outside.
+/// plotters' default `{:.1e}` printed a tick at 4 as "4.0e0".
+fn tick_label(v: f64) -> String {
+    let trim = |s: &str| {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if (1e-3..1e5).contains(&v.abs()) {
+        trim(&crate::records::three_significant(v))
+    } else {
+        let s = format!("{v:.1e}");
+        match s.split_once('e') {
+            Some((mantissa, exponent)) => format!("{}e{exponent}", trim(mantissa)),
+            None => s,
+        }
+    }
+}
+
 /// Indices of the points no other point beats in both time and error.
 pub fn pareto_front(points: &[ParetoPoint]) -> Vec<usize> {
     let mut front: Vec<usize> = (0..points.len())
@@ -163,8 +185,8 @@ where
         .configure_mesh()
         .x_desc("time per frame / ground truth's (same run)")
         .y_desc(error_label)
-        .x_label_formatter(&|v| format!("{v:.1e}"))
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .x_label_formatter(&|v| tick_label(*v))
+        .y_label_formatter(&|v| tick_label(*v))
         .draw()
         .map_err(crate::Error::plot)?;
     let clamp = |p: &ParetoPoint| (p.time_ratio.max(xlo), p.error.max(ylo));
@@ -228,7 +250,7 @@ where
         .configure_mesh()
         .x_desc("frame")
         .y_desc("M_rms of the frame (mm)")
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .y_label_formatter(&|v| tick_label(*v))
         .draw()
         .map_err(crate::Error::plot)?;
     for (i, c) in curves.iter().enumerate() {
@@ -282,7 +304,7 @@ where
             }
         })
         .x_desc(format!("mean energy ({unit})"))
-        .x_label_formatter(&|v| format!("{v:.2e}"))
+        .x_label_formatter(&|v| tick_label(*v))
         .draw()
         .map_err(crate::Error::plot)?;
     let width = 0.8 / kinds.len() as f64;
@@ -393,7 +415,7 @@ where
                 .configure_mesh()
                 .x_desc(p.x_label.as_str())
                 .y_desc(p.y_label.as_str())
-                .y_label_formatter(&|v| format!("{v:.2e}"))
+                .y_label_formatter(&|v| tick_label(*v))
                 .draw()
                 .map_err(e)?;
             for (i, s) in p.series.iter().enumerate() {
@@ -440,6 +462,28 @@ pub fn lines(stem: &Path, p: &LinePlot) -> crate::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_are_short_and_keep_their_value() {
+        let cases = [
+            (4.0, "4"),
+            (0.02, "0.02"),
+            (0.001, "0.001"),
+            (2000.0, "2000"),
+            (0.25, "0.25"),
+            (-1.5, "-1.5"),
+            (12345.0, "12345"),
+            (1e-7, "1e-7"),
+            (2.5e-8, "2.5e-8"),
+            (3e6, "3e6"),
+            (0.0, "0e0"),
+        ];
+        for (v, label) in cases {
+            assert_eq!(tick_label(v), label, "{v}");
+            let back: f64 = label.parse().unwrap();
+            assert!((back - v).abs() <= 1e-12 * v.abs(), "{label} reads back as {v}");
+        }
+    }
 
     #[test]
     fn log_axes_are_labelled_inside_one_decade_and_sparsely_across_many() {
