@@ -6,10 +6,9 @@ use crate::records::{ExperimentOutput, Record};
 
 pub use crate::records::Table;
 
+/// A table's figure: one experiment's records, looked up by scene.
 fn find<'a>(records: &'a [Record], scene: &str, method: &str, metric: &str) -> Option<&'a Record> {
-    records
-        .iter()
-        .find(|r| r.scene == scene && r.method == method && r.metric == metric)
+    crate::records::find(records, |r| r.scene == scene, method, metric)
 }
 
 /// Seconds as milliseconds with 3 significant digits, or "—" if not measured.

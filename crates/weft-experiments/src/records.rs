@@ -47,6 +47,13 @@ pub struct Record {
     pub ground_truth_seconds_per_frame: Option<f64>,
 }
 
+impl Record {
+    /// Whether the figure is on the test split, the only split a claim or table reports.
+    pub fn is_test(&self) -> bool {
+        self.split.as_deref() == Some("test")
+    }
+}
+
 /// Roll-out error of one method against the reference, frame by frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Curve {
@@ -286,6 +293,38 @@ pub fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
     (mean, var.sqrt())
 }
 
+/// The first record of `method`'s `metric` among those `within` keeps (an experiment, a
+/// scene, a split: the caller's choice). Every claim and table looks its figures up here.
+pub fn find<'a>(
+    records: &'a [Record],
+    within: impl Fn(&Record) -> bool,
+    method: &str,
+    metric: &str,
+) -> Option<&'a Record> {
+    records
+        .iter()
+        .find(|r| r.method == method && r.metric == metric && within(r))
+}
+
+/// A figure over the seeds: their mean and spread (sd; 0 for a single run).
+pub type Figure = (f64, f64);
+
+/// `method`'s `metric` among the records `within` keeps, with its spread: the `-sd`
+/// record an evaluation writes beside a mean over several seeds, 0 where there is none
+/// (one run, e.g. a PCA).
+pub fn figure(records: &[Record], within: impl Fn(&Record) -> bool, method: &str, metric: &str) -> Option<Figure> {
+    let mean = find(records, &within, method, metric)?.value;
+    let sd = find(records, &within, method, &format!("{metric}-sd")).map_or(0.0, |r| r.value);
+    Some((mean, sd))
+}
+
+/// Whether `a` is lower than `b` by more than the two spreads together — the rule a
+/// difference must pass before a claim or a table counts it: a gap inside the seeds'
+/// spread is a tie.
+pub fn lower_beyond_spread(a: Figure, b: Figure) -> bool {
+    a.0 + a.1 + b.1 < b.0
+}
+
 /// Decimals that print `x` with three significant digits in fixed notation: tables hold
 /// figures that span decades (an energy error of 1.39 mJ beside one of 0.00707 mJ; μ of
 /// 0.1 beside 0.0074), which a fixed number of decimals rounds to nothing.
@@ -385,5 +424,44 @@ mod tests {
             "{e}"
         );
         assert!(validate(&[ms("", 1.0, None)]).is_err());
+    }
+
+    /// A figure is the first record the filter keeps with its `-sd` record's spread (0
+    /// without one), and a difference counts only beyond both spreads: at the margin it is
+    /// a tie, either way round.
+    #[test]
+    fn a_figure_carries_its_spread_and_a_gap_inside_the_spreads_is_a_tie() {
+        let r = |scene: &str, metric: &str, split: Option<&str>, value: f64| Record {
+            experiment: "embed".into(),
+            scene: scene.into(),
+            method: "ours".into(),
+            metric: metric.into(),
+            split: split.map(Into::into),
+            value,
+            unit: "mm".into(),
+            paper_value: None,
+            seconds_per_frame: None,
+            ground_truth_seconds_per_frame: None,
+        };
+        let records = [
+            r("a", "m-rms", Some("validation"), 1.0),
+            r("a", "m-rms", Some("test"), 5.0),
+            r("a", "m-rms-sd", Some("test"), 0.5),
+            r("b", "m-rms", Some("test"), 7.0),
+        ];
+        let test_of = |scene: &'static str| move |r: &Record| r.scene == scene && r.is_test();
+        assert_eq!(figure(&records, test_of("a"), "ours", "m-rms"), Some((5.0, 0.5)));
+        assert_eq!(figure(&records, test_of("b"), "ours", "m-rms"), Some((7.0, 0.0)));
+        assert_eq!(figure(&records, test_of("b"), "pca", "m-rms"), None);
+        assert_eq!(
+            find(&records, |r| r.scene == "a", "ours", "m-rms").map(|r| r.value),
+            Some(1.0)
+        );
+        assert!(lower_beyond_spread((5.0, 0.5), (7.0, 0.0)));
+        assert!(!lower_beyond_spread((7.0, 0.0), (5.0, 0.5)));
+        // A gap of exactly the two spreads is a tie, and so is one inside them.
+        assert!(!lower_beyond_spread((5.0, 0.5), (6.0, 0.5)));
+        assert!(!lower_beyond_spread((5.0, 0.5), (5.9, 0.5)));
+        assert!(lower_beyond_spread((5.0, 0.5), (6.1, 0.5)));
     }
 }

@@ -25,7 +25,8 @@ use weft_sim::ForceResidual;
 use super::context::EvalContext;
 use crate::paper::{Table, format_ms, paper_cell as cell, with_spread};
 use crate::records::{
-    Curve, ExperimentOutput, LinePlot, Record, Scatter, Series, Timing, mean_sd, three_significant_decimals,
+    Curve, ExperimentOutput, Figure, LinePlot, Record, Scatter, Series, Timing, figure, lower_beyond_spread, mean_sd,
+    three_significant_decimals,
 };
 use weft_data::Size;
 use weft_data::files::{Array, write_safetensors};
@@ -1798,17 +1799,13 @@ fn tan_table_4(rows: &[(String, String, Vec<Scores>)]) -> Table {
     }
 }
 
-/// A figure over the seeds: their mean and spread (sd; 0 for a single run).
-type Figure = (f64, f64);
-
-/// Which of the learned embedding's figure and a linear baseline's is lower by more than
-/// the two spreads together (the rule `report::summary` decides the claim by):
-/// `Some(true)` the baseline, `Some(false)` the embedding, `None` within the spreads.
+/// Which of the learned embedding's figure and a linear baseline's is lower beyond the
+/// spreads (`records::lower_beyond_spread`, the claim's rule): `Some(true)` the baseline,
+/// `Some(false)` the embedding, `None` a tie.
 fn baseline_lower(ours: Figure, baseline: Figure) -> Option<bool> {
-    let margin = ours.1 + baseline.1;
-    if baseline.0 + margin < ours.0 {
+    if lower_beyond_spread(baseline, ours) {
         Some(true)
-    } else if ours.0 + margin < baseline.0 {
+    } else if lower_beyond_spread(ours, baseline) {
         Some(false)
     } else {
         None
@@ -1827,20 +1824,8 @@ fn linear_baselines_table(records: &[Record], table_4: &[(String, String, Vec<Sc
         ("m-sted", |s| s.m_sted),
         ("m-phys", |s| s.m_phys),
     ];
-    let test = |scene: &str, method: &str, metric: &str| {
-        records
-            .iter()
-            .find(|r| {
-                r.scene == scene && r.method == method && r.metric == metric && r.split.as_deref() == Some("test")
-            })
-            .map(|r| r.value)
-    };
-    let recorded = |scene: &str, method: &str, metric: &str| -> Option<Figure> {
-        Some((
-            test(scene, method, metric)?,
-            test(scene, method, &format!("{metric}-sd")).unwrap_or(0.0),
-        ))
-    };
+    let recorded =
+        |scene: &str, method: &str, metric: &str| figure(records, |r| r.scene == scene && r.is_test(), method, metric);
     let rolled = |scene: &str, model: &str, of: fn(&Scores) -> f64| -> Option<Figure> {
         let runs = &table_4.iter().find(|(s, m, _)| s == scene && m == model)?.2;
         (!runs.is_empty()).then(|| mean_sd(runs.iter().map(of)))
@@ -1868,7 +1853,7 @@ fn linear_baselines_table(records: &[Record], table_4: &[(String, String, Vec<Sc
                 continue;
             };
             let digits = three_significant_decimals(ours.0.abs().min(baseline.0.abs()));
-            let figure = |f: Figure| with_spread(format!("{:.digits$}", f.0), (f.1 > 0.0).then_some(f.1), digits);
+            let shown = |f: Figure| with_spread(format!("{:.digits$}", f.0), (f.1 > 0.0).then_some(f.1), digits);
             let lower = baseline_lower(ours, baseline);
             counts[k][match lower {
                 Some(true) => 0,
@@ -1881,7 +1866,7 @@ fn linear_baselines_table(records: &[Record], table_4: &[(String, String, Vec<Sc
                 Some(false) => "ours",
                 None => "tie",
             };
-            row.push(format!("{} vs {} → {verdict}", figure(ours), figure(baseline)));
+            row.push(format!("{} vs {} → {verdict}", shown(ours), shown(baseline)));
         }
         rows.push(row);
     }

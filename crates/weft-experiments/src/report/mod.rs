@@ -357,8 +357,8 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
     for r in records.iter().filter(|_| predictions).filter(|r| {
         r.metric == "m-rms"
             || r.metric == "sqrt-mse"
-            || (r.metric == "error-mm-rollout10" && r.split.as_deref() == Some("test"))
-            || (r.metric == "sqrtmse-mm" && r.split.as_deref() == Some("test"))
+            || (r.metric == "error-mm-rollout10" && r.is_test())
+            || (r.metric == "sqrtmse-mm" && r.is_test())
     }) {
         let p = dir
             .join("predictions")

@@ -5,7 +5,7 @@
 //! Everything here is computed from `results.json`'s records alone, so the summary of a
 //! report is rebuilt whenever any experiment is republished.
 
-use crate::records::{ExperimentOutput, MIN_SEEDS, Record};
+use crate::records::{ExperimentOutput, MIN_SEEDS, Record, figure, find, lower_beyond_spread};
 
 /// Whether the records reproduce a claim.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -73,16 +73,12 @@ impl Claim {
     }
 }
 
-fn find<'a>(
-    records: &'a [Record],
-    experiment: &str,
-    scene: Option<&str>,
-    method: &str,
-    metric: &str,
-) -> Option<&'a Record> {
-    records.iter().find(|r| {
-        r.experiment == experiment && scene.is_none_or(|s| r.scene == s) && r.method == method && r.metric == metric
-    })
+/// The split every claim is decided on.
+const TEST: Option<&str> = Some("test");
+
+/// Keeps the records of `experiment` on `scene` and `split`.
+fn on<'a>(experiment: &'a str, scene: &'a str, split: Option<&'a str>) -> impl Fn(&Record) -> bool + Copy + 'a {
+    move |r| r.experiment == experiment && r.scene == scene && r.split.as_deref() == split
 }
 
 /// Tan et al.: the physics-based loss makes the embedding physically more plausible —
@@ -93,30 +89,27 @@ fn find<'a>(
 /// count (6 of Tan et al.'s 8; the paper: lower on 9 of its 10 pairs).
 fn embed_claim(records: &[Record]) -> Claim {
     const RMS_TOLERANCE: f64 = 0.02;
-    let value = |scene: &str, method: &str, metric: &str| find(records, "embed", Some(scene), method, metric);
-    let sd = |scene: &str, method: &str, metric: &str| {
-        value(scene, method, &format!("{metric}-sd")).map_or(0.0, |r| r.value)
-    };
+    let value = |scene: &str, method: &str, metric: &str| find(records, on("embed", scene, TEST), method, metric);
+    let figure = |scene: &str, method: &str, metric: &str| figure(records, on("embed", scene, TEST), method, metric);
     let mut ours = (0, 0);
     let mut paper = (0, 0);
     let mut accurate = (0, 0);
     let mut pca_better = (0, 0);
     for r in records
         .iter()
-        .filter(|r| r.experiment == "embed" && r.method == "ours" && r.metric == "m-phys")
+        .filter(|r| r.experiment == "embed" && r.method == "ours" && r.metric == "m-phys" && r.is_test())
     {
         let scene = r.scene.as_str();
         if COARSE_SHEETS.contains(&scene) {
             continue;
         }
-        let Some(base) = value(scene, "no-pb", "m-phys") else {
+        let (Some(phys), Some(base)) = (figure(scene, "ours", "m-phys"), value(scene, "no-pb", "m-phys")) else {
             continue;
         };
         let rms = (value(scene, "ours", "m-rms"), value(scene, "no-pb", "m-rms"));
         let within = matches!(rms, (Some(a), Some(b)) if a.value <= (1.0 + RMS_TOLERANCE) * b.value);
-        let margin = sd(scene, "ours", "m-phys") + sd(scene, "no-pb", "m-phys");
         ours.1 += 1;
-        if within && r.value + margin < base.value {
+        if within && figure(scene, "no-pb", "m-phys").is_some_and(|b| lower_beyond_spread(phys, b)) {
             ours.0 += 1;
         }
         if let (Some(p), Some(q)) = (r.paper_value, base.paper_value) {
@@ -134,9 +127,9 @@ fn embed_claim(records: &[Record]) -> Claim {
             }
         }
         // PCA is one deterministic run: the margin is `ours`'s spread alone.
-        if let (Some(a), Some(p)) = (rms.0, value(scene, "pca", "m-rms")) {
+        if let (Some(a), Some(p)) = (figure(scene, "ours", "m-rms"), figure(scene, "pca", "m-rms")) {
             pca_better.1 += 1;
-            if p.value + sd(scene, "ours", "m-rms") < a.value {
+            if lower_beyond_spread(p, a) {
                 pca_better.0 += 1;
             }
         }
@@ -170,7 +163,7 @@ const COARSE_SHEETS: [&str; 2] = ["sheet-ms-33", "sheet-ms-17"];
 fn longest_rollout(records: &[Record]) -> Option<(usize, String)> {
     records
         .iter()
-        .filter(|r| r.experiment == "altconv" && r.split.as_deref() == Some("test"))
+        .filter(|r| r.experiment == "altconv" && r.is_test())
         .filter_map(|r| {
             Some((
                 r.metric.strip_prefix("error-mm-rollout")?.parse::<usize>().ok()?,
@@ -193,16 +186,9 @@ fn altconv_claim(records: &[Record]) -> Claim {
     } else {
         "limb"
     };
-    let test = |method: &str, metric: &str| {
-        records.iter().find(|r| {
-            r.experiment == "altconv"
-                && r.scene == scene
-                && r.method == method
-                && r.metric == metric
-                && r.split.as_deref() == Some("test")
-        })
-    };
-    let sd = |method: &str, metric: &str| test(method, &format!("{metric}-sd")).map_or(0.0, |r| r.value);
+    let on = on("altconv", scene, TEST);
+    let test = |method: &str, metric: &str| find(records, on, method, metric);
+    let sd = |method: &str, metric: &str| figure(records, on, method, metric).map_or(0.0, |f| f.1);
     let mut claim = Claim {
         paper: "Alt-ConvLSTM (seed 001), soft-tissue dynamics",
         experiment: "altconv",
@@ -226,7 +212,7 @@ fn altconv_claim(records: &[Record]) -> Claim {
                 && r.scene == scene
                 && r.method.starts_with("convlstm-")
                 && r.metric == metric
-                && r.split.as_deref() == Some("test")
+                && r.is_test()
         })
         .min_by(|a, b| a.value.total_cmp(&b.value));
     let Some(vanilla) = vanilla else {
@@ -253,10 +239,13 @@ fn altconv_claim(records: &[Record]) -> Claim {
 fn nnwarp_claim(records: &[Record]) -> Claim {
     const RATIO: f64 = 0.3;
     let value = |scene: &str, method: &str, metric: &str| {
-        records
-            .iter()
-            .find(|r| r.experiment == "nnwarp" && r.scene == scene && r.method == method && r.metric == metric)
-            .map(|r| r.value)
+        find(
+            records,
+            |r| r.experiment == "nnwarp" && r.scene == scene,
+            method,
+            metric,
+        )
+        .map(|r| r.value)
     };
     let mut claim = Claim {
         paper: "NNWarp (Luo et al. 2018), node-wise warping of linear FEM",
@@ -328,17 +317,9 @@ fn drape_claim(records: &[Record]) -> Claim {
     } else {
         "sleeve"
     };
-    let find = |method: &str, metric: &str, split: Option<&str>| {
-        records.iter().find(|r| {
-            r.experiment == "drape"
-                && r.scene == scene
-                && r.method == method
-                && r.metric == metric
-                && r.split.as_deref() == split
-        })
-    };
-    let test = |method: &str, metric: &str| find(method, metric, Some("test"));
-    let sd = |method: &str, metric: &str| test(method, &format!("{metric}-sd")).map_or(0.0, |r| r.value);
+    let test = |method: &str, metric: &str| find(records, on("drape", scene, TEST), method, metric);
+    let sd =
+        |method: &str, metric: &str| figure(records, on("drape", scene, TEST), method, metric).map_or(0.0, |f| f.1);
     let mut claim = Claim {
         paper: "Geng, Johnson & Fedkiw 2020, projection layers in training",
         experiment: "drape",
@@ -378,7 +359,7 @@ fn drape_claim(records: &[Record]) -> Claim {
                 && r.scene == scene
                 && r.method.starts_with("trained-")
                 && r.metric == "sqrtmse-mm"
-                && r.split.as_deref() == Some("test")
+                && r.is_test()
         })
         .filter_map(|r| {
             let s = test(&r.method, "stretching-energy-error")?;
@@ -396,7 +377,15 @@ fn drape_claim(records: &[Record]) -> Claim {
     };
     let mu: Vec<f64> = ["1", "0.1", "0.01"]
         .iter()
-        .filter_map(|s| find(&format!("learned-mu-from-{s}"), "learned-mu", None).map(|r| r.value))
+        .filter_map(|s| {
+            find(
+                records,
+                on("drape", scene, None),
+                &format!("learned-mu-from-{s}"),
+                "learned-mu",
+            )
+            .map(|r| r.value)
+        })
         .collect();
     let (lo, hi) = mu
         .iter()
