@@ -83,6 +83,7 @@ pub fn score(options: &ScoreOptions) -> crate::Result<ExperimentOutput> {
         out: options.out.clone(),
         quiet: true,
         code_version: manifest.code_version.clone(),
+        jobs: 1,
     };
     let (model, data, split) = (&options.model, &options.data, options.split.as_str());
     let output = match options.kind {

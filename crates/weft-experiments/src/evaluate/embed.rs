@@ -7,7 +7,7 @@
 //! the method's own reconstructions as predecessors (docs/RESULTS.md).
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::Context;
@@ -455,7 +455,15 @@ fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir:
         std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;
     }
     let label = format!("embed/{}", dir.display());
-    let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+    // The model's method and seed directories name it among models training at once.
+    let tag: Vec<String> = dir
+        .iter()
+        .rev()
+        .take(2)
+        .map(|c| c.to_string_lossy().into_owned())
+        .collect();
+    let tag = tag.into_iter().rev().collect::<Vec<_>>().join("/");
+    let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?.tagged(tag);
     weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
         .with_context(|| format!("training {}", dir.display()))?;
     Ok(())
@@ -967,6 +975,29 @@ struct Role<'a> {
     scene: &'a str,
     method: &'a str,
     first_seed: bool,
+}
+
+/// One model to train (unless its scores are kept) and score: its configuration,
+/// directory and role.
+#[derive(Clone)]
+struct Job<'a> {
+    config: EmbedTrainingConfig,
+    dir: PathBuf,
+    role: Role<'a>,
+}
+
+impl<'a> Job<'a> {
+    fn new(config: EmbedTrainingConfig, dir: PathBuf, role: Role<'a>) -> Self {
+        Self { config, dir, role }
+    }
+}
+
+/// [`scored_model`] for models that do not depend on each other, up to `ctx.jobs` at once
+/// ([`EvalContext::concurrently`]); their scores in `jobs`' order.
+fn scored_models(ctx: &EvalContext, data: &EmbedData, jobs: &[Job]) -> crate::Result<Vec<ModelScores>> {
+    ctx.concurrently(jobs.len(), |i| {
+        scored_model(ctx, data, &jobs[i].config, &jobs[i].dir, jobs[i].role)
+    })
 }
 
 const SCORES_FILE: &str = "scores.json";
@@ -1538,15 +1569,21 @@ fn run_scene(
     }
     let config = &r.config;
     // `no-pb`, every seed (on the first scene, a study's model where one has the seed's
-    // configuration); its first seed is the baseline the λ_ephys choice compares to.
-    let mut baseline = Vec::new();
-    for (k, &seed) in seeds.iter().enumerate() {
-        let c = with_seed(&method_config(config, true), seed);
-        let dir = study_dir_or(&study, &c, seed_dir("no-pb", seed));
-        let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?;
-        baseline.push((dir, scores));
-    }
-    let baseline_validation = baseline[0].1.validation;
+    // configuration); its first seed is the baseline the λ_ephys choice compares to. As
+    // many seeds as train at once go first; the rest train beside the λ_ephys grid, which
+    // needs only the first seed's scores.
+    let baseline_jobs: Vec<Job> = seeds
+        .iter()
+        .enumerate()
+        .map(|(k, &seed)| {
+            let c = with_seed(&method_config(config, true), seed);
+            let dir = study_dir_or(&study, &c, seed_dir("no-pb", seed));
+            Job::new(c, dir, role("no-pb", k == 0))
+        })
+        .collect();
+    let (first_jobs, later_jobs) = baseline_jobs.split_at(ctx.jobs.clamp(1, baseline_jobs.len()));
+    let mut baseline_scores = scored_models(ctx, &data, first_jobs)?;
+    let baseline_validation = baseline_scores[0].validation;
     // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation
     // windows only; the other seeds at the chosen weight.
     let parity = ephys_parity(
@@ -1567,12 +1604,27 @@ fn run_scene(
         c
     };
     let ours_method = |ephys: f64| format!("ours-ephys-{ephys}");
-    let mut candidates = Vec::new();
-    for &ephys in &grid {
-        let dir = seed_dir(&ours_method(ephys), seeds[0]);
-        let s = scored_model(ctx, &data, &ours_config(ephys, seeds[0]), &dir, role("ours", true))?;
-        candidates.push((ephys, dir, s));
-    }
+    let grid_jobs = grid.iter().map(|&ephys| {
+        Job::new(
+            ours_config(ephys, seeds[0]),
+            seed_dir(&ours_method(ephys), seeds[0]),
+            role("ours", true),
+        )
+    });
+    let jobs: Vec<Job> = later_jobs.iter().cloned().chain(grid_jobs).collect();
+    let mut scored = scored_models(ctx, &data, &jobs)?;
+    let grid_scores = scored.split_off(later_jobs.len());
+    baseline_scores.extend(scored);
+    let baseline: Vec<(PathBuf, ModelScores)> = baseline_jobs
+        .iter()
+        .map(|j| j.dir.clone())
+        .zip(baseline_scores)
+        .collect();
+    let candidates: Vec<(f64, PathBuf, ModelScores)> = grid
+        .iter()
+        .zip(jobs[later_jobs.len()..].iter().zip(grid_scores))
+        .map(|(&ephys, (job, s))| (ephys, job.dir.clone(), s))
+        .collect();
     let validation: Vec<(f64, ValidationScores)> = candidates.iter().map(|(e, _, s)| (*e, s.validation)).collect();
     let chosen = choose_ephys(&validation, baseline_validation).context("no λ_ephys candidate")?;
     let first_ours = candidates
@@ -1580,12 +1632,22 @@ fn run_scene(
         .find(|(e, _, _)| *e == chosen)
         .map(|(_, d, s)| (d.clone(), s.clone()))
         .context("the chosen λ_ephys model")?;
+    let jobs: Vec<Job> = seeds[1..]
+        .iter()
+        .map(|&seed| {
+            Job::new(
+                ours_config(chosen, seed),
+                seed_dir(&ours_method(chosen), seed),
+                role("ours", false),
+            )
+        })
+        .collect();
     let mut ours = vec![first_ours];
-    for &seed in &seeds[1..] {
-        let dir = seed_dir(&ours_method(chosen), seed);
-        let s = scored_model(ctx, &data, &ours_config(chosen, seed), &dir, role("ours", false))?;
-        ours.push((dir, s));
-    }
+    ours.extend(
+        jobs.iter()
+            .map(|j| j.dir.clone())
+            .zip(scored_models(ctx, &data, &jobs)?),
+    );
     if grid.len() > 1 {
         let mut row = vec![format!("`{scene}`"), parity.map_or("—".into(), |p| format!("{p:.1}"))];
         row.extend(
@@ -1648,14 +1710,22 @@ fn run_scene(
     if scene == "sheet-ms" {
         // Table II: every seed at each of the paper's λ_ephys (the chosen weight's are
         // `ours`; the others' first seeds are the grid's models).
-        for ephys in [TABLE_II_EPHYS[0], config.weights.ephys, TABLE_II_EPHYS[1]] {
-            let mut runs = Vec::new();
-            for (k, &seed) in seeds.iter().enumerate() {
-                let dir = seed_dir(&ours_method(ephys), seed);
-                let c = ours_config(ephys, seed);
-                runs.push(scored_model(ctx, &data, &c, &dir, role("ours", k == 0))?.test);
-            }
-            r.table_2.push((format!("(1, 1, {ephys})"), runs));
+        let weights = [TABLE_II_EPHYS[0], config.weights.ephys, TABLE_II_EPHYS[1]];
+        let jobs: Vec<Job> = weights
+            .iter()
+            .flat_map(|&ephys| seeds.iter().enumerate().map(move |(k, &seed)| (ephys, k, seed)))
+            .map(|(ephys, k, seed)| {
+                Job::new(
+                    ours_config(ephys, seed),
+                    seed_dir(&ours_method(ephys), seed),
+                    role("ours", k == 0),
+                )
+            })
+            .collect();
+        let scored = scored_models(ctx, &data, &jobs)?;
+        for (ephys, runs) in weights.iter().zip(scored.chunks(seeds.len())) {
+            r.table_2
+                .push((format!("(1, 1, {ephys})"), runs.iter().map(|s| s.test).collect()));
         }
     }
     // PCA on the frames the embedding trains on (Tan's training frames less the
@@ -2282,10 +2352,8 @@ mod tests {
         let root = std::env::temp_dir().join(format!("weft-embed-scores-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
         let ctx = EvalContext {
-            size: Size::Quick,
-            out: root.clone(),
             quiet: true,
-            code_version: "test".into(),
+            ..EvalContext::new(Size::Quick, root.clone())
         };
         let dir = root.join("model");
         let config = EmbedTrainingConfig {
@@ -2324,6 +2392,54 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
+    /// Models trained at once score exactly as each trained alone on a pool of the same
+    /// size: a model's results depend on its share of the cores, never on what trains
+    /// beside it.
+    #[test]
+    fn models_trained_at_once_score_as_each_trained_alone() {
+        let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
+        let root = std::env::temp_dir().join(format!("weft-embed-jobs-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let ctx = |jobs| EvalContext {
+            quiet: true,
+            jobs,
+            ..EvalContext::new(Size::Quick, root.clone())
+        };
+        let jobs = |under: &str| -> Vec<Job> {
+            [(0, true, 0.5), (1, false, 0.0)]
+                .into_iter()
+                .map(|(seed, first_seed, ephys)| {
+                    let mut config = EmbedTrainingConfig {
+                        epochs: [1, 1, 1],
+                        ..with_seed(&training_config(Size::Quick), seed)
+                    };
+                    config.weights.ephys = ephys;
+                    let role = Role {
+                        scene: "sheet-ms",
+                        method: if ephys > 0.0 { "ours" } else { "no-pb" },
+                        first_seed,
+                    };
+                    Job::new(config, root.join(under).join(format!("seed-{seed}")), role)
+                })
+                .collect()
+        };
+        let (together, alone) = (jobs("together"), jobs("alone"));
+        let at_once = two.install(|| scored_models(&ctx(2), &data, &together)).unwrap();
+        let one_by_one = one.install(|| scored_models(&ctx(1), &data, &alone)).unwrap();
+        // Everything but the wall times.
+        let figures = |s: &ModelScores| {
+            serde_json::to_string(&(&s.config, s.validation, s.test, s.rollout, s.stage_2_rollout)).unwrap()
+        };
+        assert_eq!(at_once.len(), 2);
+        for (a, b) in at_once.iter().zip(&one_by_one) {
+            assert_eq!(figures(a), figures(b));
+        }
+        assert_ne!(figures(&at_once[0]), figures(&at_once[1]));
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
     /// The stage-3 study's model is the source model's stages 1 and 2 with its own stage 3:
     /// the copy leaves the source as it was, and only stage 3 is trained.
     #[test]
@@ -2339,10 +2455,8 @@ mod tests {
         let root = std::env::temp_dir().join(format!("weft-embed-fine-tune-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
         let ctx = EvalContext {
-            size: Size::Quick,
-            out: root.clone(),
             quiet: true,
-            code_version: "test".into(),
+            ..EvalContext::new(Size::Quick, root.clone())
         };
         let config = EmbedTrainingConfig {
             epochs: [1, 1, 2],

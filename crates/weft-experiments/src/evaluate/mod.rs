@@ -49,6 +49,9 @@ pub struct EvaluateOptions {
     pub command: String,
     /// The code version recorded with every experiment and dataset.
     pub code_version: String,
+    /// How many independent models an experiment trains at once, each on its share of the
+    /// cores (at least 1; see [`EvalContext::concurrently`]).
+    pub jobs: usize,
 }
 
 impl EvaluateOptions {
@@ -64,6 +67,7 @@ impl EvaluateOptions {
             publish: None,
             command: format!("evaluate --size {size}"),
             code_version: concat!("weft-experiments ", env!("CARGO_PKG_VERSION")).to_string(),
+            jobs: rayon::current_num_threads(),
         }
     }
 }
@@ -96,6 +100,11 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             .filter(|e| args.only.iter().any(|o| o == e))
             .collect()
     };
+    if args.jobs == 0 {
+        return Err(crate::Error::Invalid(
+            "--jobs 0: at least one model must train at a time".into(),
+        ));
+    }
     let out = args.out.clone();
     std::fs::create_dir_all(out.join("experiments")).with_context(|| format!("creating {}", out.display()))?;
     let ctx = EvalContext {
@@ -103,6 +112,7 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
         out: out.clone(),
         quiet: args.quiet,
         code_version: args.code_version.clone(),
+        jobs: args.jobs,
     };
     let start = Instant::now();
     let mut ran: Vec<&str> = Vec::new();
