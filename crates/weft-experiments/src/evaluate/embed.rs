@@ -1744,8 +1744,10 @@ fn run_scene(
     // The same latent MLP on the PCA codes (issue 31's baseline for simulation): trained
     // like stage 2, on the same windows, selected on the same validation windows, with
     // every seed; the first draws the long roll-out.
-    let mut pca_rollouts = Vec::new();
-    for (k, &seed) in seeds.iter().enumerate() {
+    // The seeds train at once ([`EvalContext::concurrently`]); each returns its roll-out
+    // scores, and the first its long roll-out too.
+    let pca_runs = ctx.concurrently(seeds.len(), |k| {
+        let seed = seeds[k];
         let pca_config = PcaSimulatorConfig {
             hidden: config.latent_hidden.clone(),
             adam: config.adam,
@@ -1764,14 +1766,22 @@ fn run_scene(
         std::fs::create_dir_all(&pca_dir)?;
         weft_data::files::write_json(&pca_dir.join("config.json"), &pca_config)?;
         let label = format!("embed/{scene}/pca-mlp/seed-{seed}");
-        let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+        let progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
+        let mut progress = progress.tagged(format!("pca-mlp/seed-{seed}"));
         let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
             .with_context(|| format!("training {label}"))?;
         drop(progress);
-        pca_rollouts.push(pca_rollout_scores(&data, &pca_sim)?);
-        if k == 0 {
-            out.curves.push(pca_long_rollout(scene, &data, &pca_sim)?);
-        }
+        let long = if k == 0 {
+            Some(pca_long_rollout(scene, &data, &pca_sim)?)
+        } else {
+            None
+        };
+        Ok((pca_rollout_scores(&data, &pca_sim)?, long))
+    })?;
+    let mut pca_rollouts = Vec::new();
+    for (scores, long) in pca_runs {
+        pca_rollouts.push(scores);
+        out.curves.extend(long);
     }
     r.table_4.push((scene.into(), "pca + MLP".into(), pca_rollouts));
     let t = Instant::now();
