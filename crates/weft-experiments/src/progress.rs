@@ -51,6 +51,8 @@ impl weft_nn::trainer::Observer for TrainProgress {
     }
 
     fn batch(&mut self, epoch: usize, loss: f64) {
+        // A job timing something alone holds the next batch back (`timed_alone`).
+        crate::evaluate::context::pause_point();
         self.bar.set_message(format!("epoch {} loss {loss:.3e}", epoch + 1));
         self.bar.inc(1);
     }

@@ -154,6 +154,35 @@ pub fn ground_truth_seconds(dir: &Path) -> crate::Result<f64> {
     Ok(seconds / frames)
 }
 
+/// Taken for reading, briefly, at every training batch ([`pause_point`]) and for writing
+/// by a timed section ([`timed_alone`]): a model training beside a timed one waits at its
+/// next batch.
+static TIMED: std::sync::RwLock<()> = std::sync::RwLock::new(());
+
+/// Where a training run waits while another job of the process times something
+/// ([`timed_alone`]); called by the training observer at every batch.
+pub fn pause_point() {
+    drop(TIMED.read().unwrap_or_else(std::sync::PoisonError::into_inner));
+}
+
+/// Runs `f` — a section whose wall time is reported — alone: every model training in the
+/// process waits at its next batch until it returns, and `f` runs on a pool of all the
+/// cores, as it would with one job. Without it, a model timed while another trains beside
+/// it ([`EvalContext::concurrently`]) reports the time of one core shared with that
+/// training. Timed sections of several jobs take turns.
+pub fn timed_alone<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+    static FULL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    let _alone = TIMED.write().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let full = FULL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        rayon::ThreadPoolBuilder::new().num_threads(cores).build().ok()
+    });
+    match full {
+        Some(pool) => pool.install(f),
+        None => f(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -194,5 +223,42 @@ mod tests {
             crate::Error::Failed("job 1 failed".into()).to_string()
         );
         assert!(ctx(2).concurrently(0, Ok).unwrap().is_empty());
+    }
+
+    /// A timed section holds every training batch back until it returns, and runs on all
+    /// the cores even when called from a one-thread pool.
+    #[test]
+    fn a_timed_section_pauses_training_and_gets_every_core() {
+        let batches = AtomicUsize::new(0);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                while !stop.load(Ordering::Relaxed) {
+                    pause_point();
+                    batches.fetch_add(1, Ordering::Relaxed);
+                }
+            });
+            // Let the "training" run, then time a section from a one-thread pool.
+            while batches.load(Ordering::Relaxed) < 100 {
+                std::thread::yield_now();
+            }
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            let (during, threads) = one.install(|| {
+                timed_alone(|| {
+                    let before = batches.load(Ordering::Relaxed);
+                    std::thread::sleep(std::time::Duration::from_millis(50));
+                    (batches.load(Ordering::Relaxed) - before, rayon::current_num_threads())
+                })
+            });
+            // One batch may have been past its pause point when the section began.
+            assert!(during <= 1, "{during} batches ran during the timed section");
+            assert_eq!(threads, cores);
+            let after = batches.load(Ordering::Relaxed);
+            while batches.load(Ordering::Relaxed) < after + 100 {
+                std::thread::yield_now();
+            }
+            stop.store(true, Ordering::Relaxed);
+        });
     }
 }

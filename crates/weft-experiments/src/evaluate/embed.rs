@@ -1023,9 +1023,14 @@ fn scored_model(
     }
     train(ctx, data, config, dir)?;
     let model = EmbedModel::load(dir, data, 3)?;
-    let t = Instant::now();
-    let predicted = model.reconstruct(data, &data.test_frames, 16)?;
-    let seconds_per_frame = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
+    // Timed alone: another model may be training beside this one (`--jobs`).
+    let (predicted, seconds) = super::context::timed_alone(|| {
+        let t = Instant::now();
+        model
+            .reconstruct(data, &data.test_frames, 16)
+            .map(|p| (p, t.elapsed().as_secs_f64()))
+    })?;
+    let seconds_per_frame = seconds / predicted.len().max(1) as f64;
     let pb = role.method == "ours";
     let stage_2_rollout = if pb {
         Some(rollout_scores(data, &EmbedModel::load(dir, data, 2)?)?)
@@ -1044,7 +1049,10 @@ fn scored_model(
                 None
             },
             ik: if pb && IK_SCENES.contains(&role.scene) {
-                Some(inverse_kinematics(role.scene, data, &model)?)
+                // Its rows report the latent and full-space solves' wall times.
+                Some(super::context::timed_alone(|| {
+                    inverse_kinematics(role.scene, data, &model)
+                })?)
             } else {
                 None
             },
