@@ -47,7 +47,8 @@ pub struct EvaluateArgs {
 /// and its calls queue on one lock, which models training at once take turns on), and
 /// mimalloc's return of freed memory to the kernel (each model's large buffers would be
 /// page-faulted back in; the process keeps its peak instead). Two `embed` models on two
-/// cores: a median epoch of 6.3 s without, 5.1 s with both (docs/BENCHMARKS.md).
+/// cores: a median epoch of 7.95 s without, 5.4 s with both (docs/BENCHMARKS.md,
+/// `benches/concurrent_env.sh`).
 const CONCURRENT_ENV: [(&str, &str); 2] = [("CANDLE_NUM_THREADS", "1"), ("MIMALLOC_PURGE_DELAY", "-1")];
 
 /// With more than one job, re-executes this command (the same process, `exec`) under

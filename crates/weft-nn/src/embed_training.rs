@@ -77,7 +77,9 @@ pub struct EmbedTrainingConfig {
     #[serde(default)]
     pub ephys_warmup: usize,
     /// The learning-rate schedule and stopping rules of every stage (constant by
-    /// default, as Tan et al.).
+    /// default, as Tan et al., after a [`WARMUP_STEPS`]-batch warm-up at the start of each
+    /// stage). A stored configuration without the field, or without its `warmup_steps`,
+    /// had no warm-up.
     #[serde(default)]
     pub schedule: crate::trainer::Schedule,
     /// Adam's learning rate in stage 3, which fine-tunes both networks from a fresh
@@ -244,6 +246,20 @@ impl PhysScale {
     }
 }
 
+/// Batches over which each stage's learning rate ramps up ([`Schedule::warmup_steps`]).
+///
+/// Why: without it, Adam's first step moves the encoder's fully connected layer, which sums
+/// every vertex's activations (38 025 on the standard sheet, mostly of one sign), by about
+/// `lr · Σ|h|`: on `sheet-ms` seed 1's mean |code| is 14 after one step and 66 after 25,
+/// the decoder's `tanh` saturates, and depending on the seed stage 1 then sits on a plateau
+/// for 10 to more than 40 epochs, or stops there early; one seed in three of the standard
+/// run did. With a 50-batch ramp (a standard epoch is 40) the code stays below about 1 and
+/// the seeds tried leave the plateau together by the third epoch (docs/EMBEDDING.md, "Adam's
+/// first steps"; `cargo run --example embed_first_steps`).
+///
+/// [`Schedule::warmup_steps`]: crate::trainer::Schedule::warmup_steps
+pub const WARMUP_STEPS: usize = 50;
+
 impl Default for EmbedTrainingConfig {
     fn default() -> Self {
         Self {
@@ -256,7 +272,10 @@ impl Default for EmbedTrainingConfig {
             seed: 0,
             phys_scale: PhysScale::default(),
             ephys_warmup: 0,
-            schedule: crate::trainer::Schedule::default(),
+            schedule: crate::trainer::Schedule {
+                warmup_steps: WARMUP_STEPS,
+                ..crate::trainer::Schedule::default()
+            },
             fine_tune_learning_rate: None,
             kernels: crate::Kernels::default(),
         }

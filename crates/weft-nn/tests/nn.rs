@@ -695,9 +695,17 @@ fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
     let o = v.as_object_mut().unwrap();
     o.remove("phys_scale");
     o.remove("ephys_warmup");
+    o["schedule"].as_object_mut().unwrap().remove("warmup_steps");
     let legacy: EmbedTrainingConfig = serde_json::from_value(v).unwrap();
     assert_eq!(legacy.phys_scale, PhysScale::Inertial);
     assert_eq!(legacy.ephys_warmup, 0);
+    // Stored before the learning-rate warm-up: none; new configurations ramp.
+    assert_eq!(legacy.schedule.warmup_steps, 0);
+    assert_eq!(
+        EmbedTrainingConfig::default().schedule.warmup_steps,
+        weft_nn::embed_training::WARMUP_STEPS
+    );
+    assert!(weft_nn::embed_training::WARMUP_STEPS > 0);
 }
 
 #[test]

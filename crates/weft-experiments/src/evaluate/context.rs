@@ -35,8 +35,14 @@ impl EvalContext {
         }
     }
 
+    /// How many of `n` independent jobs [`concurrently`](Self::concurrently) runs at once:
+    /// [`jobs`](Self::jobs), but at least one and at most `n`.
+    pub fn workers(&self, n: usize) -> usize {
+        self.jobs.clamp(1, n.max(1))
+    }
+
     /// Runs `job(0)`, …, `job(n − 1)`, which must not depend on each other, up to
-    /// [`jobs`](Self::jobs) at once, each in its own rayon pool with an equal share of the
+    /// [`workers(n)`](Self::workers) at once, each in its own rayon pool with an equal share of the
     /// current pool's threads; returns their results in index order, or the first error
     /// (by index) once every job has stopped, so no job is cut off mid-way.
     ///
@@ -46,6 +52,12 @@ impl EvalContext {
     /// after the other on both (docs/BENCHMARKS.md). A job's results depend on its pool's
     /// size (kernels split their sums by thread), never on the jobs beside it; with one
     /// job at a time the jobs run in the current pool, as they did before.
+    ///
+    /// Two process-wide facilities slow models that share a process (candle's elementwise
+    /// pool and mimalloc's purging; docs/BENCHMARKS.md, "In one process"). `cargo xtask
+    /// evaluate` sets both for its process when `jobs > 1`; a library caller that wants the
+    /// same speed sets `CANDLE_NUM_THREADS=1` and `MIMALLOC_PURGE_DELAY=-1` before starting.
+    /// The results are the same either way.
     pub fn concurrently<T: Send>(
         &self,
         n: usize,
@@ -53,7 +65,7 @@ impl EvalContext {
     ) -> crate::Result<Vec<T>> {
         use std::sync::atomic::{AtomicUsize, Ordering};
         use std::sync::{Mutex, PoisonError};
-        let workers = self.jobs.clamp(1, n.max(1));
+        let workers = self.workers(n);
         if workers == 1 {
             return (0..n).map(job).collect();
         }
@@ -205,7 +217,16 @@ mod tests {
         assert_eq!(threads(2), (0..5).map(|i| (i, 2)).collect::<Vec<_>>());
         assert_eq!(threads(3), (0..5).map(|i| (i, 1)).collect::<Vec<_>>());
         assert_eq!(threads(1), (0..5).map(|i| (i, 4)).collect::<Vec<_>>());
-        // More workers than jobs: as many as there are jobs.
+        // More workers than jobs: as many as there are jobs; no jobs or no workers: one.
+        assert_eq!(
+            [
+                ctx(8).workers(2),
+                ctx(2).workers(6),
+                ctx(0).workers(3),
+                ctx(2).workers(0)
+            ],
+            [2, 2, 1, 1]
+        );
         let two = four.install(|| ctx(8).concurrently(2, |_| Ok(rayon::current_num_threads())));
         assert_eq!(two.unwrap(), vec![2, 2]);
         let ran = AtomicUsize::new(0);

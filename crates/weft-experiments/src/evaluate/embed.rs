@@ -1589,7 +1589,7 @@ fn run_scene(
             Job::new(c, dir, role("no-pb", k == 0))
         })
         .collect();
-    let (first_jobs, later_jobs) = baseline_jobs.split_at(ctx.jobs.clamp(1, baseline_jobs.len()));
+    let (first_jobs, later_jobs) = baseline_jobs.split_at(ctx.workers(baseline_jobs.len()));
     let mut baseline_scores = scored_models(ctx, &data, first_jobs)?;
     let baseline_validation = baseline_scores[0].validation;
     // `ours`: the first seed at every λ_ephys of the grid, chosen on the validation

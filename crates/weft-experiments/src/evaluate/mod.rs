@@ -58,16 +58,18 @@ impl EvaluateOptions {
     /// The defaults of `cargo xtask evaluate --size SIZE`: every experiment, into
     /// `out/evaluate-SIZE`.
     pub fn new(size: Size) -> Self {
+        let out = PathBuf::from(format!("out/evaluate-{}", size.as_str()));
+        let defaults = EvalContext::new(size, out.clone());
         Self {
             size,
             only: Vec::new(),
-            out: PathBuf::from(format!("out/evaluate-{}", size.as_str())),
+            out,
             force: false,
             quiet: true,
             publish: None,
             command: format!("evaluate --size {size}"),
-            code_version: concat!("weft-experiments ", env!("CARGO_PKG_VERSION")).to_string(),
-            jobs: rayon::current_num_threads(),
+            code_version: defaults.code_version,
+            jobs: defaults.jobs,
         }
     }
 }
