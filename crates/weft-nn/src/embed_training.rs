@@ -254,7 +254,7 @@ impl PhysScale {
 /// the decoder's `tanh` saturates, and depending on the seed stage 1 then sits on a plateau
 /// for 10 to more than 40 epochs, or stops there early; one seed in three of the standard
 /// run did. With a 50-batch ramp (a standard epoch is 40) the code stays below about 1 and
-/// the seeds tried leave the plateau together by the third epoch (docs/EMBEDDING.md, "Adam's
+/// the seeds tried are all past the plateau by the fifth epoch (docs/EMBEDDING.md, "Adam's
 /// first steps"; `cargo run --example embed_first_steps`).
 ///
 /// [`Schedule::warmup_steps`]: crate::trainer::Schedule::warmup_steps
