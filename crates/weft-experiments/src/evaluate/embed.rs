@@ -187,6 +187,23 @@ fn fine_tune_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<Option<
     }
 }
 
+/// Stage-3 epochs the first scene chooses between on validation, at the chosen stage-3
+/// rate: Tan et al.'s 10 and three times as many. In the run before the warm-up every
+/// `no-pb` seed's stage-3 validation loss still fell at its tenth epoch (docs/EMBEDDING.md).
+/// The longer budget's models continue the shorter one's stage 3 (the trainer resumes it
+/// exactly), so the study costs only the extra epochs.
+const STAGE_3_BUDGET_EPOCHS: usize = 30;
+
+/// The stage-3 epochs the first scene chooses between: the configuration's and
+/// [`STAGE_3_BUDGET_EPOCHS`] (quick runs keep the configuration's).
+fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+    if size == Size::Quick || config.epochs[2] >= STAGE_3_BUDGET_EPOCHS {
+        vec![config.epochs[2]]
+    } else {
+        vec![config.epochs[2], STAGE_3_BUDGET_EPOCHS]
+    }
+}
+
 /// What the first scene chooses on its validation windows before the other models train,
 /// each study's candidates in order (the configuration's first).
 #[derive(Debug, Clone)]
@@ -194,6 +211,7 @@ struct Studies {
     schedules: Vec<(&'static str, Schedule)>,
     budgets: Vec<usize>,
     fine_tune: Vec<Option<f64>>,
+    stage_3_budgets: Vec<usize>,
 }
 
 impl Studies {
@@ -202,6 +220,7 @@ impl Studies {
             schedules: schedule_candidates(size, config),
             budgets: budget_candidates(size, config),
             fine_tune: fine_tune_candidates(size, config),
+            stage_3_budgets: stage_3_budget_candidates(size, config),
         }
     }
 }
@@ -240,6 +259,48 @@ fn mean_validation(runs: &[(std::path::PathBuf, ModelScores)]) -> ValidationScor
         m_rms: mean_sd(runs.iter().map(|(_, s)| s.validation.m_rms)).0,
         m_phys: mean_sd(runs.iter().map(|(_, s)| s.validation.m_phys)).0,
     }
+}
+
+/// The header of a study's table: the candidate, [`study_row`]'s columns with `trained`
+/// naming its last, and the choice.
+fn study_header(candidate: &str, trained: &str) -> Vec<String> {
+    [
+        candidate,
+        "mean validation M_rms (mm)",
+        "validation M_rms per seed (mm)",
+        "validation M_phys per seed (N²)",
+        trained,
+        "chosen",
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+/// A study's row: the candidate, the seeds' mean validation M_rms, each seed's validation
+/// M_rms and M_phys, and the epochs each seed's `stages` trained (the kept epoch in
+/// brackets; stages joined by " / ", seeds by "; ").
+fn study_row(candidate: String, runs: &[(std::path::PathBuf, ModelScores)], stages: &[u8]) -> Vec<String> {
+    let per_seed = |f: &dyn Fn(&ModelScores) -> String| runs.iter().map(|(_, s)| f(s)).collect::<Vec<_>>().join(", ");
+    let trained: Vec<String> = runs
+        .iter()
+        .map(|(dir, _)| {
+            stages
+                .iter()
+                .map(|&stage| {
+                    TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage))
+                        .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
+                })
+                .collect::<Vec<_>>()
+                .join(" / ")
+        })
+        .collect();
+    vec![
+        candidate,
+        format!("{:.3}", mean_validation(runs).m_rms),
+        per_seed(&|s| format!("{:.3}", s.validation.m_rms)),
+        per_seed(&|s| format!("{:.4e}", s.validation.m_phys)),
+        trained.join("; "),
+    ]
 }
 
 /// The candidate to keep from `(candidate, validation scores)`: the lowest validation M_rms
@@ -427,9 +488,9 @@ fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
 /// stages 1 and 2 (copies, so neither model's later training touches the other's files),
 /// for a stage 3 trained under another learning rate
 /// ([`weft_nn::embed_training::train_model`] then discards nothing and trains stage 3).
-fn share_stages_1_and_2(from: &Path, to: &Path) -> crate::Result<()> {
+fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result<()> {
     std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
-    for stage in 1..=2u8 {
+    for stage in 1..=through {
         let run = weft_nn::embed_training::stage_dir(from, stage);
         if run.exists() {
             super::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
@@ -1095,6 +1156,9 @@ struct SceneResults {
     /// The stage-3 learning-rate study's rows (first scene, beyond the quick size).
     #[serde(default)]
     fine_tune_rows: Vec<Vec<String>>,
+    /// The stage-3 budget study's rows (first scene, beyond the quick size).
+    #[serde(default)]
+    stage_3_budget_rows: Vec<Vec<String>>,
     /// Wall seconds of the run that finished the scene (its models may have trained in
     /// earlier runs).
     wall_seconds: f64,
@@ -1119,8 +1183,10 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
             ..kept.config.clone()
         };
         before_the_studies.epochs[0] = config.epochs[0];
+        before_the_studies.epochs[2] = config.epochs[2];
         studies.schedules.iter().any(|(_, s)| *s == kept.config.schedule)
             && studies.budgets.contains(&kept.config.epochs[0])
+            && studies.stage_3_budgets.contains(&kept.config.epochs[2])
             && studies.fine_tune.contains(&kept.config.fine_tune_learning_rate)
             && before_the_studies == *config
     } else {
@@ -1161,6 +1227,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut schedule_rows: Vec<Vec<String>> = Vec::new();
     let mut budget_rows: Vec<Vec<String>> = Vec::new();
     let mut fine_tune_rows: Vec<Vec<String>> = Vec::new();
+    let mut stage_3_budget_rows: Vec<Vec<String>> = Vec::new();
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
@@ -1195,6 +1262,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         schedule_rows.extend(results.schedule_rows);
         budget_rows.extend(results.budget_rows);
         fine_tune_rows.extend(results.fine_tune_rows);
+        stage_3_budget_rows.extend(results.stage_3_budget_rows);
         scene_seconds.push(format!("{scene} {:.0}", results.wall_seconds));
     }
     out.notes.push(format!(
@@ -1242,16 +1310,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                  plays no part.",
                 scenes()[0]
             ),
-            header: [
-                "schedule",
-                "mean validation M_rms (mm)",
-                "validation M_rms per seed (mm)",
-                "validation M_phys per seed (N²)",
-                "epochs per seed, stages 1 / 2 / 3 (kept epoch)",
-                "chosen",
-            ]
-            .map(String::from)
-            .to_vec(),
+            header: study_header("schedule", "epochs per seed, stages 1 / 2 / 3 (kept epoch)"),
             rows: schedule_rows,
         });
     }
@@ -1292,17 +1351,24 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                  M_rms fine-tunes every model; the test split plays no part.",
                 scenes()[0]
             ),
-            header: [
-                "stage-3 learning rate",
-                "mean validation M_rms (mm)",
-                "validation M_rms per seed (mm)",
-                "validation M_phys per seed (N²)",
-                "stage-3 epochs per seed (kept epoch)",
-                "chosen",
-            ]
-            .map(String::from)
-            .to_vec(),
+            header: study_header("stage-3 learning rate", "stage-3 epochs per seed (kept epoch)"),
             rows: fine_tune_rows,
+        });
+    }
+    if !stage_3_budget_rows.is_empty() {
+        out.tables.push(Table {
+            title: "Tan et al. stage-3 budget chosen on the validation windows".into(),
+            caption: format!(
+                "`no-pb`, every seed, on `{}`, under the chosen schedule, stage-1 budget and stage-3 rate: stage 3 \
+                 with Tan et al.'s epochs and with up to {STAGE_3_BUDGET_EPOCHS} (the longer run continues the \
+                 shorter one; every stage stops once its validation loss has not improved for \
+                 {EARLY_STOPPING_PATIENCE} epochs). Validation M_rms (mm) and M_phys (N²) of the stage-3 model, and \
+                 the epochs stage 3 trained (the kept epoch in brackets). The budget with the lowest mean validation \
+                 M_rms fine-tunes every model; the test split plays no part.",
+                scenes()[0]
+            ),
+            header: study_header("stage-3 epochs allowed", "stage-3 epochs per seed (kept epoch)"),
+            rows: stage_3_budget_rows,
         });
     }
     out.tables.push(tan_table_2(&table_2));
@@ -1333,6 +1399,7 @@ fn run_scene(
         schedule_rows: Vec::new(),
         budget_rows: Vec::new(),
         fine_tune_rows: Vec::new(),
+        stage_3_budget_rows: Vec::new(),
         wall_seconds: 0.0,
     };
     let out = &mut r.output;
@@ -1414,29 +1481,7 @@ fn run_scene(
                 runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
             }
             let mean = mean_validation(&runs);
-            let epochs: Vec<String> = runs
-                .iter()
-                .map(|(dir, _)| {
-                    (1..=3u8)
-                        .map(|stage| {
-                            TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage))
-                                .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
-                        })
-                        .collect::<Vec<_>>()
-                        .join(" / ")
-                })
-                .collect();
-            let (rms, phys) = (
-                runs.iter().map(|(_, s)| format!("{:.3}", s.validation.m_rms)),
-                runs.iter().map(|(_, s)| format!("{:.4e}", s.validation.m_phys)),
-            );
-            r.schedule_rows.push(vec![
-                (*name).to_string(),
-                format!("{:.3}", mean.m_rms),
-                rms.collect::<Vec<_>>().join(", "),
-                phys.collect::<Vec<_>>().join(", "),
-                epochs.join("; "),
-            ]);
+            r.schedule_rows.push(study_row((*name).to_string(), &runs, &[1, 2, 3]));
             scored.push((*name, mean));
             study.extend(runs);
         }
@@ -1524,7 +1569,7 @@ fn run_scene(
                         .join(format!("lr-{}", fine_tune_name(&r.config, rate)))
                         .join(format!("seed-{seed}"));
                     if !dir.join("config.json").exists() {
-                        share_stages_1_and_2(&source, &dir)?;
+                        share_stages(&source, &dir, 2)?;
                     }
                     dir
                 };
@@ -1534,26 +1579,8 @@ fn run_scene(
                 ));
             }
             let mean = mean_validation(&runs);
-            let kept: Vec<String> = runs
-                .iter()
-                .map(|(dir, _)| {
-                    TrainingState::read(&weft_nn::embed_training::stage_dir(dir, 3))
-                        .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
-                })
-                .collect();
-            r.fine_tune_rows.push(vec![
-                fine_tune_name(&r.config, rate),
-                format!("{:.3}", mean.m_rms),
-                runs.iter()
-                    .map(|(_, s)| format!("{:.3}", s.validation.m_rms))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                runs.iter()
-                    .map(|(_, s)| format!("{:.4e}", s.validation.m_phys))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                kept.join("; "),
-            ]);
+            r.fine_tune_rows
+                .push(study_row(fine_tune_name(&r.config, rate), &runs, &[3]));
             scored.push((rate, mean));
             curves.push((
                 format!("stage-3 rate {}", fine_tune_name(&r.config, rate)),
@@ -1574,6 +1601,65 @@ fn run_scene(
         ));
         out.lines
             .push(study_curves(scene, "stage-3-study", "learning rate", &curves, 3));
+    }
+    // Stage 3's budget, on the same validation windows: `no-pb`, every seed, at the chosen
+    // stage-3 rate, with each candidate's stage-3 epochs; a longer budget's model is a copy
+    // of the shorter one's whose stage 3 trains on (exactly the run a fresh model makes).
+    if first && studies.stage_3_budgets.len() > 1 {
+        let current = r.config.epochs[2];
+        let at = |epochs: usize, seed: u64| {
+            let mut c = with_seed(&method_config(&r.config, true), seed);
+            c.epochs[2] = epochs;
+            c
+        };
+        let mut scored = Vec::new();
+        let mut curves = Vec::new();
+        for &epochs in &studies.stage_3_budgets {
+            let mut jobs = Vec::new();
+            for (k, &seed) in seeds.iter().enumerate() {
+                let source = study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed));
+                let dir = if epochs == current {
+                    source
+                } else {
+                    let dir = models
+                        .join("stage-3-budget-study")
+                        .join(format!("stage-3-{epochs}"))
+                        .join(format!("seed-{seed}"));
+                    if !dir.join("config.json").exists() {
+                        share_stages(&source, &dir, 3)?;
+                    }
+                    dir
+                };
+                jobs.push(Job::new(at(epochs, seed), dir, role("no-pb", k == 0)));
+            }
+            let runs: Vec<(PathBuf, ModelScores)> = jobs
+                .iter()
+                .map(|j| j.dir.clone())
+                .zip(scored_models(ctx, &data, &jobs)?)
+                .collect();
+            let mean = mean_validation(&runs);
+            r.stage_3_budget_rows.push(study_row(epochs.to_string(), &runs, &[3]));
+            scored.push((epochs, mean));
+            curves.push((format!("{epochs} stage-3 epochs allowed"), runs[0].0.clone()));
+            for run in runs {
+                if !study.iter().any(|(d, _)| *d == run.0) {
+                    study.push(run);
+                }
+            }
+        }
+        let chosen = lowest_m_rms(&scored).context("no stage-3 budget candidate")?;
+        mark_chosen(&mut r.stage_3_budget_rows, &chosen.to_string());
+        r.config.epochs[2] = chosen;
+        out.notes.push(format!(
+            "embed: {chosen} stage-3 epochs allowed, chosen on `{scene}`'s validation windows (the stage-3 budget table)"
+        ));
+        out.lines.push(study_curves(
+            scene,
+            "stage-3-budget-study",
+            "stage-3 budget",
+            &curves,
+            3,
+        ));
     }
     let config = &r.config;
     // `no-pb`, every seed (on the first scene, a study's model where one has the seed's
@@ -2458,10 +2544,11 @@ mod tests {
         let _ = std::fs::remove_dir_all(&root);
     }
 
-    /// The stage-3 study's model is the source model's stages 1 and 2 with its own stage 3:
-    /// the copy leaves the source as it was, and only stage 3 is trained.
+    /// The stage-3 rate study's model is the source model's stages 1 and 2 with its own
+    /// stage 3; the stage-3 budget study's is the source's three stages, stage 3 trained on.
+    /// Either copy leaves the source as it was.
     #[test]
-    fn a_stage_3_study_model_shares_stages_1_and_2_and_fine_tunes_at_its_own_rate() {
+    fn stage_3_study_models_share_the_source_stages_and_train_only_stage_3() {
         let quick = training_config(Size::Quick);
         assert_eq!(fine_tune_candidates(Size::Quick, &quick), [None]);
         let standard = training_config(Size::Standard);
@@ -2491,7 +2578,7 @@ mod tests {
             std::fs::read(weft_nn::embed_training::stage_dir(dir, stage).join("training.json")).unwrap()
         };
         let source_stage_3 = state(&source, 3);
-        share_stages_1_and_2(&source, &study).unwrap();
+        share_stages(&source, &study, 2).unwrap();
         assert!(!weft_nn::embed_training::stage_dir(&study, 3).exists());
         let slower = EmbedTrainingConfig {
             fine_tune_learning_rate: Some(1e-4),
@@ -2506,6 +2593,42 @@ mod tests {
         assert_eq!(state(&source, 3), source_stage_3, "the source is untouched");
         let stored: EmbedTrainingConfig = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
         assert_eq!(stored.fine_tune_learning_rate, Some(1e-4));
+
+        // The stage-3 budget study: a copy of all three stages whose stage 3 trains on is
+        // the model a fresh directory trains with the longer budget, epoch for epoch.
+        assert_eq!(stage_3_budget_candidates(Size::Quick, &quick), [quick.epochs[2]]);
+        assert_eq!(
+            stage_3_budget_candidates(Size::Standard, &standard),
+            [10, STAGE_3_BUDGET_EPOCHS]
+        );
+        let (longer, straight) = (root.join("longer"), root.join("straight"));
+        share_stages(&source, &longer, 3).unwrap();
+        let four = EmbedTrainingConfig {
+            epochs: [1, 1, 4],
+            ..config.clone()
+        };
+        let continued = scored_model(&ctx, &data, &four, &longer, role).unwrap();
+        let fresh = scored_model(&ctx, &data, &four, &straight, role).unwrap();
+        // Stage 3's epochs: (loss, validation, wall seconds).
+        let history = |dir: &Path| -> Vec<(f64, f64, f64)> {
+            TrainingState::read(&weft_nn::embed_training::stage_dir(dir, 3))
+                .unwrap()
+                .history
+                .iter()
+                .map(|h| (h.loss, h.validation, h.train_seconds))
+                .collect()
+        };
+        let without_time = |h: Vec<(f64, f64, f64)>| h.into_iter().map(|(l, v, _)| (l, v)).collect::<Vec<_>>();
+        assert_eq!(history(&longer).len(), 4);
+        assert_eq!(without_time(history(&longer)), without_time(history(&straight)));
+        // Continued, not retrained: stages 1 and 2 are the copied runs, and stage 3's first
+        // two epochs are the source's own (their wall times included).
+        for stage in 1..=2 {
+            assert_eq!(state(&longer, stage), state(&source, stage), "stage {stage}");
+        }
+        assert_eq!(history(&longer)[..2], history(&source)[..]);
+        assert_eq!(continued.validation, fresh.validation);
+        assert_eq!(state(&source, 3), source_stage_3, "the source is untouched");
         let _ = std::fs::remove_dir_all(&root);
     }
 
@@ -2543,7 +2666,7 @@ mod tests {
         let schedules = schedule_candidates(Size::Standard, &config);
         let chosen = EmbedTrainingConfig {
             schedule: schedules[1].1,
-            epochs: [BUDGET_STUDY_EPOCHS, 30, 10],
+            epochs: [BUDGET_STUDY_EPOCHS, 30, STAGE_3_BUDGET_EPOCHS],
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
@@ -2565,6 +2688,7 @@ mod tests {
             schedule_rows: Vec::new(),
             budget_rows: Vec::new(),
             fine_tune_rows: Vec::new(),
+            stage_3_budget_rows: Vec::new(),
             wall_seconds: 12.0,
         };
         let budgets = budget_candidates(Size::Standard, &config);
@@ -2573,6 +2697,7 @@ mod tests {
             schedules: schedules.clone(),
             budgets: budgets.clone(),
             fine_tune: fine_tune_candidates(Size::Standard, &config),
+            stage_3_budgets: stage_3_budget_candidates(Size::Standard, &config),
         };
         assert_eq!(studies.fine_tune, [None, Some(1e-4)]);
         let restored = |c: &EmbedTrainingConfig, first| restored_scene(&path, c, &studies, first);
@@ -2596,6 +2721,10 @@ mod tests {
             },
             EmbedTrainingConfig {
                 epochs: [77, 30, 10],
+                ..chosen.clone()
+            },
+            EmbedTrainingConfig {
+                epochs: [BUDGET_STUDY_EPOCHS, 30, 20],
                 ..chosen.clone()
             },
             EmbedTrainingConfig {
