@@ -1053,6 +1053,21 @@ impl<'a> Job<'a> {
     }
 }
 
+/// [`scored_models`] with each model's directory beside its scores.
+fn scored_runs(ctx: &EvalContext, data: &EmbedData, jobs: &[Job]) -> crate::Result<Vec<(PathBuf, ModelScores)>> {
+    let scores = scored_models(ctx, data, jobs)?;
+    Ok(jobs.iter().map(|j| j.dir.clone()).zip(scores).collect())
+}
+
+/// Adds a study's runs to the first scene's study models, each directory once.
+fn add_to_study(study: &mut Vec<(PathBuf, ModelScores)>, runs: Vec<(PathBuf, ModelScores)>) {
+    for run in runs {
+        if !study.iter().any(|(d, _)| *d == run.0) {
+            study.push(run);
+        }
+    }
+}
+
 /// [`scored_model`] for models that do not depend on each other, up to `ctx.jobs` at once
 /// ([`EvalContext::concurrently`]); their scores in `jobs`' order.
 fn scored_models(ctx: &EvalContext, data: &EmbedData, jobs: &[Job]) -> crate::Result<Vec<ModelScores>> {
@@ -1470,20 +1485,27 @@ fn run_scene(
     };
     if first && schedules.len() > 1 {
         let mut scored = Vec::new();
-        for (name, schedule) in schedules {
-            let mut runs = Vec::new();
-            for (k, &seed) in seeds.iter().enumerate() {
-                let dir = models.join("schedule-study").join(name).join(format!("seed-{seed}"));
-                let c = EmbedTrainingConfig {
-                    schedule: *schedule,
-                    ..with_seed(&method_config(config, true), seed)
-                };
-                runs.push((dir.clone(), scored_model(ctx, &data, &c, &dir, role("no-pb", k == 0))?));
-            }
-            let mean = mean_validation(&runs);
-            r.schedule_rows.push(study_row((*name).to_string(), &runs, &[1, 2, 3]));
-            scored.push((*name, mean));
-            study.extend(runs);
+        // Every candidate's seeds at once: none depends on another.
+        let study_root = models.join("schedule-study");
+        let jobs: Vec<Job> = schedules
+            .iter()
+            .flat_map(|(name, schedule)| {
+                let study_root = &study_root;
+                seeds.iter().enumerate().map(move |(k, &seed)| {
+                    let c = EmbedTrainingConfig {
+                        schedule: *schedule,
+                        ..with_seed(&method_config(config, true), seed)
+                    };
+                    let dir = study_root.join(name).join(format!("seed-{seed}"));
+                    Job::new(c, dir, role("no-pb", k == 0))
+                })
+            })
+            .collect();
+        let all = scored_runs(ctx, &data, &jobs)?;
+        for ((name, _), runs) in schedules.iter().zip(all.chunks(seeds.len())) {
+            scored.push((*name, mean_validation(runs)));
+            r.schedule_rows.push(study_row((*name).to_string(), runs, &[1, 2, 3]));
+            study.extend_from_slice(runs);
         }
         let chosen = lowest_m_rms(&scored).context("no learning-rate schedule candidate")?;
         mark_chosen(&mut r.schedule_rows, chosen);
@@ -1532,9 +1554,7 @@ fn run_scene(
             ]);
             scored.push((epochs, scores.validation));
             curves.push((format!("{epochs} epochs allowed"), dir.clone()));
-            if !study.iter().any(|(d, _)| *d == dir) {
-                study.push((dir, scores));
-            }
+            add_to_study(&mut study, vec![(dir, scores)]);
         }
         let chosen = lowest_m_rms(&scored).context("no stage-1 budget candidate")?;
         mark_chosen(&mut r.budget_rows, &chosen.to_string());
@@ -1553,44 +1573,34 @@ fn run_scene(
         let mut scored = Vec::new();
         let mut curves = Vec::new();
         let current = r.config.fine_tune_learning_rate;
+        let at = |rate: Option<f64>, seed: u64| EmbedTrainingConfig {
+            fine_tune_learning_rate: rate,
+            ..with_seed(&method_config(&r.config, true), seed)
+        };
         for &rate in &studies.fine_tune {
-            let mut runs = Vec::new();
+            let name = fine_tune_name(&r.config, rate);
+            let mut jobs = Vec::new();
             for (k, &seed) in seeds.iter().enumerate() {
-                let at = |rate| EmbedTrainingConfig {
-                    fine_tune_learning_rate: rate,
-                    ..with_seed(&method_config(&r.config, true), seed)
-                };
-                let source = study_dir_or(&study, &at(current), seed_dir("no-pb", seed));
+                let source = study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed));
                 let dir = if rate == current {
                     source
                 } else {
                     let dir = models
                         .join("stage-3-study")
-                        .join(format!("lr-{}", fine_tune_name(&r.config, rate)))
+                        .join(format!("lr-{name}"))
                         .join(format!("seed-{seed}"));
                     if !dir.join("config.json").exists() {
                         share_stages(&source, &dir, 2)?;
                     }
                     dir
                 };
-                runs.push((
-                    dir.clone(),
-                    scored_model(ctx, &data, &at(rate), &dir, role("no-pb", k == 0))?,
-                ));
+                jobs.push(Job::new(at(rate, seed), dir, role("no-pb", k == 0)));
             }
-            let mean = mean_validation(&runs);
-            r.fine_tune_rows
-                .push(study_row(fine_tune_name(&r.config, rate), &runs, &[3]));
-            scored.push((rate, mean));
-            curves.push((
-                format!("stage-3 rate {}", fine_tune_name(&r.config, rate)),
-                runs[0].0.clone(),
-            ));
-            for run in runs {
-                if !study.iter().any(|(d, _)| *d == run.0) {
-                    study.push(run);
-                }
-            }
+            let runs = scored_runs(ctx, &data, &jobs)?;
+            scored.push((rate, mean_validation(&runs)));
+            r.fine_tune_rows.push(study_row(name.clone(), &runs, &[3]));
+            curves.push((format!("stage-3 rate {name}"), runs[0].0.clone()));
+            add_to_study(&mut study, runs);
         }
         let chosen = lowest_m_rms(&scored).context("no stage-3 learning-rate candidate")?;
         let chosen_name = fine_tune_name(&r.config, chosen);
@@ -1632,20 +1642,11 @@ fn run_scene(
                 };
                 jobs.push(Job::new(at(epochs, seed), dir, role("no-pb", k == 0)));
             }
-            let runs: Vec<(PathBuf, ModelScores)> = jobs
-                .iter()
-                .map(|j| j.dir.clone())
-                .zip(scored_models(ctx, &data, &jobs)?)
-                .collect();
-            let mean = mean_validation(&runs);
+            let runs = scored_runs(ctx, &data, &jobs)?;
+            scored.push((epochs, mean_validation(&runs)));
             r.stage_3_budget_rows.push(study_row(epochs.to_string(), &runs, &[3]));
-            scored.push((epochs, mean));
             curves.push((format!("{epochs} stage-3 epochs allowed"), runs[0].0.clone()));
-            for run in runs {
-                if !study.iter().any(|(d, _)| *d == run.0) {
-                    study.push(run);
-                }
-            }
+            add_to_study(&mut study, runs);
         }
         let chosen = lowest_m_rms(&scored).context("no stage-3 budget candidate")?;
         mark_chosen(&mut r.stage_3_budget_rows, &chosen.to_string());
