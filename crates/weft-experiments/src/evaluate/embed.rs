@@ -1068,6 +1068,41 @@ fn add_to_study(study: &mut Vec<(PathBuf, ModelScores)>, runs: Vec<(PathBuf, Mod
     }
 }
 
+/// One candidate of a stage-3 study on the first scene: `no-pb` on every seed, trained
+/// (unless kept) and scored under `configs[k]`, seed k's configuration. With `copy` =
+/// `None` the candidate is the configuration's own, and seed k's model is `sources[k]`;
+/// with `Some((dir, through))` it is a copy of `sources[k]`'s stages 1..=`through` in
+/// `dir/seed-{seed}` (made once) whose later stages train under the candidate.
+fn stage_3_candidate_runs(
+    ctx: &EvalContext,
+    data: &EmbedData,
+    scene: &str,
+    configs: &[EmbedTrainingConfig],
+    sources: &[PathBuf],
+    copy: Option<(&Path, u8)>,
+) -> crate::Result<Vec<(PathBuf, ModelScores)>> {
+    let mut jobs = Vec::new();
+    for (k, (config, source)) in configs.iter().zip(sources).enumerate() {
+        let dir = match copy {
+            None => source.clone(),
+            Some((copies, through)) => {
+                let dir = copies.join(format!("seed-{}", config.seed));
+                if !dir.join("config.json").exists() {
+                    share_stages(source, &dir, through)?;
+                }
+                dir
+            }
+        };
+        let role = Role {
+            scene,
+            method: "no-pb",
+            first_seed: k == 0,
+        };
+        jobs.push(Job::new(config.clone(), dir, role));
+    }
+    scored_runs(ctx, data, &jobs)
+}
+
 /// [`scored_model`] for models that do not depend on each other, up to `ctx.jobs` at once
 /// ([`EvalContext::concurrently`]); their scores in `jobs`' order.
 fn scored_models(ctx: &EvalContext, data: &EmbedData, jobs: &[Job]) -> crate::Result<Vec<ModelScores>> {
@@ -1577,26 +1612,16 @@ fn run_scene(
             fine_tune_learning_rate: rate,
             ..with_seed(&method_config(&r.config, true), seed)
         };
+        let sources: Vec<PathBuf> = seeds
+            .iter()
+            .map(|&seed| study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed)))
+            .collect();
         for &rate in &studies.fine_tune {
             let name = fine_tune_name(&r.config, rate);
-            let mut jobs = Vec::new();
-            for (k, &seed) in seeds.iter().enumerate() {
-                let source = study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed));
-                let dir = if rate == current {
-                    source
-                } else {
-                    let dir = models
-                        .join("stage-3-study")
-                        .join(format!("lr-{name}"))
-                        .join(format!("seed-{seed}"));
-                    if !dir.join("config.json").exists() {
-                        share_stages(&source, &dir, 2)?;
-                    }
-                    dir
-                };
-                jobs.push(Job::new(at(rate, seed), dir, role("no-pb", k == 0)));
-            }
-            let runs = scored_runs(ctx, &data, &jobs)?;
+            let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(rate, seed)).collect();
+            let copies = models.join("stage-3-study").join(format!("lr-{name}"));
+            let copy = (rate != current).then_some((copies.as_path(), 2));
+            let runs = stage_3_candidate_runs(ctx, &data, scene, &configs, &sources, copy)?;
             scored.push((rate, mean_validation(&runs)));
             r.fine_tune_rows.push(study_row(name.clone(), &runs, &[3]));
             curves.push((format!("stage-3 rate {name}"), runs[0].0.clone()));
@@ -1624,25 +1649,15 @@ fn run_scene(
         };
         let mut scored = Vec::new();
         let mut curves = Vec::new();
+        let sources: Vec<PathBuf> = seeds
+            .iter()
+            .map(|&seed| study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed)))
+            .collect();
         for &epochs in &studies.stage_3_budgets {
-            let mut jobs = Vec::new();
-            for (k, &seed) in seeds.iter().enumerate() {
-                let source = study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed));
-                let dir = if epochs == current {
-                    source
-                } else {
-                    let dir = models
-                        .join("stage-3-budget-study")
-                        .join(format!("stage-3-{epochs}"))
-                        .join(format!("seed-{seed}"));
-                    if !dir.join("config.json").exists() {
-                        share_stages(&source, &dir, 3)?;
-                    }
-                    dir
-                };
-                jobs.push(Job::new(at(epochs, seed), dir, role("no-pb", k == 0)));
-            }
-            let runs = scored_runs(ctx, &data, &jobs)?;
+            let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(epochs, seed)).collect();
+            let copies = models.join("stage-3-budget-study").join(format!("stage-3-{epochs}"));
+            let copy = (epochs != current).then_some((copies.as_path(), 3));
+            let runs = stage_3_candidate_runs(ctx, &data, scene, &configs, &sources, copy)?;
             scored.push((epochs, mean_validation(&runs)));
             r.stage_3_budget_rows.push(study_row(epochs.to_string(), &runs, &[3]));
             curves.push((format!("{epochs} stage-3 epochs allowed"), runs[0].0.clone()));
@@ -2547,7 +2562,8 @@ mod tests {
 
     /// The stage-3 rate study's model is the source model's stages 1 and 2 with its own
     /// stage 3; the stage-3 budget study's is the source's three stages, stage 3 trained on.
-    /// Either copy leaves the source as it was.
+    /// Either copy leaves the source as it was, and the configuration's own candidate is the
+    /// source model, kept.
     #[test]
     fn stage_3_study_models_share_the_source_stages_and_train_only_stage_3() {
         let quick = training_config(Size::Quick);
@@ -2602,13 +2618,36 @@ mod tests {
             stage_3_budget_candidates(Size::Standard, &standard),
             [10, STAGE_3_BUDGET_EPOCHS]
         );
-        let (longer, straight) = (root.join("longer"), root.join("straight"));
-        share_stages(&source, &longer, 3).unwrap();
+        // Through the studies' own step: the configuration's candidate is the source
+        // itself, kept; another is a copy under the study's directory.
+        let kept = stage_3_candidate_runs(
+            &ctx,
+            &data,
+            "sheet-ms",
+            std::slice::from_ref(&config),
+            std::slice::from_ref(&source),
+            None,
+        )
+        .unwrap();
+        assert_eq!(kept[0].0, source);
+        assert_eq!(state(&source, 3), source_stage_3, "kept, not retrained");
         let four = EmbedTrainingConfig {
             epochs: [1, 1, 4],
             ..config.clone()
         };
-        let continued = scored_model(&ctx, &data, &four, &longer, role).unwrap();
+        let copies = root.join("stage-3-budget-study").join("stage-3-4");
+        let mut runs = stage_3_candidate_runs(
+            &ctx,
+            &data,
+            "sheet-ms",
+            std::slice::from_ref(&four),
+            std::slice::from_ref(&source),
+            Some((&copies, 3)),
+        )
+        .unwrap();
+        let (longer, continued) = runs.remove(0);
+        assert_eq!(longer, copies.join(format!("seed-{}", four.seed)));
+        let straight = root.join("straight");
         let fresh = scored_model(&ctx, &data, &four, &straight, role).unwrap();
         // Stage 3's epochs: (loss, validation, wall seconds).
         let history = |dir: &Path| -> Vec<(f64, f64, f64)> {
