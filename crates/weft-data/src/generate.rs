@@ -656,6 +656,17 @@ mod tests {
         assert_eq!(DatasetSpec::new("limb", Size::Quick).unwrap().stored_frames(), 9);
     }
 
+    /// Tan et al. §VI: each SHEET and BALL sequence is its own scene, so the paper size of a
+    /// cloth scene is one sequence of 2400 (sheets) or 500 (balls) frames, split 12 in 17.
+    #[test]
+    fn a_paper_size_cloth_scene_is_one_of_tans_sequences() {
+        for (name, frames) in [("sheet-ms", 2400), ("sheet-ms-holes", 2400), ("ball-fem", 500)] {
+            let spec = DatasetSpec::new(name, Size::Paper).unwrap();
+            assert_eq!((spec.sequences, spec.frames), (1, frames), "{name}");
+            assert_eq!(spec.split, Split::Frames12Of17, "{name}");
+        }
+    }
+
     #[test]
     fn sequence_seeds_differ_across_indices_and_dataset_seeds() {
         let mut seeds: Vec<u64> = (0..100)

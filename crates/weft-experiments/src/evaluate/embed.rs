@@ -136,9 +136,11 @@ fn training_config(size: Size) -> EmbedTrainingConfig {
 const EARLY_STOPPING_PATIENCE: usize = 20;
 
 /// Stage-1 epochs allowed in the budget study: five times the paper's 30. At standard size
-/// an epoch holds 4 × 170 frames against the paper's 4 × 2400, so the paper's 30 epochs are
-/// fewer steps here; the study measures on validation what more epochs buy, and the budget
-/// with the lower validation M_rms trains every model.
+/// an epoch holds 320 training windows (4 sequences of 170 frames, 8 windows in every 17
+/// frames) against about 1400 in the paper's one sequence of 2400 frames (10 in every 17:
+/// Tan et al. had no validation frames), so the paper's 30 epochs are about 4.4 times fewer
+/// steps here, and 150 about as many as the paper's; the study measures on validation what
+/// more epochs buy, and the budget with the lower validation M_rms trains every model.
 const BUDGET_STUDY_EPOCHS: usize = 150;
 
 /// The stage-1 epochs the first scene chooses between on validation: the paper's and
@@ -1370,8 +1372,9 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             caption: format!(
                 "`no-pb`, first seed, on `{}`, under the chosen schedule, with the paper's stage-1 epochs and with \
                  up to {} (every stage still stops once its validation loss has not improved for \
-                 {EARLY_STOPPING_PATIENCE} epochs; the kept epoch in brackets). An epoch here is 4 sequences of 170 \
-                 frames, the paper's 4 of 2400, so its 30 epochs are about 14 times fewer steps here. Validation \
+                 {EARLY_STOPPING_PATIENCE} epochs; the kept epoch in brackets). An epoch here is 320 training windows \
+                 (4 sequences of 170 frames), the paper's about 1400 (one sequence of 2400), so its 30 epochs are \
+                 about 4.4 times fewer steps here. Validation \
                  M_rms (mm) and M_phys (N²); the budget with the lower validation M_rms trains every model; the test \
                  split plays no part.",
                 scenes()[0],
