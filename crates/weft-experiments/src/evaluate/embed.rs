@@ -1368,14 +1368,15 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         });
     }
     if !budget_rows.is_empty() {
+        let configured = studies.budgets[0];
         out.tables.push(Table {
             title: "Tan et al. stage-1 budget chosen on the validation windows".into(),
             caption: format!(
-                "`no-pb`, first seed, on `{}`, under the chosen schedule, with the configuration's 30 stage-1 epochs and with \
+                "`no-pb`, first seed, on `{}`, under the chosen schedule, with the configuration's {configured} stage-1 epochs and with \
                  up to {} (every stage still stops once its validation loss has not improved for \
                  {EARLY_STOPPING_PATIENCE} epochs; the kept epoch in brackets). An epoch here is 320 training windows \
-                 (4 sequences of 170 frames), the paper's about 1400 (one sequence of 2400), so 30 epochs are about \
-                 4.4 times fewer steps here than there. Validation \
+                 (4 sequences of 170 frames), the paper's about 1400 (one sequence of 2400), so an epoch here is about \
+                 4.4 times fewer steps than one there. Validation \
                  M_rms (mm) and M_phys (N²); the budget with the lower validation M_rms trains every model; the test \
                  split plays no part.",
                 scenes()[0],
@@ -1522,6 +1523,14 @@ fn run_scene(
             .find(|(_, s)| c.trains_like(&s.config))
             .map_or(otherwise, |(d, _)| d.clone())
     };
+    // The `no-pb` model each seed's stage 3 starts from in the stage-3 studies: the study's
+    // run that trains like `c`, or the seed's `no-pb` model.
+    let stage_3_sources = |study: &[(std::path::PathBuf, ModelScores)], configs: &[EmbedTrainingConfig]| {
+        configs
+            .iter()
+            .map(|c| study_dir_or(study, c, seed_dir("no-pb", c.seed)))
+            .collect::<Vec<PathBuf>>()
+    };
     if first && schedules.len() > 1 {
         let mut scored = Vec::new();
         // Every candidate's seeds at once: none depends on another.
@@ -1616,10 +1625,8 @@ fn run_scene(
             fine_tune_learning_rate: rate,
             ..with_seed(&method_config(&r.config, true), seed)
         };
-        let sources: Vec<PathBuf> = seeds
-            .iter()
-            .map(|&seed| study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed)))
-            .collect();
+        let currents: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(current, seed)).collect();
+        let sources = stage_3_sources(&study, &currents);
         for &rate in &studies.fine_tune {
             let name = fine_tune_name(&r.config, rate);
             let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(rate, seed)).collect();
@@ -1653,10 +1660,8 @@ fn run_scene(
         };
         let mut scored = Vec::new();
         let mut curves = Vec::new();
-        let sources: Vec<PathBuf> = seeds
-            .iter()
-            .map(|&seed| study_dir_or(&study, &at(current, seed), seed_dir("no-pb", seed)))
-            .collect();
+        let currents: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(current, seed)).collect();
+        let sources = stage_3_sources(&study, &currents);
         for &epochs in &studies.stage_3_budgets {
             let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(epochs, seed)).collect();
             let copies = models.join("stage-3-budget-study").join(format!("stage-3-{epochs}"));
