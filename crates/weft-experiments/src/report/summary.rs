@@ -111,13 +111,14 @@ fn embed_claim(records: &[Record]) -> Claim {
         let (Some(phys), Some(base)) = (figure(scene, "ours", "m-phys"), value(scene, "no-pb", "m-phys")) else {
             continue;
         };
+        let base_spread = figure(scene, "no-pb", "m-phys");
         let rms = (value(scene, "ours", "m-rms"), value(scene, "no-pb", "m-rms"));
         let within = matches!(rms, (Some(a), Some(b)) if a.value <= (1.0 + RMS_TOLERANCE) * b.value);
         ours.1 += 1;
         if within && phys.0 < base.value {
             means_lower += 1;
         }
-        if within && figure(scene, "no-pb", "m-phys").is_some_and(|b| lower_beyond_spread(phys, b)) {
+        if within && base_spread.is_some_and(|b| lower_beyond_spread(phys, b)) {
             ours.0 += 1;
         }
         if let (Some(p), Some(q)) = (r.paper_value, base.paper_value) {
@@ -125,7 +126,7 @@ fn embed_claim(records: &[Record]) -> Claim {
             if p < q {
                 paper.0 += 1;
             }
-            if let Some(b) = figure(scene, "no-pb", "m-phys")
+            if let Some(b) = base_spread
                 && q > 0.0
             {
                 resolvable.1 += 1;
