@@ -61,8 +61,42 @@ pub struct Curve {
     pub method: String,
     /// Scene frames (time / the scene's frame time).
     pub frames: Vec<f64>,
-    /// Per-frame RMS error per coordinate (mm, M_rms of that frame).
+    /// Per-frame RMS error per coordinate (mm, M_rms of that frame); for a curve over
+    /// seeds ([`Curve::over_seeds`]), their mean.
     pub error_mm: Vec<f64>,
+    /// The seeds' spread of `error_mm` (population standard deviation per frame); empty
+    /// for a single run.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub error_mm_sd: Vec<f64>,
+}
+
+impl Curve {
+    /// One method's roll-out over several seeds: per frame the seeds' mean and spread (as
+    /// [`mean_sd`]), so the plot carries the spread every table does. The seeds must share
+    /// scene, method and frames; `None` for no seeds.
+    pub fn over_seeds(seeds: &[Curve]) -> crate::Result<Option<Curve>> {
+        let Some(first) = seeds.first() else {
+            return Ok(None);
+        };
+        for c in seeds {
+            ensure!(
+                c.scene == first.scene && c.method == first.method && c.frames == first.frames,
+                "roll-out curves of {} / {} and {} / {} over different frames cannot be averaged",
+                first.scene,
+                first.method,
+                c.scene,
+                c.method
+            );
+        }
+        let (error_mm, error_mm_sd) = (0..first.frames.len())
+            .map(|k| mean_sd(seeds.iter().map(|c| c.error_mm[k])))
+            .unzip();
+        Ok(Some(Curve {
+            error_mm,
+            error_mm_sd: if seeds.len() > 1 { error_mm_sd } else { Vec::new() },
+            ..first.clone()
+        }))
+    }
 }
 
 /// One bar of an energy chart.
@@ -362,6 +396,37 @@ pub fn distinct<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_roll_out_over_seeds_is_the_mean_and_population_spread_of_each_frame() {
+        let curve = |error_mm: Vec<f64>| Curve {
+            scene: "sheet-ms".into(),
+            method: "ours".into(),
+            frames: vec![2.0, 3.0],
+            error_mm,
+            error_mm_sd: Vec::new(),
+        };
+        let c = Curve::over_seeds(&[curve(vec![1.0, 10.0]), curve(vec![3.0, 10.0]), curve(vec![5.0, 40.0])])
+            .unwrap()
+            .unwrap();
+        assert_eq!(c.frames, vec![2.0, 3.0]);
+        assert_eq!(c.error_mm, vec![3.0, 20.0]);
+        // Population sd: √(8/3) and √(200).
+        assert!((c.error_mm_sd[0] - (8.0f64 / 3.0).sqrt()).abs() < 1e-12);
+        assert!((c.error_mm_sd[1] - 200.0f64.sqrt()).abs() < 1e-12);
+        // One seed has no spread, no seed no curve, and other frames are refused.
+        assert!(
+            Curve::over_seeds(&[curve(vec![1.0, 2.0])])
+                .unwrap()
+                .unwrap()
+                .error_mm_sd
+                .is_empty()
+        );
+        assert!(Curve::over_seeds(&[]).unwrap().is_none());
+        let mut shifted = curve(vec![1.0, 2.0]);
+        shifted.frames = vec![3.0, 4.0];
+        assert!(Curve::over_seeds(&[curve(vec![1.0, 2.0]), shifted]).is_err());
+    }
 
     #[test]
     fn table_figures_keep_three_significant_digits_across_decades() {

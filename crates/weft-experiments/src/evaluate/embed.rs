@@ -775,6 +775,7 @@ fn pca_long_rollout(scene: &str, data: &EmbedData, sim: &PcaSimulator) -> crate:
         method: "pca-mlp".into(),
         frames: Vec::new(),
         error_mm: Vec::new(),
+        error_mm_sd: Vec::new(),
     };
     for (k, p) in predicted.iter().enumerate() {
         let mut acc = RmsAccumulator::default();
@@ -840,6 +841,7 @@ fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel)
         method: method.into(),
         frames: Vec::new(),
         error_mm: Vec::new(),
+        error_mm_sd: Vec::new(),
     };
     for m in 2..seq.num_frames() {
         let p = rollout.step(seq.control(m))?;
@@ -848,6 +850,34 @@ fn long_rollout(scene: &str, method: &str, data: &EmbedData, model: &EmbedModel)
         curve.error_mm.push(acc.add(&p, seq.frame(m), &map));
     }
     Ok(curve)
+}
+
+/// `method`'s long roll-out over the seeds of `runs` that have one (a note names the
+/// seeds that do not: scored on another machine before every seed's was kept).
+fn seeds_long_rollout<'a>(
+    scene: &str,
+    method: &str,
+    runs: impl Iterator<Item = &'a ModelScores>,
+    out: &mut ExperimentOutput,
+) -> crate::Result<Option<Curve>> {
+    let (mut curves, mut missing) = (Vec::new(), Vec::new());
+    for s in runs {
+        match &s.long_rollout {
+            Some(c) => curves.push(Curve {
+                method: method.into(),
+                ..c.clone()
+            }),
+            None => missing.push(s.config.seed),
+        }
+    }
+    if !missing.is_empty() {
+        out.notes.push(format!(
+            "embed/{scene}: {method}'s long roll-out is over {} seed(s); seeds {missing:?} were scored in an earlier \
+             run whose weights were not kept",
+            curves.len()
+        ));
+    }
+    Curve::over_seeds(&curves)
 }
 
 /// Tan et al. Fig. 6: the test frames' latent codes projected on their two principal
@@ -1020,6 +1050,10 @@ struct ModelScores {
     rollout: Scores,
     /// The roll-out test of the model after stage 2 (PB-loss models: Table IV's "2nd stage").
     stage_2_rollout: Option<Scores>,
+    /// Tan et al. §V-B's long roll-out ([`long_rollout`]), every seed's, so the plot has a
+    /// spread. `None` only for a model scored before it was kept whose weights are gone.
+    #[serde(default)]
+    long_rollout: Option<Curve>,
     /// What a method's first seed adds: retrieval, plots, inverse kinematics.
     first_seed: Option<FirstSeed>,
 }
@@ -1027,7 +1061,6 @@ struct ModelScores {
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct FirstSeed {
     ndcg: f64,
-    long_rollout: Curve,
     scatter: Option<Scatter>,
     ik: Option<IkRow>,
 }
@@ -1130,8 +1163,16 @@ fn scored_model(
     role: Role,
 ) -> crate::Result<ModelScores> {
     let path = dir.join(SCORES_FILE);
-    if let Ok(kept) = weft_nn::checkpoint::read_json::<ModelScores>(&path) {
+    if let Ok(mut kept) = weft_nn::checkpoint::read_json::<ModelScores>(&path) {
         if config.trains_like(&kept.config) && (kept.first_seed.is_some() || !role.first_seed) {
+            // Scores kept before every seed's long roll-out was: add it where the weights
+            // still are (the roll-out is deterministic), else report the seeds that have one.
+            if kept.long_rollout.is_none()
+                && let Ok(model) = EmbedModel::load(dir, data, 3)
+            {
+                kept.long_rollout = Some(long_rollout(role.scene, role.method, data, &model)?);
+                weft_nn::checkpoint::write_json(&path, &kept)?;
+            }
             return Ok(kept);
         }
     }
@@ -1156,7 +1197,6 @@ fn scored_model(
         let codes = model.codes(data, &data.test_frames)?;
         Some(FirstSeed {
             ndcg: full_ranking_ndcg(data, &codes)?,
-            long_rollout: long_rollout(role.scene, role.method, data, &model)?,
             scatter: if pb && matches!(role.scene, "sheet-ms" | "ball-ms") {
                 Some(embedding_scatter(role.scene, role.method, data, &codes)?)
             } else {
@@ -1181,6 +1221,7 @@ fn scored_model(
         seconds_per_frame,
         rollout: rollout_scores(data, &model)?,
         stage_2_rollout,
+        long_rollout: Some(long_rollout(role.scene, role.method, data, &model)?),
         first_seed,
     };
     weft_nn::checkpoint::write_json(&path, &scores)?;
@@ -1215,18 +1256,39 @@ struct SceneResults {
     /// Wall seconds of the run that finished the scene (its models may have trained in
     /// earlier runs).
     wall_seconds: f64,
+    /// The file's format ([`SCENE_FORMAT`]).
+    #[serde(default)]
+    format: u32,
+}
+
+/// The format of a scene's kept results. A file of an older format is remade from its
+/// models' kept scores (nothing retrains): 1 holds every seed's long roll-out, where 0
+/// held the first seed's.
+const SCENE_FORMAT: u32 = 1;
+
+/// What a scene's kept file gives a later run.
+#[derive(Debug)]
+enum KeptScene {
+    /// Nothing usable: run the scene.
+    None,
+    /// The scene's results, made under the run's configuration.
+    Done(Box<SceneResults>),
+    /// Made under the run's configuration in an older format: remake it from the models'
+    /// kept scores, counting the seconds the earlier run spent on it.
+    Remake { earlier_seconds: f64 },
 }
 
 /// The results kept at `path` if they were made under `config` (on the first scene, under
-/// any candidate schedule and stage-1 budget: the scene makes the choices); `None` to run
-/// the scene.
-fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> Option<SceneResults> {
-    let text = std::fs::read_to_string(path).ok()?;
+/// any candidate schedule and stage-1 budget: the scene makes the choices).
+fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> KeptScene {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return KeptScene::None;
+    };
     let kept: SceneResults = match serde_json::from_str(&text) {
         Ok(k) => k,
         Err(e) => {
             eprintln!("embed: {} does not parse ({e}); running the scene", path.display());
-            return None;
+            return KeptScene::None;
         }
     };
     let same = if first {
@@ -1245,7 +1307,20 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
     } else {
         kept.config == *config
     };
-    same.then_some(kept)
+    if !same {
+        KeptScene::None
+    } else if kept.format != SCENE_FORMAT {
+        eprintln!(
+            "embed: {} is of an older format ({}, now {SCENE_FORMAT}); remaking the scene from its models' scores",
+            path.display(),
+            kept.format
+        );
+        KeptScene::Remake {
+            earlier_seconds: kept.wall_seconds,
+        }
+    } else {
+        KeptScene::Done(Box::new(kept))
+    }
 }
 
 pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
@@ -1259,7 +1334,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         "embed: {} graph convolution(s), {}-D latent, latent MLP hidden {:?}, epochs per stage {:?}, batch {}, \
          Adam lr {}; λ_ephys chosen per scene on the validation windows (the λ_ephys table; {} without a \
          choice), λ_mphys = {} for `ours`, 0 for `no-pb`; {} seed(s) per model (each figure their mean, its `-sd` \
-         record their spread; plots, predictions and inverse kinematics from the first seed); PCA with the same \
+         record their spread, the long roll-out's mean ± spread per frame; retrieval, scatter, predictions and \
+         inverse kinematics from the first seed); PCA with the same \
          latent size, the PCA + MLP simulator with every seed; STED with the 1-ring, s = 1 m/s, c = 1",
         config.autoencoder.conv_layers,
         config.autoencoder.latent,
@@ -1284,15 +1360,20 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
-        let results = match restored_scene(&path, &config, &studies, i == 0) {
-            Some(r) => {
+        let kept = restored_scene(&path, &config, &studies, i == 0);
+        let results = match kept {
+            KeptScene::Done(r) => {
                 eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
-                r
+                *r
             }
-            None => {
+            KeptScene::None | KeptScene::Remake { .. } => {
+                let earlier_seconds = match kept {
+                    KeptScene::Remake { earlier_seconds } => earlier_seconds,
+                    _ => 0.0,
+                };
                 let t = Instant::now();
                 let mut r = run_scene(ctx, scene, &config, &studies, i == 0)?;
-                r.wall_seconds = t.elapsed().as_secs_f64();
+                r.wall_seconds = earlier_seconds + t.elapsed().as_secs_f64();
                 weft_data::files::write_json(&path, &r)?;
                 r
             }
@@ -1320,7 +1401,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     }
     out.notes.push(format!(
         "embed: wall seconds of the run that finished each scene (models trained in earlier runs of the same \
-         command are not in it): {}",
+         command are not in it; a scene remade from a file of an older format adds the remake to the run that \
+         made the file): {}",
         scene_seconds.join(", ")
     ));
     // The paper's orders: λ_ephys ascending then the baseline; baseline, 2nd, 3rd stage.
@@ -1456,6 +1538,7 @@ fn run_scene(
         fine_tune_rows: Vec::new(),
         stage_3_budget_rows: Vec::new(),
         wall_seconds: 0.0,
+        format: SCENE_FORMAT,
     };
     let out = &mut r.output;
     let seeds = seeds(ctx.size);
@@ -1793,7 +1876,8 @@ fn run_scene(
         let (dir, first_seed) = (&runs[0].0, &runs[0].1);
         let extras = first_seed.first_seed.as_ref().context("the first seed's plots")?;
         ndcg.push((method, extras.ndcg));
-        out.curves.push(extras.long_rollout.clone());
+        let long = seeds_long_rollout(scene, method, runs.iter().map(|(_, s)| s), out)?;
+        out.curves.extend(long);
         out.scatters.extend(extras.scatter.clone());
         r.ik_rows.extend(extras.ik.clone());
         // The reported model's reconstructions; a model scored on another machine (its
@@ -1890,18 +1974,13 @@ fn run_scene(
         let pca_sim = weft_nn::pca_simulator::train(&pca_dir, &data, pca.clone(), &pca_config, &mut progress)
             .with_context(|| format!("training {label}"))?;
         drop(progress);
-        let long = if k == 0 {
-            Some(pca_long_rollout(scene, &data, &pca_sim)?)
-        } else {
-            None
-        };
-        Ok((pca_rollout_scores(&data, &pca_sim)?, long))
+        Ok((
+            pca_rollout_scores(&data, &pca_sim)?,
+            pca_long_rollout(scene, &data, &pca_sim)?,
+        ))
     })?;
-    let mut pca_rollouts = Vec::new();
-    for (scores, long) in pca_runs {
-        pca_rollouts.push(scores);
-        out.curves.extend(long);
-    }
+    let (pca_rollouts, pca_long): (Vec<Scores>, Vec<Curve>) = pca_runs.into_iter().unzip();
+    out.curves.extend(Curve::over_seeds(&pca_long)?);
     r.table_4.push((scene.into(), "pca + MLP".into(), pca_rollouts));
     let t = Instant::now();
     let predicted: Vec<Vec<f64>> = data
@@ -2498,13 +2577,30 @@ mod tests {
         let first = scored_model(&ctx, &data, &config, &dir, role).unwrap();
         let extras = first.first_seed.as_ref().unwrap();
         assert!(extras.scatter.is_some() && extras.ik.is_none());
-        assert_eq!(extras.long_rollout.method, "ours");
+        assert_eq!(first.long_rollout.as_ref().unwrap().method, "ours");
         assert!(first.stage_2_rollout.is_some());
         assert!(first.test.m_rms.is_finite() && first.test.m_rms > 0.0);
         assert!(dir.join(PREDICTIONS_FILE).exists());
+        // Scores kept before every seed's long roll-out was: the roll-out is added from the
+        // weights, the same curve; without the weights the scores are read as they are.
+        let without = ModelScores {
+            long_rollout: None,
+            ..first.clone()
+        };
+        weft_nn::checkpoint::write_json(&dir.join(SCORES_FILE), &without).unwrap();
+        let upgraded = scored_model(&ctx, &data, &config, &dir, role).unwrap();
+        assert_eq!(upgraded.long_rollout, first.long_rollout);
+        let kept: ModelScores = weft_nn::checkpoint::read_json(&dir.join(SCORES_FILE)).unwrap();
+        assert_eq!(kept.long_rollout, first.long_rollout, "the added roll-out is kept");
+        let weights_before = weights(&dir);
         for w in weights(&dir) {
             std::fs::remove_file(w).unwrap();
         }
+        weft_nn::checkpoint::write_json(&dir.join(SCORES_FILE), &without).unwrap();
+        let bare = scored_model(&ctx, &data, &config, &dir, role).unwrap();
+        assert!(bare.long_rollout.is_none() && weights(&dir).is_empty());
+        assert!(!weights_before.is_empty());
+        weft_nn::checkpoint::write_json(&dir.join(SCORES_FILE), &first).unwrap();
         let again = scored_model(&ctx, &data, &config, &dir, role).unwrap();
         assert_eq!(
             serde_json::to_string(&again).unwrap(),
@@ -2739,6 +2835,7 @@ mod tests {
             fine_tune_rows: Vec::new(),
             stage_3_budget_rows: Vec::new(),
             wall_seconds: 12.0,
+            format: SCENE_FORMAT,
         };
         let budgets = budget_candidates(Size::Standard, &config);
         assert_eq!(budgets, [30, BUDGET_STUDY_EPOCHS]);
@@ -2749,7 +2846,10 @@ mod tests {
             stage_3_budgets: stage_3_budget_candidates(Size::Standard, &config),
         };
         assert_eq!(studies.fine_tune, [None, Some(1e-4)]);
-        let restored = |c: &EmbedTrainingConfig, first| restored_scene(&path, c, &studies, first);
+        let restored = |c: &EmbedTrainingConfig, first| match restored_scene(&path, c, &studies, first) {
+            KeptScene::Done(r) => Some(*r),
+            _ => None,
+        };
         assert!(restored(&config, true).is_none(), "no file");
         weft_data::files::write_json(&path, &results(&chosen)).unwrap();
         let first = restored(&config, true).unwrap();
@@ -2757,6 +2857,21 @@ mod tests {
         assert_eq!(first.table_4[0].2[0].m_phys, 3.0);
         assert!(restored(&chosen, false).is_some());
         assert!(restored(&config, false).is_none());
+        // A file of an older format is remade, whatever its configuration.
+        let older = SceneResults {
+            format: SCENE_FORMAT - 1,
+            ..results(&chosen)
+        };
+        weft_data::files::write_json(&path, &older).unwrap();
+        assert!(matches!(
+            restored_scene(&path, &chosen, &studies, false),
+            KeptScene::Remake { earlier_seconds } if earlier_seconds == 12.0
+        ));
+        assert!(matches!(
+            restored_scene(&path, &config, &studies, false),
+            KeptScene::None
+        ));
+        weft_data::files::write_json(&path, &results(&chosen)).unwrap();
         let mut more = config.clone();
         more.epochs[1] += 1;
         assert!(restored(&more, true).is_none());

@@ -264,6 +264,7 @@ fn score(
             method: run.method.clone(),
             frames: Vec::new(),
             error_mm: Vec::new(),
+            error_mm_sd: Vec::new(),
         };
         let mut truth = Vec::with_capacity(run.positions.len() * run.positions[0].len());
         for (t, x) in run.times.iter().zip(&run.positions) {

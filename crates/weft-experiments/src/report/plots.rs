@@ -238,7 +238,13 @@ where
         .iter()
         .flat_map(|c| c.frames.iter().copied())
         .fold(1.0f64, f64::max);
-    let (ylo, yhi) = log_range(curves.iter().flat_map(|c| c.error_mm.iter().copied()));
+    let (ylo, yhi) = log_range(curves.iter().flat_map(|c| {
+        c.error_mm
+            .iter()
+            .zip(c.error_mm_sd.iter().chain(std::iter::repeat(&0.0)))
+            .map(|(m, sd)| m + sd)
+            .chain(c.error_mm.iter().copied())
+    }));
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
@@ -255,6 +261,18 @@ where
         .map_err(crate::Error::plot)?;
     for (i, c) in curves.iter().enumerate() {
         let colour = palette(i);
+        // A curve over seeds: its mean ± the seeds' spread as a band under the line.
+        if c.error_mm_sd.len() == c.error_mm.len() && !c.error_mm_sd.is_empty() {
+            let upper = c.frames.iter().zip(&c.error_mm).zip(&c.error_mm_sd);
+            let band: Vec<(f64, f64)> = upper
+                .clone()
+                .map(|((x, m), sd)| (*x, (m + sd).clamp(ylo, yhi)))
+                .chain(upper.rev().map(|((x, m), sd)| (*x, (m - sd).clamp(ylo, yhi))))
+                .collect();
+            chart
+                .draw_series(std::iter::once(Polygon::new(band, colour.mix(0.18).filled())))
+                .map_err(crate::Error::plot)?;
+        }
         chart
             .draw_series(LineSeries::new(
                 c.frames.iter().zip(&c.error_mm).map(|(x, y)| (*x, y.max(ylo))),
