@@ -168,6 +168,8 @@ pub struct ExperimentOutput {
     pub scatters: Vec<Scatter>,
     #[serde(default)]
     pub lines: Vec<LinePlot>,
+    /// Wall seconds of the experiment: the run's own, plus those an experiment that
+    /// resumes across runs records for the work it read back instead of redoing.
     pub wall_seconds: f64,
     /// The command line and code version that produced this output (empty in outputs
     /// cached before they were recorded).

@@ -1364,6 +1364,8 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         let results = match kept {
             KeptScene::Done(r) => {
                 eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
+                // Its seconds count in the experiment's: the work was done, in another run.
+                out.wall_seconds += r.wall_seconds;
                 *r
             }
             KeptScene::None | KeptScene::Remake { .. } => {
@@ -1371,6 +1373,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                     KeptScene::Remake { earlier_seconds } => earlier_seconds,
                     _ => 0.0,
                 };
+                out.wall_seconds += earlier_seconds;
                 let t = Instant::now();
                 let mut r = run_scene(ctx, scene, &config, &studies, i == 0)?;
                 r.wall_seconds = earlier_seconds + t.elapsed().as_secs_f64();

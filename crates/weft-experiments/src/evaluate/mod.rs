@@ -141,7 +141,8 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             "drape" => drape::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
-        output.wall_seconds = t.elapsed().as_secs_f64();
+        // The experiment may have set the seconds of work it read back from earlier runs.
+        output.wall_seconds += t.elapsed().as_secs_f64();
         output.command = format!("cargo xtask {}", args.command);
         output.code_version = args.code_version.clone();
         crate::records::validate(&output.records)?;
