@@ -2134,7 +2134,21 @@ fn linear_baselines_table(records: &[Record], table_4: &[(String, String, Vec<Sc
                 continue;
             };
             let digits = three_significant_decimals(ours.0.abs().min(baseline.0.abs()));
-            let shown = |f: Figure| with_spread(format!("{:.digits$}", f.0), (f.1 > 0.0).then_some(f.1), digits);
+            // Both figures to the same decimals, so they compare at a glance; where the
+            // smaller needs more than four (a PCA that reconstructs a ball exactly), each
+            // in scientific notation instead of a dozen digits of the larger.
+            let shown = |f: Figure| {
+                if digits > 4 {
+                    let spread = if f.1 > 0.0 {
+                        format!(" ± {:.2e}", f.1)
+                    } else {
+                        String::new()
+                    };
+                    format!("{:.2e}{spread}", f.0)
+                } else {
+                    with_spread(format!("{:.digits$}", f.0), (f.1 > 0.0).then_some(f.1), digits)
+                }
+            };
             let lower = baseline_lower(ours, baseline);
             counts[k][match lower {
                 Some(true) => 0,
@@ -3038,6 +3052,18 @@ mod tests {
                 "PCA + MLP 1 · ours 0 · tie 0",
             ]
         );
+        // A PCA that reconstructs exactly: scientific notation, not twelve decimals.
+        let mut out = ExperimentOutput::new("embed", Size::Standard);
+        for (method, metric, value) in [
+            ("ours", "m-phys", 772.28),
+            ("ours", "m-phys-sd", 223.53),
+            ("pca", "m-phys", 4.73e-8),
+        ] {
+            out.record("ball-fem", method, metric, value, "", Timing::default());
+            out.records.last_mut().unwrap().split = Some("test".into());
+        }
+        let exact = linear_baselines_table(&out.records, &[]);
+        assert_eq!(exact.rows[0][3], "7.72e2 ± 2.24e2 vs 4.73e-8 → PCA");
         assert_eq!(baseline_lower((1.0, 0.1), (1.0, 0.0)), None);
         assert_eq!(baseline_lower((1.0, 0.0), (0.5, 0.5)), None);
         assert_eq!(baseline_lower((1.0, 0.0), (0.5, 0.4)), Some(true));
