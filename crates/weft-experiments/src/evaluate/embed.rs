@@ -1270,7 +1270,7 @@ const SCENE_FORMAT: u32 = 1;
 #[derive(Debug)]
 enum KeptScene {
     /// Nothing usable: run the scene.
-    None,
+    Run,
     /// The scene's results, made under the run's configuration.
     Done(Box<SceneResults>),
     /// Made under the run's configuration in an older format: remake it from the models'
@@ -1282,13 +1282,13 @@ enum KeptScene {
 /// any candidate schedule and stage-1 budget: the scene makes the choices).
 fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> KeptScene {
     let Ok(text) = std::fs::read_to_string(path) else {
-        return KeptScene::None;
+        return KeptScene::Run;
     };
     let kept: SceneResults = match serde_json::from_str(&text) {
         Ok(k) => k,
         Err(e) => {
             eprintln!("embed: {} does not parse ({e}); running the scene", path.display());
-            return KeptScene::None;
+            return KeptScene::Run;
         }
     };
     let same = if first {
@@ -1308,7 +1308,7 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
         kept.config == *config
     };
     if !same {
-        KeptScene::None
+        KeptScene::Run
     } else if kept.format != SCENE_FORMAT {
         eprintln!(
             "embed: {} is of an older format ({}, now {SCENE_FORMAT}); remaking the scene from its models' scores",
@@ -1360,27 +1360,27 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     let mut scene_seconds = Vec::new();
     for (i, &scene) in scenes().iter().enumerate() {
         let path = root.join("scenes").join(format!("{scene}.json"));
-        let kept = restored_scene(&path, &config, &studies, i == 0);
-        let results = match kept {
+        // The seconds earlier runs spent on the scene count in the experiment's (this
+        // run's own are the driver's to add).
+        let (results, earlier_seconds) = match restored_scene(&path, &config, &studies, i == 0) {
             KeptScene::Done(r) => {
                 eprintln!("embed/{scene}: read from {} (done in an earlier run)", path.display());
-                // Its seconds count in the experiment's: the work was done, in another run.
-                out.wall_seconds += r.wall_seconds;
-                *r
+                let seconds = r.wall_seconds;
+                (*r, seconds)
             }
-            KeptScene::None | KeptScene::Remake { .. } => {
+            kept => {
                 let earlier_seconds = match kept {
                     KeptScene::Remake { earlier_seconds } => earlier_seconds,
                     _ => 0.0,
                 };
-                out.wall_seconds += earlier_seconds;
                 let t = Instant::now();
                 let mut r = run_scene(ctx, scene, &config, &studies, i == 0)?;
                 r.wall_seconds = earlier_seconds + t.elapsed().as_secs_f64();
                 weft_data::files::write_json(&path, &r)?;
-                r
+                (r, earlier_seconds)
             }
         };
+        out.wall_seconds += earlier_seconds;
         if results.config != config {
             config = results.config.clone();
             std::fs::write(&config_path, serde_json::to_string_pretty(&config)?)?;
@@ -2886,7 +2886,7 @@ mod tests {
         ));
         assert!(matches!(
             restored_scene(&path, &config, &studies, false),
-            KeptScene::None
+            KeptScene::Run
         ));
         weft_data::files::write_json(&path, &results(&chosen)).unwrap();
         let mut more = config.clone();
