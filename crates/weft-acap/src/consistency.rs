@@ -16,7 +16,7 @@
 
 use nalgebra::Vector3;
 
-use crate::features::Rings;
+use crate::rings::Rings;
 
 /// A rotation closer than this to the identity has no meaningful axis: it takes its
 /// parent's axis and φ = 2πk (docs/ACAP.md §A3, BFS rule).

@@ -6,6 +6,7 @@ use weft_mesh::{Topology, TriMesh, geometry};
 
 use crate::consistency::{ConsistencyReport, consistent_logs};
 use crate::error::{Error, Result};
+use crate::rings::Rings;
 use crate::rotation::{polar_decomposition, principal_log};
 
 /// One vertex's ACAP feature: the log-rotation as the upper triangle of `K = [r]_×`,
@@ -81,50 +82,6 @@ impl Default for AcapSettings {
     }
 }
 
-/// Weighted 1-ring lists in compressed form.
-#[derive(Debug, Clone)]
-pub(crate) struct Rings {
-    offsets: Vec<usize>,
-    neighbors: Vec<usize>,
-    weights: Vec<f64>,
-}
-
-impl Rings {
-    pub(crate) fn len(&self) -> usize {
-        self.offsets.len() - 1
-    }
-    pub(crate) fn neighbors(&self, i: usize) -> &[usize] {
-        &self.neighbors[self.offsets[i]..self.offsets[i + 1]]
-    }
-    pub(crate) fn weights(&self, i: usize) -> &[f64] {
-        &self.weights[self.offsets[i]..self.offsets[i + 1]]
-    }
-    /// One vertex per connected component: the lowest index in it.
-    pub(crate) fn component_roots(&self) -> Vec<usize> {
-        let n = self.len();
-        let mut seen = vec![false; n];
-        let mut roots = Vec::new();
-        let mut stack = Vec::new();
-        for s in 0..n {
-            if seen[s] {
-                continue;
-            }
-            roots.push(s);
-            seen[s] = true;
-            stack.push(s);
-            while let Some(i) = stack.pop() {
-                for &j in self.neighbors(i) {
-                    if !seen[j] {
-                        seen[j] = true;
-                        stack.push(j);
-                    }
-                }
-            }
-        }
-        roots
-    }
-}
-
 /// The ACAP feature extractor of one rest mesh: cotangent weights, inverse rest edge
 /// covariances and 1-ring lists, computed once; [`AcapFeatures::encode`] per frame.
 ///
@@ -174,27 +131,7 @@ impl AcapFeatures {
         let edge_weight: Vec<f64> = cot.iter().map(|&c| edge_weight(settings.edge_weights, c)).collect();
 
         let n = q.len();
-        let mut offsets = Vec::with_capacity(n + 1);
-        let mut neighbors = Vec::with_capacity(2 * topology.edges.len());
-        let mut weights = Vec::with_capacity(2 * topology.edges.len());
-        offsets.push(0);
-        for i in 0..n {
-            for &j in topology.one_ring.neighbors(i) {
-                let key = [i.min(j), i.max(j)];
-                let e = topology
-                    .edges
-                    .binary_search(&key)
-                    .expect("1-ring neighbours are mesh edges");
-                neighbors.push(j);
-                weights.push(edge_weight[e]);
-            }
-            offsets.push(neighbors.len());
-        }
-        let rings = Rings {
-            offsets,
-            neighbors,
-            weights,
-        };
+        let rings = Rings::new(&topology, &edge_weight);
 
         let normals = geometry::vertex_normals(q, faces);
         let mut rest_normal_terms = Vec::with_capacity(n);

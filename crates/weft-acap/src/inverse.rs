@@ -8,7 +8,8 @@ use rayon::prelude::*;
 use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
 use crate::error::{Error, Result};
-use crate::features::{AcapFeatures, Feature, Rings, feature_log_rotation, feature_stretch};
+use crate::features::{AcapFeatures, Feature, feature_log_rotation, feature_stretch};
+use crate::rings::Rings;
 use crate::rotation::{rotation_exp, rotation_exp_with_derivatives};
 
 const NOT_FREE: usize = usize::MAX;

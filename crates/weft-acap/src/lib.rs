@@ -49,6 +49,7 @@ pub mod error;
 mod features;
 mod inverse;
 mod normalization;
+mod rings;
 pub mod rotation;
 
 /// The nalgebra this crate's API uses (`Vector3<f64>`, `Matrix3<f64>`), re-exported so
