@@ -9,10 +9,7 @@ use nalgebra::{Matrix3, Vector3};
 use crate::error::{Error, Result};
 use crate::topology::Topology;
 
-/// Area of triangle `abc`.
-pub fn triangle_area(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> f64 {
-    0.5 * (b - a).cross(&(c - a)).norm()
-}
+pub use crate::element::{face_areas, tet_signed_volume, triangle_area};
 
 /// Unit normal of counter-clockwise triangle `abc` (zero vector for a degenerate one).
 pub fn triangle_normal(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Vector3<f64> {
@@ -20,13 +17,6 @@ pub fn triangle_normal(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> 
         .cross(&(c - a))
         .try_normalize(0.0)
         .unwrap_or_else(Vector3::zeros)
-}
-
-pub fn face_areas(positions: &[Vector3<f64>], faces: &[[usize; 3]]) -> Vec<f64> {
-    faces
-        .iter()
-        .map(|f| triangle_area(&positions[f[0]], &positions[f[1]], &positions[f[2]]))
-        .collect()
 }
 
 pub fn face_normals(positions: &[Vector3<f64>], faces: &[[usize; 3]]) -> Vec<Vector3<f64>> {
@@ -143,11 +133,6 @@ pub fn dihedral_angles(positions: &[Vector3<f64>], topology: &Topology) -> Vec<f
             )
         })
         .collect()
-}
-
-/// Signed volume of tetrahedron `abcd`: `det[b − a, c − a, d − a] / 6`.
-pub fn tet_signed_volume(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>, d: &Vector3<f64>) -> f64 {
-    (b - a).cross(&(c - a)).dot(&(d - a)) / 6.0
 }
 
 pub fn tet_volumes(positions: &[Vector3<f64>], tets: &[[usize; 4]]) -> Vec<f64> {

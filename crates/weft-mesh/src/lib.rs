@@ -24,6 +24,7 @@
 //! # Ok::<(), weft_mesh::Error>(())
 //! ```
 
+mod element;
 pub mod error;
 pub mod generators;
 pub mod geodesic;

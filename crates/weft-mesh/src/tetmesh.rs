@@ -4,8 +4,8 @@ use std::collections::HashMap;
 
 use nalgebra::Vector3;
 
+use crate::element::tet_signed_volume;
 use crate::error::{Error, Result};
-use crate::geometry::tet_signed_volume;
 use crate::trimesh::{TriMesh, check_finite, check_indices};
 
 /// A tetrahedral mesh: vertex positions (metres) and positively oriented tetrahedra.

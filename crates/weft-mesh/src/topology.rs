@@ -2,8 +2,11 @@
 
 use std::collections::HashMap;
 
+use crate::element::sorted2;
 use crate::tetmesh::TetMesh;
 use crate::trimesh::TriMesh;
+
+pub use crate::element::unique_edges;
 
 /// Compressed adjacency lists: `neighbors(i)` is sorted and excludes `i`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -83,21 +86,6 @@ pub struct Topology {
     pub vertex_faces: Adjacency,
     /// Closed boundary loops as vertex cycles, each following the face orientation.
     pub boundary_loops: Vec<Vec<usize>>,
-}
-
-/// Unique sorted edges of a face list.
-pub fn unique_edges(faces: &[[usize; 3]]) -> Vec<[usize; 2]> {
-    let mut edges: Vec<[usize; 2]> = faces
-        .iter()
-        .flat_map(|f| (0..3).map(move |k| sorted2(f[k], f[(k + 1) % 3])))
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
-    edges
-}
-
-fn sorted2(a: usize, b: usize) -> [usize; 2] {
-    if a < b { [a, b] } else { [b, a] }
 }
 
 impl Topology {

@@ -4,8 +4,8 @@ use std::collections::HashMap;
 
 use nalgebra::Vector3;
 
+use crate::element::{face_areas, unique_edges};
 use crate::error::{Error, Result};
-use crate::geometry;
 
 /// A triangle mesh: vertex positions (metres) and counter-clockwise faces.
 ///
@@ -84,10 +84,7 @@ impl TriMesh {
 
     /// Errors on the first face whose area is at or below `tolerance` (m²).
     pub fn check_face_areas(&self, tolerance: f64) -> Result<()> {
-        for (f, a) in geometry::face_areas(&self.positions, &self.faces)
-            .into_iter()
-            .enumerate()
-        {
+        for (f, a) in face_areas(&self.positions, &self.faces).into_iter().enumerate() {
             if a.is_nan() || a <= tolerance {
                 return Err(Error::DegenerateFace {
                     face: f,
@@ -101,12 +98,12 @@ impl TriMesh {
 
     /// Total surface area (m²).
     pub fn area(&self) -> f64 {
-        geometry::face_areas(&self.positions, &self.faces).iter().sum()
+        face_areas(&self.positions, &self.faces).iter().sum()
     }
 
     /// Euler characteristic V − E + F.
     pub fn euler_characteristic(&self) -> i64 {
-        let edges = crate::topology::unique_edges(&self.faces).len();
+        let edges = unique_edges(&self.faces).len();
         self.num_vertices() as i64 - edges as i64 + self.num_faces() as i64
     }
 
