@@ -8,14 +8,8 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::scenes::cloth::{BUILTIN_SCENES, ClothScene};
 use crate::scenes::volume::{BUILTIN_VOLUME_SCENES, SoftTissueScene, VolumeScene};
-
-/// Name of the built-in soft-tissue scene.
-pub const SOFT_TISSUE_SCENE: &str = "limb";
-/// The soft-tissue scene whose tissue moves: a soft fat layer over a stiffer core, jumps,
-/// shakes and abrupt stops ([`crate::scenes::soft_tissue::SoftTissueParams::jiggle`]).
-pub const JIGGLE_SCENE: &str = "limb-jiggle";
-/// Both soft-tissue scenes.
-pub const SOFT_TISSUE_SCENES: [&str; 2] = [SOFT_TISSUE_SCENE, JIGGLE_SCENE];
+// The soft-tissue scenes' names live beside `SoftTissueScene`; every built-in is named here.
+pub use crate::scenes::volume::{JIGGLE_SCENE, SOFT_TISSUE_SCENE, SOFT_TISSUE_SCENES};
 
 /// A scene of any kind.
 #[derive(Debug, Clone, PartialEq)]

@@ -143,6 +143,14 @@ pub struct VolumeScene {
     pub frames: usize,
 }
 
+/// Name of the built-in soft-tissue scene.
+pub const SOFT_TISSUE_SCENE: &str = "limb";
+/// The soft-tissue scene whose tissue moves: a soft fat layer over a stiffer core, jumps,
+/// shakes and abrupt stops ([`crate::scenes::soft_tissue::SoftTissueParams::jiggle`]).
+pub const JIGGLE_SCENE: &str = "limb-jiggle";
+/// Both soft-tissue scenes.
+pub const SOFT_TISSUE_SCENES: [&str; 2] = [SOFT_TISSUE_SCENE, JIGGLE_SCENE];
+
 /// Built-in volumetric scenes: the clamped beam for each material under gravity, the
 /// Neo-Hookean beam under a directional field, and the pre-factorised linear beam.
 pub const BUILTIN_VOLUME_SCENES: [&str; 6] = [
@@ -552,7 +560,7 @@ impl SoftTissueScene {
     /// `limb`).
     pub fn builtin_named(name: &str, quick: bool) -> Self {
         let mut scene = Self::builtin(quick);
-        if name == crate::scenes::load::JIGGLE_SCENE {
+        if name == JIGGLE_SCENE {
             scene.name = name.into();
             scene.params = SoftTissueParams::jiggle();
         }
