@@ -11,6 +11,9 @@
 //! precomputed slots and a Cholesky solver for SPD matrices ([`CholeskySolver`]). It
 //! knows nothing of meshes or physics. (The projection layers' KKT systems are
 //! factorised rows-first through this Cholesky, in weft-proj — the only user of them.)
+//! Two small pieces of numerics every crate shares sit here because this is the lowest
+//! crate they all reach: [`max_abs`], the one max-norm, and [`SplitMix64`], the one seeded
+//! pseudo-random generator (weft-sim's scenes and weft-testkit's `TestRng` draw from it).
 //!
 //! faer runs single-threaded here: at weft's sizes two threads made faer 2–6× slower on
 //! this project's 2-core machines (measured when the dependency was chosen) because its `Par`
@@ -46,12 +49,14 @@ mod error;
 mod norms;
 mod ordering;
 mod pattern;
+mod rng;
 mod two_domain;
 
 pub use cholesky::{CholeskyFactor, CholeskySolver, Substructuring};
 pub use error::{Error, Result};
 pub use norms::max_abs;
 pub use pattern::{SymmetricMatrix, SymmetricPattern};
+pub use rng::SplitMix64;
 
 #[cfg(test)]
 mod tests;

@@ -1,6 +1,11 @@
-//! SplitMix64 (Steele, Lea & Flood 2014): the one pseudo-random generator of weft's
-//! simulations. It is tiny and fully specified, so a seed means the same motion, jitter
-//! and perturbation on every machine and in every version — which datasets rely on.
+//! SplitMix64 (Steele, Lea & Flood 2014): the one pseudo-random generator of weft. It is
+//! tiny and fully specified, so a seed means the same motion, jitter and perturbation on
+//! every machine and in every version — which datasets rely on.
+//!
+//! It lives here, in the lowest crate that both of its users already depend on: weft-sim
+//! (scene motion and perturbations, re-exported as `weft_sim::rng`) and weft-testkit (its
+//! `TestRng` wraps it). It is not linear algebra; weft-mesh would be lower, but weft-testkit
+//! depending on weft-mesh would close a cycle with weft-mesh's own tests.
 
 /// The SplitMix64 generator: state advanced by the golden-ratio increment, output by
 /// its finaliser.

@@ -92,26 +92,22 @@ pub fn fd_jacobian(f: impl Fn(&[f64]) -> Vec<f64>, x: &[f64], h: f64) -> Vec<Vec
     (0..m).map(|r| cols.iter().map(|c| c[r]).collect()).collect()
 }
 
-/// A small deterministic pseudo-random generator (SplitMix64) so tests need no extra
-/// dependency and give the same numbers on every machine.
+/// A small deterministic pseudo-random generator so tests need no extra dependency and
+/// give the same numbers on every machine: weft's one SplitMix64 (`weft_linalg::SplitMix64`,
+/// the generator the simulations draw from), with a helper for vectors.
 #[derive(Debug, Clone)]
-pub struct TestRng(u64);
+pub struct TestRng(weft_linalg::SplitMix64);
 
 impl TestRng {
     pub fn new(seed: u64) -> Self {
-        Self(seed)
+        Self(weft_linalg::SplitMix64::new(seed))
     }
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
     /// Uniform in `[lo, hi)`.
     pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * u
+        self.0.uniform(lo, hi)
     }
     /// A vector of `n` uniforms in `[lo, hi)`.
     pub fn vec(&mut self, n: usize, lo: f64, hi: f64) -> Vec<f64> {
