@@ -57,7 +57,7 @@ pub enum Error {
     },
 }
 
-pub type Result<T> = std::result::Result<T, Error>;
+pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     /// An I/O error on `path`.
@@ -69,35 +69,52 @@ impl Error {
     }
 }
 
-/// `.context(...)` on results and options, adding what was being done to an error.
-pub trait Context<T> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T>;
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T>;
+/// Defines a crate's `Context` trait: `.context(...)` and `.with_context(...)` on results
+/// and options, adding what was being done to an error — anyhow's `Context`, for a typed
+/// error. Written once here, the lowest crate that needs it; weft-experiments invokes it too.
+///
+/// `context_trait!(Error, Error::Variant)` needs, in scope, an `Error` enum with a
+/// `Context { context: String, source: Box<Error> }` variant, which wraps any error that
+/// converts `Into<Error>`; an absent `Option` becomes `Error::Variant(context)`. The trait is
+/// generated per crate (not generic over the error) so that `x.context("...")?` infers its
+/// error type from the crate it is written in.
+#[macro_export]
+macro_rules! context_trait {
+    ($error:ident, $missing:path) => {
+        /// `.context(...)` on results and options, adding what was being done to an error
+        /// (defined by `weft_data::context_trait!`).
+        pub trait Context<T> {
+            fn context(self, context: impl ::std::fmt::Display) -> ::std::result::Result<T, $error>;
+            fn with_context<C: ::std::fmt::Display>(self, f: impl FnOnce() -> C) -> ::std::result::Result<T, $error>;
+        }
+
+        impl<T, E: ::std::convert::Into<$error>> Context<T> for ::std::result::Result<T, E> {
+            fn context(self, context: impl ::std::fmt::Display) -> ::std::result::Result<T, $error> {
+                self.map_err(|e| $error::Context {
+                    context: context.to_string(),
+                    source: ::std::boxed::Box::new(e.into()),
+                })
+            }
+            fn with_context<C: ::std::fmt::Display>(self, f: impl FnOnce() -> C) -> ::std::result::Result<T, $error> {
+                self.map_err(|e| $error::Context {
+                    context: f().to_string(),
+                    source: ::std::boxed::Box::new(e.into()),
+                })
+            }
+        }
+
+        impl<T> Context<T> for ::std::option::Option<T> {
+            fn context(self, context: impl ::std::fmt::Display) -> ::std::result::Result<T, $error> {
+                self.ok_or_else(|| $missing(context.to_string()))
+            }
+            fn with_context<C: ::std::fmt::Display>(self, f: impl FnOnce() -> C) -> ::std::result::Result<T, $error> {
+                self.ok_or_else(|| $missing(f().to_string()))
+            }
+        }
+    };
 }
 
-impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T> {
-        self.map_err(|e| Error::Context {
-            context: context.to_string(),
-            source: Box::new(e.into()),
-        })
-    }
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T> {
-        self.map_err(|e| Error::Context {
-            context: f().to_string(),
-            source: Box::new(e.into()),
-        })
-    }
-}
-
-impl<T> Context<T> for Option<T> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T> {
-        self.ok_or_else(|| Error::Invalid(context.to_string()))
-    }
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T> {
-        self.ok_or_else(|| Error::Invalid(f().to_string()))
-    }
-}
+context_trait!(Error, Error::Invalid);
 
 /// Returns an [`Error::Invalid`] with a formatted message unless `cond` holds.
 macro_rules! ensure {

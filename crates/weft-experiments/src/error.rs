@@ -48,7 +48,7 @@ pub enum Error {
     },
 }
 
-pub type Result<T> = std::result::Result<T, Error>;
+pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     /// A plotting error (plotters' errors carry their backend's type).
@@ -63,35 +63,7 @@ impl<E: std::error::Error + Send + Sync> From<plotters::drawing::DrawingAreaErro
     }
 }
 
-/// `.context(...)` on results and options, adding what was being done to an error.
-pub trait Context<T> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T>;
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T>;
-}
-
-impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T> {
-        self.map_err(|e| Error::Context {
-            context: context.to_string(),
-            source: Box::new(e.into()),
-        })
-    }
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T> {
-        self.map_err(|e| Error::Context {
-            context: f().to_string(),
-            source: Box::new(e.into()),
-        })
-    }
-}
-
-impl<T> Context<T> for Option<T> {
-    fn context(self, context: impl std::fmt::Display) -> Result<T> {
-        self.ok_or_else(|| Error::Failed(context.to_string()))
-    }
-    fn with_context<C: std::fmt::Display>(self, f: impl FnOnce() -> C) -> Result<T> {
-        self.ok_or_else(|| Error::Failed(f().to_string()))
-    }
-}
+weft_data::context_trait!(Error, Error::Failed);
 
 /// Returns an [`Error::Failed`] with a formatted message unless `cond` holds.
 macro_rules! ensure {
