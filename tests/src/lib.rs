@@ -1,1 +1,1 @@
-//! Cross-crate pipeline tests live in `tests/tests/`; this library is empty by design.
+//! Cross-crate tests live in `tests/tests/integration/` (one binary); this library is empty by design.

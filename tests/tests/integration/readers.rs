@@ -1,7 +1,7 @@
 //! Every mesh and scene reader returns a typed error — never a panic, a hang or a huge
 //! allocation from a lying header — for random and mutated input (property tests; the
 //! cargo-fuzz targets in `fuzz/` run the same readers for long; see docs/FUZZING.md).
-//! `PROPTEST_CASES=100000 cargo test --release -p weft-integration --test readers` runs
+//! `PROPTEST_CASES=100000 cargo test --release -p weft-integration --test integration readers` runs
 //! a long session.
 
 use std::path::Path;
