@@ -488,10 +488,7 @@ mod tests {
             ..config.clone()
         };
         let results = |config: &EmbedTrainingConfig| SceneResults {
-            config: config.clone(),
-            output: ExperimentOutput::new("embed", Size::Standard),
             ephys_row: Some((vec![0.1, 0.5], vec!["`sheet-ms`".into()])),
-            table_2: Vec::new(),
             table_4: vec![(
                 "sheet-ms".into(),
                 "baseline".into(),
@@ -501,13 +498,8 @@ mod tests {
                     m_phys: 3.0,
                 }],
             )],
-            ik_rows: Vec::new(),
-            schedule_rows: Vec::new(),
-            budget_rows: Vec::new(),
-            fine_tune_rows: Vec::new(),
-            stage_3_budget_rows: Vec::new(),
             wall_seconds: 12.0,
-            format: SCENE_FORMAT,
+            ..SceneResults::new(config, Size::Standard)
         };
         let budgets = budget_candidates(Size::Standard, &config);
         assert_eq!(budgets, [30, BUDGET_STUDY_EPOCHS]);

@@ -356,6 +356,29 @@ pub(super) fn rollout_from<'a>(
 /// (`LatentRollout`); the scores of the predicted frames (the given two count in M_STED's
 /// window and as M_phys's predecessors).
 pub(super) fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<Scores> {
+    rollout_test(data, |start, _, controls| {
+        let mut rollout = rollout_from(data, model, start)?;
+        controls.iter().map(|c| Ok(rollout.step(c)?)).collect()
+    })
+}
+
+/// Table IV's test for the latent MLP on the PCA subspace: in each 5-frame test window, the
+/// first two frames' PCA codes start the MLP, which predicts the other three from their
+/// controls, decoded through the basis; scored like [`rollout_scores`].
+pub(super) fn pca_rollout_scores(data: &EmbedData, sim: &PcaSimulator) -> crate::Result<Scores> {
+    rollout_test(data, |_, given, controls| {
+        Ok(sim.rollout(&given[0], &given[1], controls)?)
+    })
+}
+
+/// Table IV's test of a simulator: in each 5-frame test window, `predict` is given the
+/// first two frames (their references and ground-truth positions) and the other three's
+/// controls, and returns those three frames; scored from the third frame on, the given two
+/// in M_STED's window and as M_phys's predecessors.
+fn rollout_test(
+    data: &EmbedData,
+    mut predict: impl FnMut([FrameRef; 2], &[Vec<f64>], &[&[f64]]) -> crate::Result<Vec<Vec<f64>>>,
+) -> crate::Result<Scores> {
     let frames = &data.test_frames;
     let mut scored = Vec::new();
     for w in windows(frames) {
@@ -370,40 +393,12 @@ pub(super) fn rollout_scores(data: &EmbedData, model: &EmbedModel) -> crate::Res
                     .to_vec()
             })
             .collect();
-        let mut predicted = truth[..2].to_vec();
-        let mut rollout = rollout_from(data, model, [frames[w[0]], frames[w[1]]])?;
-        for &k in &w[2..5] {
-            let f = frames[k];
-            predicted.push(rollout.step(data.dataset.sequences[f.sequence].control(f.frame))?);
-        }
-        scored.push(Window {
-            predicted,
-            truth,
-            refs: w[..5].iter().map(|&k| frames[k]).collect(),
-            scored_from: 2,
-        });
-    }
-    score_windows(data, &scored)
-}
-
-/// Table IV's test for the latent MLP on the PCA subspace: in each 5-frame test window, the
-/// first two frames' PCA codes start the MLP, which predicts the other three from their
-/// controls, decoded through the basis; scored like [`rollout_scores`].
-pub(super) fn pca_rollout_scores(data: &EmbedData, sim: &PcaSimulator) -> crate::Result<Scores> {
-    let frames = &data.test_frames;
-    let mut scored = Vec::new();
-    for w in windows(frames) {
-        if w.len() < 5 {
-            continue;
-        }
-        let at = |k: usize| data.dataset.sequences[frames[k].sequence].frame(frames[k].frame);
-        let truth: Vec<Vec<f64>> = w[..5].iter().map(|&k| at(k).to_vec()).collect();
         let controls: Vec<&[f64]> = w[2..5]
             .iter()
             .map(|&k| data.dataset.sequences[frames[k].sequence].control(frames[k].frame))
             .collect();
         let mut predicted = truth[..2].to_vec();
-        predicted.extend(sim.rollout(&truth[0], &truth[1], &controls)?);
+        predicted.extend(predict([frames[w[0]], frames[w[1]]], &truth[..2], &controls)?);
         scored.push(Window {
             predicted,
             truth,
