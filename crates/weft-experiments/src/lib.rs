@@ -62,6 +62,9 @@
 
 pub mod error;
 pub mod evaluate;
+pub mod files;
+#[cfg(test)]
+mod layers;
 pub mod paper;
 pub mod progress;
 pub mod records;

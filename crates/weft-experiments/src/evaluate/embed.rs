@@ -496,7 +496,7 @@ fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result<()> {
     for stage in 1..=through {
         let run = weft_nn::embed_training::stage_dir(from, stage);
         if run.exists() {
-            super::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
+            crate::files::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
         }
     }
     // The configuration last: a directory with it is a model (a copy cut short is redone).
