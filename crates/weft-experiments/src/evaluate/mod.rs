@@ -15,6 +15,7 @@ pub mod embed;
 pub mod nnwarp;
 pub mod proj;
 pub mod sim;
+pub(crate) mod study;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
