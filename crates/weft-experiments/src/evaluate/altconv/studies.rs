@@ -11,6 +11,7 @@ use weft_nn::trainer::TrainingState;
 use super::{learning_rates, training_config};
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;
+use crate::evaluate::study::Study;
 use crate::records::{ExperimentOutput, Series, Timing, mean_sd};
 
 /// Every variant's trained models, and what the tables show of their training.
@@ -88,19 +89,24 @@ pub(super) fn train_variants(
         };
         // The rate: the first seed at each, the best validation score (a single rate is
         // simply trained).
-        let mut runs = Vec::new();
-        let mut by_rate = Vec::new();
-        for &lr in &rates {
-            let run = training.train(seeds[0], lr)?;
-            by_rate.push((lr, run.0.best_validation));
-            runs.push((lr, run));
-        }
-        let chosen = by_rate
+        let study = Study::sweep(
+            rates.iter().copied(),
+            |&lr| training.train(seeds[0], lr),
+            |(state, _)| state.best_validation,
+        )?;
+        let chosen = *study.chosen();
+        let by_rate: Vec<(f64, f64)> = study
+            .trials()
             .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|r| r.0)
-            .context("no learning rate")?;
-        let mut runs: Vec<_> = runs.into_iter().filter(|r| r.0 == chosen).map(|r| r.1).collect();
+            .map(|(lr, (s, _))| (*lr, s.best_validation))
+            .collect();
+        let (trials, chosen_index) = study.into_parts();
+        let mut runs: Vec<_> = trials
+            .into_iter()
+            .nth(chosen_index)
+            .map(|(_, run)| run)
+            .into_iter()
+            .collect();
         for &seed in &seeds[1..] {
             runs.push(training.train(seed, chosen)?);
         }

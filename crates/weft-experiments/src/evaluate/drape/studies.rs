@@ -12,6 +12,7 @@ use super::tables::paper_learned_mu;
 use super::{FIXED_MU, MU_STARTS, finetune_rates};
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;
+use crate::evaluate::study::Study;
 use crate::records::{ExperimentOutput, Timing};
 
 /// Trains (or resumes) one model of the garment as `plan` says, into `dir`; training
@@ -141,42 +142,45 @@ pub(super) fn finetune_rate(
 ) -> crate::Result<RateChoice> {
     let seed0 = g.seeds[0];
     let rate_dir = |lr: f64| g.models_of(seed0).join(format!("lr-{lr}")).join("trained-qs-mu0.1");
-    let mut rate_rows = Vec::new();
-    let mut rate_fits = Vec::new();
-    let mut chosen = (f64::INFINITY, g.base.learning_rate);
-    for &lr in finetune_rates(ctx.size) {
-        let dir = rate_dir(lr);
-        let f = train_one(
-            ctx,
-            g,
-            out,
-            &dir,
-            &plan(
-                "trained-qs-mu0.1",
-                Layer::Quasistatic(0.1),
-                Some(net0),
-                g.base.finetune_epochs,
-            ),
-            &g.config_of(seed0, lr),
-        )?;
-        let path: Vec<String> = f.state.history.iter().map(|h| format!("{:.3}", h.validation)).collect();
-        rate_rows.push(vec![
-            format!("{lr}"),
-            format!("{:.4}", f.state.initial_validation),
-            path.join(" → "),
-            format!("{} ({:.4})", f.state.best_epoch, f.state.best_validation),
-        ]);
-        if f.state.best_validation < chosen.0 {
-            chosen = (f.state.best_validation, lr);
-        }
-        rate_fits.push((lr, f));
-    }
-    let finetune_lr = chosen.1;
+    let study = Study::sweep(
+        finetune_rates(ctx.size).iter().copied(),
+        |&lr| {
+            train_one(
+                ctx,
+                g,
+                out,
+                &rate_dir(lr),
+                &plan(
+                    "trained-qs-mu0.1",
+                    Layer::Quasistatic(0.1),
+                    Some(net0),
+                    g.base.finetune_epochs,
+                ),
+                &g.config_of(seed0, lr),
+            )
+        },
+        |f| f.state.best_validation,
+    )?;
+    let rate_rows = study
+        .trials()
+        .iter()
+        .map(|(lr, f)| {
+            let path: Vec<String> = f.state.history.iter().map(|h| format!("{:.3}", h.validation)).collect();
+            vec![
+                format!("{lr}"),
+                format!("{:.4}", f.state.initial_validation),
+                path.join(" → "),
+                format!("{} ({:.4})", f.state.best_epoch, f.state.best_validation),
+            ]
+        })
+        .collect();
+    let finetune_lr = *study.chosen();
     // The chosen rate's model is the first seed's `trained-qs-mu0.1`: the same stamp
     // (configuration, layer, starting weights) and epochs, so it is not trained twice.
     // Its directory is copied to the method's place, so that every seed's model
     // directories hold what the tables score.
-    let chosen_fit = rate_fits.into_iter().find(|(lr, _)| *lr == finetune_lr).map(|(_, f)| f);
+    let (trials, chosen) = study.into_parts();
+    let chosen_fit = trials.into_iter().nth(chosen).map(|(_, f)| f);
     let method_dir = g.models_of(seed0).join("trained-qs-mu0.1");
     start_from_copy(&rate_dir(finetune_lr), &method_dir)?;
     check_same_run(&rate_dir(finetune_lr), &method_dir)?;
