@@ -90,14 +90,81 @@ fn resolve(module: &str, root: &str, rest: &[&str]) -> String {
     base.join("::")
 }
 
+/// `text` with comments and the contents of string and character literals blanked
+/// (newlines kept, so line numbers hold): what is left is the code the compiler resolves.
+fn code_only(text: &str) -> String {
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    let blank = |c: char| if c == '\n' { '\n' } else { ' ' };
+    while i < chars.len() {
+        let c = chars[i];
+        let next = chars.get(i + 1).copied();
+        if c == '/' && next == Some('/') {
+            while i < chars.len() && chars[i] != '\n' {
+                i += 1;
+            }
+        } else if c == '/' && next == Some('*') {
+            while i < chars.len() && !(chars[i] == '*' && chars.get(i + 1) == Some(&'/')) {
+                out.push(blank(chars[i]));
+                i += 1;
+            }
+            i += 2;
+        } else if c == '"' || (c == 'r' && matches!(next, Some('"' | '#')) && !ident_before(&chars, i)) {
+            // A string, raw (`r"…"`, `r#"…"#`) or not.
+            let raw = c == 'r';
+            let mut hashes = 0;
+            i += 1;
+            while raw && chars.get(i) == Some(&'#') {
+                hashes += 1;
+                i += 1;
+            }
+            i += usize::from(raw);
+            out.push('"');
+            while i < chars.len() {
+                if !raw && chars[i] == '\\' {
+                    out.push(' ');
+                    out.push(blank(chars.get(i + 1).copied().unwrap_or(' ')));
+                    i += 2;
+                    continue;
+                }
+                if chars[i] == '"' && (0..hashes).all(|k| chars.get(i + 1 + k) == Some(&'#')) {
+                    i += 1 + hashes;
+                    break;
+                }
+                out.push(blank(chars[i]));
+                i += 1;
+            }
+            out.push('"');
+        } else if c == '\'' && (next == Some('\\') || chars.get(i + 2) == Some(&'\'')) {
+            // A character literal (not a lifetime): `'x'`, `'\n'`, `'\''`.
+            i += if next == Some('\\') { 3 } else { 2 };
+            while i < chars.len() && chars[i] != '\'' {
+                i += 1;
+            }
+            i += 1;
+            out.push_str("' '");
+        } else {
+            out.push(c);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Whether the character before `i` continues an identifier (so an `r` there is not a raw
+/// string's prefix).
+fn ident_before(chars: &[char], i: usize) -> bool {
+    i > 0 && (chars[i - 1].is_alphanumeric() || chars[i - 1] == '_')
+}
+
 /// Every `crate::…`/`super::…` path in `text`, the source of `module`, as (line, path
-/// written, module it names). Comments are skipped; inside an inline module (`mod tests
-/// { … }` at a file's end), `super` is the file's own module.
+/// written, module it names). Comments and literals are skipped; inside an inline module
+/// (`mod tests { … }` at a file's end), `super` is the file's own module.
 fn imports(module: &str, text: &str) -> Vec<(usize, String, String)> {
     let mut found = Vec::new();
     let mut inline = false;
-    for (n, line) in text.lines().enumerate() {
-        let code = line.split("//").next().unwrap_or("");
+    for (n, code) in code_only(text).lines().enumerate() {
         let trimmed = code.trim_start();
         if trimmed.starts_with("mod ") || trimmed.starts_with("pub mod ") || trimmed.starts_with("pub(crate) mod ") {
             inline |= trimmed.trim_end().ends_with('{');
@@ -264,6 +331,15 @@ fn the_check_reads_paths_as_the_compiler_does_and_catches_an_upward_one() {
     let good = "use crate::files::copy_tree;\nuse crate::{Result, error::ensure};\nuse super::Garment;\n\
                 // super::copy_tree in a comment\n#[cfg(test)]\nmod tests {\n    use super::*;\n}\n";
     assert_eq!(upward("evaluate::drape::studies", good), Vec::<String>::new());
+    // Paths in strings, characters and comments are not imports; a lifetime is no literal.
+    let literals = "fn f<'a>(x: &'a str) -> &'a str {\n    let q = '\"';\n    /* super::copy_tree */\n    \
+                    let s = \"super::copy_tree \\\" crate::evaluate::run\";\n    \
+                    let r = r#\"crate::evaluate::run \"# ;\n    x\n}\n";
+    assert_eq!(upward("evaluate::embed", literals), Vec::<String>::new());
+    assert_eq!(
+        upward("evaluate::embed", &format!("{literals}super::copy_tree(a, b)?;\n")).len(),
+        1
+    );
     // Groups are expanded; one upward leaf is enough.
     let grouped = "use crate::{records::Record, report::write};\n";
     assert_eq!(upward("paper", grouped).len(), 1);
