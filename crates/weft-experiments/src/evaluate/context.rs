@@ -168,7 +168,8 @@ pub fn ground_truth_seconds(dir: &Path) -> crate::Result<f64> {
     Ok(seconds / frames)
 }
 
-/// What every experiment's `score_model` opens with (`crate::score` dispatches to them):
+/// What every experiment's `score_model` is given and opens with (`crate::score` builds it
+/// and dispatches on the model kind):
 /// the model loaded with its directory named in any error, the split checked for
 /// something to score, the dataset's ground-truth cost per frame where it recorded one,
 /// and the output begun with a note saying what was scored on what.

@@ -133,19 +133,8 @@ pub(super) fn write_predictions(
 /// of the `limb` dataset in `data_dir`, beside skinning alone, with the evaluation's
 /// metrics: `error-mm-step1` and `error-mm-rollout{10,…,50}` (windows up to the shortest
 /// sequence), and each method's predictions under `ctx.out/predictions/altconv/limb/`.
-pub fn score_model(
-    ctx: &EvalContext,
-    model_dir: &Path,
-    data_dir: &Path,
-    split: &str,
-) -> crate::Result<ExperimentOutput> {
-    let scoring = Scoring {
-        ctx,
-        experiment: "altconv",
-        model_dir,
-        data_dir,
-        split,
-    };
+pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
+    let (ctx, data_dir, split) = (scoring.ctx, scoring.data_dir, scoring.split);
     let dataset = LimbDataset::load(data_dir)?;
     let (config, _, net) = scoring.load_model(|dir| weft_nn::altconv::load_model(dir, &weft_nn::Device::Cpu))?;
     let adj = NormalizedAdjacency::new(&dataset.rest)?;

@@ -316,19 +316,8 @@ pub(super) fn write_predictions(
 /// `stretching-energy-error`; cold layer solves) and its predictions under
 /// `ctx.out/predictions/drape/sleeve/`. Examples the layer fails on are left out and
 /// reported in the output's failures.
-pub fn score_model(
-    ctx: &EvalContext,
-    model_dir: &Path,
-    data_dir: &Path,
-    split: &str,
-) -> crate::Result<ExperimentOutput> {
-    let scoring = Scoring {
-        ctx,
-        experiment: "drape",
-        model_dir,
-        data_dir,
-        split,
-    };
+pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
+    let (ctx, data_dir, split) = (scoring.ctx, scoring.data_dir, scoring.split);
     let dataset = DrapeDataset::load(data_dir)?;
     let (model, layer, config) = scoring.load_model(|dir| weft_nn::drape_training::load_model(dir, &dataset.sleeve))?;
     let data = DrapeTensors::of_split(&dataset, split, &Device::Cpu)?;

@@ -21,7 +21,7 @@ use super::{
     WARP_SOLVES, WARP_TOLERANCE, WarpMaterial, YOUNG, material_of,
 };
 use crate::error::Context;
-use crate::evaluate::context::{EvalContext, Scoring};
+use crate::evaluate::context::Scoring;
 use crate::records::{ExperimentOutput, Timing};
 
 /// One shape under material `m` (NNWarp with each of `finals`, one network per seed):
@@ -368,19 +368,8 @@ fn max_node_displacement(u: &[f64]) -> f64 {
 /// of the corrected linear displacement against the material's registered one, beside
 /// modal warping and the linear displacement itself (scene `beam/<material>`, the
 /// dataset's body), and NNWarp's displacements under `ctx.out/predictions/nnwarp/beam/`.
-pub fn score_model(
-    ctx: &EvalContext,
-    model_dir: &Path,
-    data_dir: &Path,
-    split: &str,
-) -> crate::Result<ExperimentOutput> {
-    let scoring = Scoring {
-        ctx,
-        experiment: "nnwarp",
-        model_dir,
-        data_dir,
-        split,
-    };
+pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
+    let (ctx, data_dir, split) = (scoring.ctx, scoring.data_dir, scoring.split);
     let (config, mlp) = scoring.load_model(load_model)?;
     let dataset = weft_data::WarpDataset::load(data_dir, &config.material)?;
     let gradients = Arc::new(NodalGradients::new(&dataset.body)?);
