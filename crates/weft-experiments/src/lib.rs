@@ -15,7 +15,9 @@
 //! - [`score`]: any trained model scored on any dataset of its kind, in the evaluation's
 //!   records and prediction files;
 //! - [`render`]: per-vertex error images; [`stability`]: the stability map;
-//! - [`progress`]: a training run's progress bar and epoch lines.
+//! - [`progress`]: a training run's progress bar and epoch lines;
+//! - [`files`]: the file helpers every module may use (the bottom layer; a test checks
+//!   that no module imports from a layer above its own).
 //!
 //! What is not here: no physics, features, projections or networks of its own (weft-sim,
 //! weft-acap, weft-proj, weft-nn), no dataset format (weft-data), no command line (xtask
@@ -62,6 +64,9 @@
 
 pub mod error;
 pub mod evaluate;
+pub mod files;
+#[cfg(test)]
+mod layers;
 pub mod paper;
 pub mod progress;
 pub mod records;

@@ -234,6 +234,14 @@ impl ExperimentOutput {
         }
     }
 
+    /// Sets the split of the last record (`train`, `validation`, `test`, or an
+    /// experiment's own such as `known` or `unseen-shape`).
+    pub fn split(&mut self, split: &str) {
+        if let Some(r) = self.records.last_mut() {
+            r.split = Some(split.into());
+        }
+    }
+
     pub fn energy(&mut self, scene: &str, method: &str, kind: &str, value: f64, unit: &str) {
         self.energies.push(EnergyBar {
             scene: scene.into(),

@@ -10,7 +10,7 @@
 use std::path::PathBuf;
 
 use crate::error::Context;
-use crate::evaluate::context::EvalContext;
+use crate::evaluate::context::{EvalContext, Scoring};
 use crate::evaluate::{altconv, drape, embed, nnwarp};
 use crate::records::ExperimentOutput;
 
@@ -85,12 +85,18 @@ pub fn score(options: &ScoreOptions) -> crate::Result<ExperimentOutput> {
         code_version: manifest.code_version.clone(),
         jobs: 1,
     };
-    let (model, data, split) = (&options.model, &options.data, options.split.as_str());
+    let scoring = Scoring {
+        ctx: &ctx,
+        experiment: options.kind.name(),
+        model_dir: &options.model,
+        data_dir: &options.data,
+        split: &options.split,
+    };
     let output = match options.kind {
-        ModelKind::Embed => embed::score_model(&ctx, model, data, split)?,
-        ModelKind::Nnwarp => nnwarp::score_model(&ctx, model, data, split)?,
-        ModelKind::Altconv => altconv::score_model(&ctx, model, data, split)?,
-        ModelKind::Drape => drape::score_model(&ctx, model, data, split)?,
+        ModelKind::Embed => embed::score_model(&scoring)?,
+        ModelKind::Nnwarp => nnwarp::score_model(&scoring)?,
+        ModelKind::Altconv => altconv::score_model(&scoring)?,
+        ModelKind::Drape => drape::score_model(&scoring)?,
     };
     crate::records::validate(&output.records)?;
     weft_data::files::write_json(&options.out.join("results.json"), &output.records)?;

@@ -356,13 +356,11 @@ fn prediction(rest: &weft_mesh::TriMesh, stretch: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Sweeps every simulator over the grid and writes the map; a failing cell (a panic or a
-/// NaN passed on) is an error after everything is written.
-pub fn run(args: &StabilityOptions) -> crate::Result<()> {
-    let quick = args.quick;
-    let start = Instant::now();
-    let mut jobs: Vec<Box<dyn Fn() -> Cell + Send>> = Vec::new();
-    // Cloth: stiffness × Δt × resolution, both models.
+/// One cell of the map, run when the sweep reaches it.
+type Job = Box<dyn Fn() -> Cell + Send>;
+
+/// Cloth: stiffness × Δt × resolution, both models, and the inexact steps.
+fn cloth_jobs(quick: bool, jobs: &mut Vec<Job>) {
     let (ks, dts, ns): (Vec<f64>, Vec<f64>, Vec<usize>) = if quick {
         (vec![1e1, 1e5, 1e9], vec![1e-5, 1e-3, 1e-1], vec![9])
     } else {
@@ -432,7 +430,10 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
             }
         }
     }
-    // Tet FEM: material × E × ν × Δt × start.
+}
+
+/// Tet FEM: material × E × ν × Δt × start.
+fn tet_jobs(quick: bool, jobs: &mut Vec<Job>) {
     let (es, nus, tdts) = if quick {
         (vec![1e3, 1e9], vec![0.0, 0.499], vec![1e-5, 1e-1])
     } else {
@@ -470,8 +471,11 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
             }
         }
     }
-    // Soft tissue (the `limb-jiggle` scene on the quick limb): fat modulus × motion amplitude,
-    // through jumps and the first abrupt stop.
+}
+
+/// Soft tissue (the `limb-jiggle` scene on the quick limb): fat modulus × motion
+/// amplitude, through jumps and the first abrupt stop.
+fn tissue_jobs(quick: bool, jobs: &mut Vec<Job>) {
     let (fats, amplitudes) = if quick {
         (vec![1e3, 1.5e3], vec![1.0, 2.0])
     } else {
@@ -493,7 +497,10 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
             }));
         }
     }
-    // Projection layers: stretch 0–200 % (−1: collapsed to a point) × ε or μ.
+}
+
+/// Projection layers: stretch 0–200 % (−1: collapsed to a point) × ε or μ.
+fn projection_jobs(quick: bool, jobs: &mut Vec<Job>) {
     let n = if quick { 7 } else { 13 };
     let stretches = [-1.0, 0.0, 0.1, 0.5, 1.0, 2.0];
     for &s in &stretches {
@@ -559,6 +566,18 @@ pub fn run(args: &StabilityOptions) -> crate::Result<()> {
             }));
         }
     }
+}
+
+/// Sweeps every simulator over the grid and writes the map; a failing cell (a panic or a
+/// NaN passed on) is an error after everything is written.
+pub fn run(args: &StabilityOptions) -> crate::Result<()> {
+    let quick = args.quick;
+    let start = Instant::now();
+    let mut jobs: Vec<Job> = Vec::new();
+    cloth_jobs(quick, &mut jobs);
+    tet_jobs(quick, &mut jobs);
+    tissue_jobs(quick, &mut jobs);
+    projection_jobs(quick, &mut jobs);
 
     let bar = progress_bar(args.quiet, jobs.len() as u64, "stability", "cells")?;
     // Panics are caught per cell; keep the default hook from printing each one.

@@ -1,11 +1,13 @@
-//! What the experiments share: their [`EvalContext`] and the datasets they generate (or
-//! complete) under the evaluation's directory, with the ground truth's cost per frame.
+//! What the experiments share: their [`EvalContext`], the datasets they generate (or
+//! complete) under the evaluation's directory with the ground truth's cost per frame, and
+//! the opening of every experiment's `score_model` ([`Scoring`]).
 
 use std::path::{Path, PathBuf};
 
 use weft_data::Size;
 
 use crate::error::Context;
+use crate::records::ExperimentOutput;
 
 /// What every experiment of a run shares: the size, where it writes, whether it shows
 /// progress, and the code version its datasets' manifests record.
@@ -164,6 +166,50 @@ pub fn ground_truth_seconds(dir: &Path) -> crate::Result<f64> {
     }
     crate::error::ensure!(frames > 0.0, "timing.json counts no frames");
     Ok(seconds / frames)
+}
+
+/// What every experiment's `score_model` is given and opens with (`crate::score` builds it
+/// and dispatches on the model kind):
+/// the model loaded with its directory named in any error, the split checked for
+/// something to score, the dataset's ground-truth cost per frame where it recorded one,
+/// and the output begun with a note saying what was scored on what.
+#[derive(Debug, Clone, Copy)]
+pub struct Scoring<'a> {
+    pub ctx: &'a EvalContext,
+    /// The records' experiment name.
+    pub experiment: &'a str,
+    pub model_dir: &'a Path,
+    pub data_dir: &'a Path,
+    pub split: &'a str,
+}
+
+impl Scoring<'_> {
+    /// `load(model_dir)`, its error naming the directory.
+    pub fn load_model<M, E: Into<crate::Error>>(
+        &self,
+        load: impl FnOnce(&Path) -> std::result::Result<M, E>,
+    ) -> crate::Result<M> {
+        load(self.model_dir).with_context(|| format!("loading the model in {}", self.model_dir.display()))
+    }
+
+    /// An error unless the split holds `count > 0` of `what` (examples, sequences).
+    pub fn require(&self, count: usize, what: &str) -> crate::Result<()> {
+        crate::error::ensure!(count > 0, "{} has no {} {what}", self.data_dir.display(), self.split);
+        Ok(())
+    }
+
+    /// The dataset's ground-truth seconds per frame, if its `timing.json` says.
+    pub fn ground_truth_seconds(&self) -> Option<f64> {
+        ground_truth_seconds(self.data_dir).ok()
+    }
+
+    /// The output, its first note `"<experiment> score: <model directory> <on>"`.
+    pub fn output(&self, on: impl std::fmt::Display) -> ExperimentOutput {
+        let mut out = ExperimentOutput::new(self.experiment, self.ctx.size);
+        out.notes
+            .push(format!("{} score: {} {on}", self.experiment, self.model_dir.display()));
+        out
+    }
 }
 
 /// Taken for reading, briefly, at every training batch ([`pause_point`]) and for writing

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::Context;
+use crate::files::copy_tree;
 
 pub use crate::records::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
 use context::EvalContext;
@@ -292,21 +293,6 @@ fn provenance_per_experiment(outputs: &[ExperimentOutput]) -> String {
         }
     }
     s
-}
-
-/// Copies the directory `from` into `to`, recursively (made if missing).
-pub(super) fn copy_tree(from: &Path, to: &Path) -> crate::Result<()> {
-    std::fs::create_dir_all(to)?;
-    for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
-        let p = e?.path();
-        let target = to.join(p.file_name().context("unnamed file")?);
-        if p.is_dir() {
-            copy_tree(&p, &target)?;
-        } else {
-            std::fs::copy(&p, &target)?;
-        }
-    }
-    Ok(())
 }
 
 fn read_cached(path: &Path, size: Size) -> crate::Result<Option<ExperimentOutput>> {

@@ -21,7 +21,7 @@ use super::studies::ephys_parity;
 use super::{FirstSeed, IkRow, Job, ModelScores, Role, Scene, SceneResults, Scores, ValidationScores};
 use super::{data, tables};
 use crate::error::Context;
-use crate::evaluate::context::EvalContext;
+use crate::evaluate::context::{EvalContext, Scoring};
 use crate::records::{Curve, ExperimentOutput, Scatter, Timing};
 
 pub(super) fn validation_scores(data: &EmbedData, model: &EmbedModel) -> crate::Result<ValidationScores> {
@@ -90,7 +90,7 @@ pub(super) fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result
     for stage in 1..=through {
         let run = weft_nn::embed_training::stage_dir(from, stage);
         if run.exists() {
-            crate::evaluate::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
+            crate::files::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
         }
     }
     // The configuration last: a directory with it is a model (a copy cut short is redone).
@@ -592,12 +592,8 @@ pub(super) fn inverse_kinematics(scene: &str, data: &EmbedData, model: &EmbedMod
 ///   M_phys's two forces squared apart (`m-phys-inertial`, `m-phys-potential`), beside the
 ///   same three of the ground-truth frames (method `ground-truth`): how large the forces
 ///   are that the residual is measured against.
-pub fn score_model(
-    ctx: &EvalContext,
-    model_dir: &Path,
-    data_dir: &Path,
-    split: &str,
-) -> crate::Result<ExperimentOutput> {
+pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
+    let (ctx, model_dir, data_dir, split) = (scoring.ctx, scoring.model_dir, scoring.data_dir, scoring.split);
     if !matches!(split, "test" | "validation") {
         return Err(crate::Error::Invalid(format!(
             "embed models are scored on Tan et al.'s test frames (the last 5 of every 17) or on the validation windows, not {split:?}: use --split test or --split validation"
@@ -607,8 +603,7 @@ pub fn score_model(
     let scene = dataset.name.clone();
     let normalization = weft_nn::checkpoint::read_json(&model_dir.join("normalization.json"))?;
     let data = EmbedData::with_normalization(dataset, normalization)?;
-    let model = EmbedModel::load(model_dir, &data, 3)
-        .with_context(|| format!("loading the model in {}", model_dir.display()))?;
+    let model = scoring.load_model(|dir| EmbedModel::load(dir, &data, 3))?;
     let w = model.config.weights;
     let method = if w.ephys == 0.0 && w.mphys == 0.0 {
         "no-pb"
@@ -624,12 +619,10 @@ pub fn score_model(
     let scores = score(&data, &predicted)?;
     let timing = Timing {
         seconds_per_frame: Some(seconds),
-        ground_truth_seconds_per_frame: crate::evaluate::context::ground_truth_seconds(data_dir).ok(),
+        ground_truth_seconds_per_frame: scoring.ground_truth_seconds(),
     };
-    let mut out = ExperimentOutput::new("embed", ctx.size);
-    out.notes.push(format!(
-        "embed score: {} ({method}) on the {} test frames of {}",
-        model_dir.display(),
+    let mut out = scoring.output(format_args!(
+        "({method}) on the {} test frames of {}",
         data.test_frames.len(),
         data_dir.display()
     ));

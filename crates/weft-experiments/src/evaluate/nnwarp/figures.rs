@@ -1,0 +1,348 @@
+//! The nnwarp experiment's figures and timings: NNWarp Table 1 measured on this machine,
+//! the error as the load and the field's direction leave the trained range (Figs. 18–19),
+//! and the beam tip's trajectory under a suddenly applied field (Fig. 15).
+
+use std::path::Path;
+use std::time::Instant;
+
+use nalgebra::Vector3;
+use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, WarpContext, load_model, rel_error};
+use weft_sim::energies::{LameParameters, Material, TetElasticity};
+use weft_sim::scenes::volume::LimbResolution;
+use weft_sim::warp::FieldDirection;
+use weft_sim::{LinearSolve, PrefactorizedLinear};
+
+use super::data::{Shape, limb};
+use super::scoring::{Bench, METHODS, Reference, Scored, field_tag};
+use super::{DENSITY, FIELD_ANGLES, POISSON, WarpMaterial, YOUNG};
+use crate::error::Context;
+use crate::records::{ExperimentOutput, LinePlot, Series, Timing};
+use weft_data::Size;
+
+/// NNWarp Table 1, all measured here: the training beam and the ~50 k-tet limb (quick:
+/// the quick limb), with the Neo-Hookean network `model`.
+pub(super) fn timing_table(
+    out: &mut ExperimentOutput,
+    size: Size,
+    shapes: &[Shape],
+    model: &Path,
+    lame: LameParameters,
+) -> crate::Result<()> {
+    let mut timing_rows = Vec::new();
+    // NNWarp Table 1's bodies: the training beam and the ~50 k-tet limb (quick: the
+    // quick limb).
+    let timed_limb = limb(if size == Size::Quick {
+        LimbResolution::Quick
+    } else {
+        LimbResolution::Benchmark
+    })?;
+    for shape in shapes.iter().filter(|s| s.name == "beam").chain([&timed_limb]) {
+        timing_rows.push(timing_row(out, shape, model, lame)?);
+    }
+    out.tables.push(crate::paper::Table {
+        title: "NNWarp (Luo et al.) Table 1 — time performance, ours (paper beside)".into(),
+        caption: "All columns measured in this run on this machine: pre-factorised linear FEM (factorisation, one \
+                  static solve), the Neo-Hookean network's node-wise correction, frames per second of solve and \
+                  correction together, and one full Neo-Hookean implicit-Euler frame (Δt = 0.01 s) on the same \
+                  body. The paper (8-core i7, Eigen): beam 2,629 tets, 6.9 ms factorisation, < 1 ms solve, 333 \
+                  FPS; dragon 51,850 tets, 307 ms, 15 ms, 15–18 FPS."
+            .into(),
+        header: [
+            "body",
+            "tetrahedra",
+            "factorisation",
+            "solve",
+            "NNWarp correction",
+            "FPS",
+            "full Neo-Hookean frame",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: timing_rows,
+    });
+    Ok(())
+}
+
+/// One empty line per method, in [`METHODS`] order.
+fn method_series() -> Vec<Series> {
+    METHODS
+        .iter()
+        .map(|m| Series {
+            label: m.to_string(),
+            x: Vec::new(),
+            y: Vec::new(),
+        })
+        .collect()
+}
+
+/// Adds every method's error at `x`.
+fn push_point(series: &mut [Series], x: f64, scored: &Scored) {
+    for (s, e) in series.iter_mut().zip(scored.errors) {
+        s.x.push(x);
+        s.y.push(e);
+    }
+}
+
+/// NNWarp Fig. 18: `rel-error` of every method as the load grows past the trained range
+/// (which ends where the linear answer moves a node by 2), Neo-Hookean.
+pub(super) fn load_extrapolation(
+    root: &Path,
+    model: &Path,
+    shape: &Shape,
+    direction: Vector3<f64>,
+    field: FieldDirection,
+    lame: LameParameters,
+    size: Size,
+) -> crate::Result<LinePlot> {
+    let mut bench = Bench::new(shape, direction, lame)?;
+    let nnwarp = [bench.nnwarp(model, field)?];
+    let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(FIELD_ANGLES.0))?;
+    let levels: Vec<f64> = if size == Size::Quick {
+        vec![0.5, 1.5, 2.5]
+    } else {
+        (1..=12).map(|k| 0.25 * k as f64).collect()
+    };
+    let mut series = method_series();
+    for level in levels {
+        // Past the reach of the nonlinear reference the curve ends.
+        let Ok(scored) = bench.score(&nnwarp, &mut reference, level) else {
+            break;
+        };
+        push_point(&mut series, level, &scored);
+    }
+    crate::error::ensure!(!series[0].x.is_empty(), "no load could be scored");
+    Ok(LinePlot {
+        name: format!("extrapolation-load-{}", shape.name),
+        title: format!(
+            "nnwarp / {}/neo-hookean: error as the load leaves the trained range (ends at 2)",
+            shape.name
+        ),
+        x_label: "largest linear node displacement (unit-sphere units)".into(),
+        y_label: "rel-error".into(),
+        log_y: true,
+        series,
+    })
+}
+
+/// NNWarp Fig. 19: `rel-error` as the field's azimuth α leaves the trained quarter
+/// hemisphere (α ∈ [0, π/2]; β fixed), at the middle load, Neo-Hookean. Each direction is
+/// a fresh body: its contextual features and its reference depend on the field.
+pub(super) fn direction_extrapolation(
+    root: &Path,
+    model: &Path,
+    shape: &Shape,
+    lame: LameParameters,
+    size: Size,
+) -> crate::Result<LinePlot> {
+    let alphas: Vec<f64> = if size == Size::Quick {
+        vec![0.4, 1.2, 2.4]
+    } else {
+        (0..8).map(|k| 0.4 * k as f64).collect()
+    };
+    let mut series = method_series();
+    for alpha in alphas {
+        let direction = Vector3::from(weft_sim::energies::hemisphere_direction(alpha, FIELD_ANGLES.1));
+        let mut bench = Bench::new(shape, direction, lame)?;
+        let nnwarp = [bench.nnwarp(model, FieldDirection::Directional(direction))?];
+        let mut reference = Reference::new(root, &bench, WarpMaterial::NeoHookean, lame, &field_tag(alpha))?;
+        let Ok(scored) = bench.score(&nnwarp, &mut reference, 1.0) else {
+            continue;
+        };
+        push_point(&mut series, alpha, &scored);
+    }
+    crate::error::ensure!(!series[0].x.is_empty(), "no direction could be scored");
+    Ok(LinePlot {
+        name: format!("extrapolation-direction-{}", shape.name),
+        title: format!(
+            "nnwarp / {}/neo-hookean: error as the field's azimuth α leaves [0, π/2] (β = {})",
+            shape.name, FIELD_ANGLES.1
+        ),
+        x_label: "field azimuth α (rad)".into(),
+        y_label: "rel-error".into(),
+        log_y: true,
+        series,
+    })
+}
+
+/// NNWarp Fig. 15: the beam's tip node over time under a suddenly applied field, full
+/// Neo-Hookean implicit Euler against NNWarp's runtime and linear FEM at time step `dt`.
+/// Returns the plot and a note with each method's mean `rel-error` over the frames.
+pub(super) fn trajectory(
+    model: &Path,
+    direction: Vector3<f64>,
+    dt: f64,
+    size: Size,
+) -> crate::Result<(LinePlot, String)> {
+    use weft_sim::scenes::volume::{ForceField, VolumeSolve};
+    let quick = size == Size::Quick;
+    let mut scene = weft_sim::VolumeScene::builtin("beam-neo-hookean-field", quick)?;
+    scene.young = YOUNG;
+    scene.poisson = POISSON;
+    scene.density = DENSITY;
+    scene.solve = VolumeSolve::ImplicitEuler { dt };
+    scene.frames = ((if quick { 0.3 } else { 1.5 }) / dt).round() as usize;
+    // The field's strength: the static linear answer at the middle load.
+    let probe = weft_sim::VolumeSimulation::new(scene.clone(), None)?;
+    let shape = Shape {
+        name: "beam",
+        mesh: probe.mesh().clone(),
+        anchors: probe.anchors().to_vec(),
+        split: "train-shape",
+    };
+    let lame = LameParameters::from_young_poisson(YOUNG, POISSON)?;
+    let bench = Bench::new(&shape, direction, lame)?;
+    let acceleration = 1.0 / (bench.reach * bench.scale);
+    scene.gravity = None;
+    scene.force_field = Some(ForceField::Directional {
+        direction: direction.into(),
+        acceleration,
+    });
+    let mut full = weft_sim::VolumeSimulation::new(scene.clone(), None)?;
+    let mut linear_scene = scene.clone();
+    linear_scene.material = Material::Linear;
+    let mut linear = weft_sim::VolumeSimulation::new(linear_scene, None)?;
+    let (_, mlp) = load_model(model)?;
+    let mut runtime = NnWarpSimulation::new(&full, mlp)?;
+    // The tip node nearest the tip face's centre.
+    let mesh = full.mesh();
+    let x_max = mesh.positions().iter().map(|p| p.x).fold(f64::MIN, f64::max);
+    let centre = mesh
+        .positions()
+        .iter()
+        .filter(|p| (p.x - x_max).abs() < 1e-9)
+        .fold(Vector3::zeros(), |a, p| a + p)
+        / mesh
+            .positions()
+            .iter()
+            .filter(|p| (p.x - x_max).abs() < 1e-9)
+            .count()
+            .max(1) as f64;
+    let tip = (0..mesh.num_vertices())
+        .min_by(|&a, &b| {
+            (mesh.positions()[a] - centre)
+                .norm()
+                .total_cmp(&(mesh.positions()[b] - centre).norm())
+        })
+        .context("empty mesh")?;
+    let rest = mesh.flat_positions();
+    let along = |u: &[f64]| Vector3::new(u[3 * tip], u[3 * tip + 1], u[3 * tip + 2]).dot(&direction);
+    let labels = ["full FEM (neo-hookean)", "nnwarp", "linear"];
+    let mut series: Vec<Series> = labels
+        .iter()
+        .map(|l| Series {
+            label: l.to_string(),
+            x: vec![0.0],
+            y: vec![0.0],
+        })
+        .collect();
+    let (mut e_nnwarp, mut e_linear) = (0.0, 0.0);
+    for k in 1..=scene.frames {
+        let truth: Vec<f64> = full.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
+        let lin: Vec<f64> = linear.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
+        let warped = runtime.step()?.warped;
+        e_nnwarp += rel_error(&warped, &truth);
+        e_linear += rel_error(&lin, &truth);
+        for (s, u) in series.iter_mut().zip([&truth, &warped, &lin]) {
+            s.x.push(k as f64 * dt);
+            s.y.push(along(u));
+        }
+    }
+    let frames = scene.frames.max(1) as f64;
+    let note = format!(
+        "nnwarp/trajectory at Δt = {dt} s: beam tip node {tip}, {} frames under a field of {acceleration:.3} m/s² \
+         applied at t = 0 (static linear answer 1 unit-sphere unit); mean rel-error over the frames: nnwarp {:.4}, \
+         linear {:.4}",
+        scene.frames,
+        e_nnwarp / frames,
+        e_linear / frames
+    );
+    Ok((
+        LinePlot {
+            name: format!("trajectory-dt-{}ms", (dt * 1e3).round()),
+            title: format!("nnwarp / beam: tip node along the field over time, Δt = {dt} s"),
+            x_label: "time (s)".into(),
+            y_label: "tip displacement along the field (m)".into(),
+            log_y: false,
+            series,
+        },
+        note,
+    ))
+}
+
+/// NNWarp Table 1's columns for one body, all measured here: tets, factorisation, one
+/// static solve, the Neo-Hookean network's correction (means over `REPEATS`), frames per
+/// second of the two together, and one full Neo-Hookean implicit-Euler frame (Δt = 0.01 s).
+fn timing_row(
+    out: &mut ExperimentOutput,
+    shape: &Shape,
+    model: &std::path::Path,
+    lame: LameParameters,
+) -> crate::Result<Vec<String>> {
+    const REPEATS: usize = 20;
+    let mesh = &shape.mesh;
+    let rest = mesh.flat_positions();
+    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), DENSITY);
+    let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), &shape.anchors)?;
+    let gravity = weft_sim::energies::ConstantForce::gravity(&masses, [0.0, -9.81, 0.0])?;
+    let forces = gravity.forces().to_vec();
+    let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
+    let mut linear = PrefactorizedLinear::new(
+        &rest,
+        &[&linear_energy],
+        masses.clone(),
+        fixed.clone(),
+        LinearSolve::Static,
+    )?;
+    let (_, mlp) = load_model(model)?;
+    let context = WarpContext::new(
+        mesh,
+        &shape.anchors,
+        FieldDirection::Directional(-Vector3::y()),
+        POISSON,
+    )?;
+    let nnwarp = NnWarp::new(context, mlp);
+    let (mut solve, mut correction) = (0.0, 0.0);
+    for _ in 0..REPEATS {
+        let t = Instant::now();
+        linear.step(&forces, &[])?;
+        solve += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        std::hint::black_box(nnwarp.warp(linear.displacements())?);
+        correction += t.elapsed().as_secs_f64();
+    }
+    let (solve, correction) = (solve / REPEATS as f64, correction / REPEATS as f64);
+    let terms: Vec<Box<dyn weft_sim::Energy>> = vec![
+        Box::new(TetElasticity::new(mesh, Material::NeoHookean, lame)?),
+        Box::new(gravity),
+    ];
+    let mut full = weft_sim::ImplicitEuler::new(masses, 0.01, rest, terms, fixed)?;
+    let t = Instant::now();
+    full.step(&[])?;
+    let full_seconds = t.elapsed().as_secs_f64();
+    let timing = Timing::new(solve + correction, full_seconds);
+    for (metric, value, unit) in [
+        ("correction-seconds", correction, "s"),
+        ("fps", 1.0 / (solve + correction), "1/s"),
+    ] {
+        out.record(
+            &format!("{}/neo-hookean", shape.name),
+            "nnwarp",
+            metric,
+            value,
+            unit,
+            timing,
+        );
+        if let Some(r) = out.records.last_mut() {
+            r.split = Some(shape.split.into());
+        }
+    }
+    Ok(vec![
+        format!("`{}`", shape.name),
+        mesh.num_tets().to_string(),
+        crate::paper::format_ms(linear.factorization_seconds()),
+        crate::paper::format_ms(solve),
+        crate::paper::format_ms(correction),
+        format!("{:.0}", 1.0 / (solve + correction)),
+        crate::paper::format_ms(full_seconds),
+    ])
+}
