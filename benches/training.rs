@@ -112,7 +112,7 @@ fn altconv(c: &mut Criterion) {
 }
 
 fn embedding(c: &mut Criterion) {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
     use weft_sim::ClothScene;
     // Three simulated frames of the standard sheet: one training window.
     let scene = ClothScene::builtin("sheet-ms", false).unwrap();

@@ -279,7 +279,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
+    use weft_nn::drape::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
     let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
@@ -382,7 +382,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingConfig, train_model};
     let c = &args.common;
     let mut config: EmbedTrainingConfig = read_config(c.config.as_deref())?;
     if args.no_pb {
@@ -507,7 +507,7 @@ mod tests {
     /// are the `--autograd` flag's).
     #[test]
     fn the_embed_configuration_help_names_every_field() {
-        let config = weft_nn::embed_training::EmbedTrainingConfig {
+        let config = weft_nn::embed::EmbedTrainingConfig {
             fine_tune_learning_rate: Some(1e-4),
             ..Default::default()
         };

@@ -13,7 +13,7 @@ use candle_core::Tensor;
 use nalgebra::Vector3;
 
 use crate::adam::{Adam, AdamSettings};
-use crate::embed_training::{EmbedData, EmbedModel};
+use crate::embed::{EmbedData, EmbedModel};
 use crate::error::{Error, Result};
 use crate::ops::{AcapInverse, ClothPotential};
 use crate::params::{Init, Params};

@@ -13,8 +13,7 @@
 use candle_core::{DType, Device, Tensor};
 
 use crate::adam::AdamSettings;
-use crate::embed::{LatentSimulator, LatentSimulatorConfig};
-use crate::embed_training::{EmbedData, FrameRef};
+use crate::embed::{EmbedData, FrameRef, LatentSimulator, LatentSimulatorConfig};
 use crate::error::{Error, Result};
 use crate::params::Params;
 use crate::pca::PositionPca;

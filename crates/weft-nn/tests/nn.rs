@@ -375,8 +375,8 @@ fn training_the_autoencoder_on_the_quick_sheet_lowers_every_loss() {
 
 #[test]
 fn latent_rollout_decodes_like_the_ops_and_feeds_its_codes_back() {
+    use weft_nn::embed::LatentRollout;
     use weft_nn::embed::{LatentSimulator, LatentSimulatorConfig};
-    use weft_nn::rollout::LatentRollout;
     let c = acap_case();
     let sheet = weft_mesh::generators::sheet(5, 1.0).unwrap();
     let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
@@ -468,8 +468,8 @@ fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
 
 /// The embedding's default configuration with a one-convolution, 8-wide autoencoder: the
 /// size the quick sheet's tests train and differentiate.
-fn small_embed_config() -> weft_nn::embed_training::EmbedTrainingConfig {
-    weft_nn::embed_training::EmbedTrainingConfig {
+fn small_embed_config() -> weft_nn::embed::EmbedTrainingConfig {
+    weft_nn::embed::EmbedTrainingConfig {
         autoencoder: AutoencoderConfig {
             conv_layers: 1,
             latent: 8,
@@ -480,7 +480,7 @@ fn small_embed_config() -> weft_nn::embed_training::EmbedTrainingConfig {
 
 #[test]
 fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, FrameRef};
+    use weft_nn::embed::{EmbedData, EmbedModel, FrameRef};
     use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let model = EmbedModel::new(small_embed_config(), &data).unwrap();
@@ -671,7 +671,7 @@ fn the_batched_correction_is_the_node_by_node_network_on_small_and_large_bodies(
 
 #[test]
 fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
-    use weft_nn::embed_training::{EmbedTrainingConfig, PhysScale, Progress};
+    use weft_nn::embed::{EmbedTrainingConfig, PhysScale, Progress};
     let mut c = EmbedTrainingConfig::default();
     c.weights.ephys = 0.5;
     c.ephys_warmup = 4;
@@ -703,7 +703,7 @@ fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
     assert_eq!(legacy.schedule.warmup_steps, 0);
     assert_eq!(
         EmbedTrainingConfig::default().schedule.warmup_steps,
-        weft_nn::embed_training::WARMUP_STEPS
+        weft_nn::embed::WARMUP_STEPS
     );
 }
 
@@ -850,7 +850,7 @@ fn the_pca_simulator_rolls_out_the_hand_computed_steps() {
 /// the controls.
 #[test]
 fn the_pca_simulator_learns_the_codes_and_rolls_out() {
-    use weft_nn::embed_training::EmbedData;
+    use weft_nn::embed::EmbedData;
     use weft_nn::pca::PositionPca;
     use weft_nn::pca_simulator::{PcaSimulatorConfig, train};
     let data = EmbedData::new(quick_sheet_dataset(34)).unwrap();
@@ -1199,7 +1199,7 @@ fn the_published_nnwarp_models_load_and_correct_nothing_at_rest() {
 /// the uncached computation's (`EmbedModel::losses`), on windows taken out of order.
 #[test]
 fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_gradients() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
     use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let config = EmbedTrainingConfig {
@@ -1274,7 +1274,7 @@ fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_grad
 
 #[test]
 fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_refused() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, train_stages};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingConfig, train_stages};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let config = small_embed_config();
     let model = EmbedModel::new(config.clone(), &data).unwrap();
@@ -1287,7 +1287,7 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
     assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
     // The command line's path refuses it before writing anything, so a retry is not
     // blocked by a half-made model directory.
-    let e = weft_nn::embed_training::train_model(&dir, &data, &config, &[2, 3], silent).unwrap_err();
+    let e = weft_nn::embed::train_model(&dir, &data, &config, &[2, 3], silent).unwrap_err();
     assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
     assert!(!dir.exists(), "a refused request writes nothing");
     for stages in [&[3, 1][..], &[1, 1], &[2, 1, 3], &[4]] {
@@ -1317,7 +1317,7 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
 
 /// Every stage of the embeddings in `a` and `b` trained the same epochs, bit for bit.
 fn assert_same_stage_histories(a: &std::path::Path, b: &std::path::Path) {
-    use weft_nn::embed_training::stage_dir;
+    use weft_nn::embed::stage_dir;
     for stage in 1..=3u8 {
         let history = |dir: &std::path::Path| -> Vec<(u64, u64)> {
             weft_nn::trainer::TrainingState::read(&stage_dir(dir, stage))
@@ -1333,7 +1333,7 @@ fn assert_same_stage_histories(a: &std::path::Path, b: &std::path::Path) {
 
 #[test]
 fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_trains() {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingConfig, train_model};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let short = EmbedTrainingConfig {
         epochs: [1, 1, 1],
@@ -1349,8 +1349,8 @@ fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_tra
     let silent = &mut weft_nn::trainer::Silent;
     train_model(&fresh, &data, &long, &[1, 2, 3], silent).unwrap();
     train_model(&extended, &data, &short, &[1, 2, 3], silent).unwrap();
-    assert!(weft_nn::embed_training::continues_exactly(&extended, &long));
-    assert!(!weft_nn::embed_training::continues_exactly(&fresh, &short));
+    assert!(weft_nn::embed::continues_exactly(&extended, &long));
+    assert!(!weft_nn::embed::continues_exactly(&fresh, &short));
     train_model(&extended, &data, &long, &[1, 2, 3], silent).unwrap();
     // Stages 2 and 3 started from stage 1's one-epoch weights; they are trained again from
     // its two-epoch ones, so every stage matches the fresh run's.
@@ -1360,7 +1360,7 @@ fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_tra
 
 #[test]
 fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_trains_stage_3_afresh() {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, continues_exactly, stage_dir, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingConfig, continues_exactly, stage_dir, train_model};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let before = EmbedTrainingConfig {
         epochs: [1, 1, 2],
@@ -1414,7 +1414,7 @@ fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_tra
 
 #[test]
 fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_depth() {
-    use weft_nn::embed_training::EmbedTrainingConfig;
+    use weft_nn::embed::EmbedTrainingConfig;
     let c: EmbedTrainingConfig =
         serde_json::from_str(r#"{"adam": {"learning_rate": 2e-4}, "autoencoder": {"latent": 64}}"#).unwrap();
     let d = EmbedTrainingConfig::default();

@@ -23,7 +23,7 @@ use nalgebra::Vector3;
 use weft_data::DrapeDataset;
 use weft_nn::Device;
 use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
-use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
+use weft_nn::drape::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
 use weft_nn::params::Params;
 use weft_proj::RestShape;
 
@@ -1084,7 +1084,7 @@ pub fn score_model(
     split: &str,
 ) -> crate::Result<ExperimentOutput> {
     let dataset = DrapeDataset::load(data_dir)?;
-    let (model, layer, config) = weft_nn::drape_training::load_model(model_dir, &dataset.sleeve)
+    let (model, layer, config) = weft_nn::drape::load_model(model_dir, &dataset.sleeve)
         .with_context(|| format!("loading the model in {}", model_dir.display()))?;
     let data = DrapeTensors::of_split(&dataset, split, &Device::Cpu)?;
     crate::error::ensure!(!data.is_empty(), "{} has no {split} example", data_dir.display());

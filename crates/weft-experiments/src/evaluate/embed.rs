@@ -13,12 +13,12 @@ use std::time::Instant;
 use crate::error::Context;
 
 use weft_data::ClothDataset;
-use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
+use weft_nn::embed::LatentRollout;
+use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
 use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
-use weft_nn::rollout::LatentRollout;
 use weft_nn::trainer::{Decay, Schedule, TrainingState};
 use weft_sim::ForceResidual;
 
@@ -290,7 +290,7 @@ fn study_row(candidate: String, runs: &[(std::path::PathBuf, ModelScores)], stag
             stages
                 .iter()
                 .map(|&stage| {
-                    TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage))
+                    TrainingState::read(&weft_nn::embed::stage_dir(dir, stage))
                         .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
                 })
                 .collect::<Vec<_>>()
@@ -482,21 +482,21 @@ fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConf
 /// Whether `dir` holds a model that cannot be trained on into the one `config` asks for:
 /// one from an older version of the experiment. A model that stopped under fewer epochs or
 /// a shorter early-stopping patience is not stale: training it on gives exactly the model
-/// `config` trains ([`weft_nn::embed_training::continues_exactly`]).
+/// `config` trains ([`weft_nn::embed::continues_exactly`]).
 fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
-    dir.join("config.json").exists() && !weft_nn::embed_training::continues_exactly(dir, config)
+    dir.join("config.json").exists() && !weft_nn::embed::continues_exactly(dir, config)
 }
 
 /// Makes `to` a model directory holding `from`'s configuration, normalisation and trained
 /// stages 1 and 2 (copies, so neither model's later training touches the other's files),
 /// for a stage 3 trained under another learning rate
-/// ([`weft_nn::embed_training::train_model`] then discards nothing and trains stage 3).
+/// ([`weft_nn::embed::train_model`] then discards nothing and trains stage 3).
 fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result<()> {
     std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
     for stage in 1..=through {
-        let run = weft_nn::embed_training::stage_dir(from, stage);
+        let run = weft_nn::embed::stage_dir(from, stage);
         if run.exists() {
-            super::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
+            super::copy_tree(&run, &weft_nn::embed::stage_dir(to, stage))?;
         }
     }
     // The configuration last: a directory with it is a model (a copy cut short is redone).
@@ -528,7 +528,7 @@ fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir:
         .collect();
     let tag = tag.into_iter().rev().collect::<Vec<_>>().join("/");
     let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?.tagged(tag);
-    weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
+    weft_nn::embed::train_model(dir, data, config, &[1, 2, 3], &mut progress)
         .with_context(|| format!("training {}", dir.display()))?;
     Ok(())
 }
@@ -803,7 +803,7 @@ fn stage_curves(name: String, title: String, models: &[(&str, &Path)], stages: &
     let mut series = Vec::new();
     for (method, dir) in models {
         for &stage in stages {
-            let Ok(state) = TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage)) else {
+            let Ok(state) = TrainingState::read(&weft_nn::embed::stage_dir(dir, stage)) else {
                 continue;
             };
             let (mut x, mut y) = (vec![0.0], vec![state.initial_validation]);
@@ -1669,7 +1669,7 @@ fn run_scene(
             );
             let scores = scored_model(ctx, &data, &c, &dir, role("no-pb", true))?;
             let states: Vec<Option<TrainingState>> = (1..=3u8)
-                .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, stage)).ok())
+                .map(|stage| TrainingState::read(&weft_nn::embed::stage_dir(&dir, stage)).ok())
                 .collect();
             let trained: Vec<String> = states
                 .iter()
@@ -2541,11 +2541,11 @@ mod tests {
             epochs: [2, 0, 1],
             ..training_config(Size::Quick)
         };
-        weft_nn::embed_training::train_model(&dir, &data, &config, &[1, 2, 3], &mut weft_nn::trainer::Silent).unwrap();
+        weft_nn::embed::train_model(&dir, &data, &config, &[1, 2, 3], &mut weft_nn::trainer::Silent).unwrap();
         let plot = learning_curves("sheet-ms", &[("ours", &dir)]);
         let labels: Vec<&str> = plot.series.iter().map(|s| s.label.as_str()).collect();
         assert_eq!(labels, ["ours, stage 1", "ours, stage 3"]);
-        let first = TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, 1)).unwrap();
+        let first = TrainingState::read(&weft_nn::embed::stage_dir(&dir, 1)).unwrap();
         assert_eq!(plot.series[0].x, [0.0, 1.0, 2.0]);
         assert_eq!(plot.series[0].y[0], first.initial_validation);
         assert_eq!(plot.series[0].y[2], first.history[1].validation);
@@ -2713,12 +2713,11 @@ mod tests {
         };
         let (source, study) = (root.join("source"), root.join("study"));
         scored_model(&ctx, &data, &config, &source, role).unwrap();
-        let state = |dir: &Path, stage: u8| {
-            std::fs::read(weft_nn::embed_training::stage_dir(dir, stage).join("training.json")).unwrap()
-        };
+        let state =
+            |dir: &Path, stage: u8| std::fs::read(weft_nn::embed::stage_dir(dir, stage).join("training.json")).unwrap();
         let source_stage_3 = state(&source, 3);
         share_stages(&source, &study, 2).unwrap();
-        assert!(!weft_nn::embed_training::stage_dir(&study, 3).exists());
+        assert!(!weft_nn::embed::stage_dir(&study, 3).exists());
         let slower = EmbedTrainingConfig {
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
@@ -2773,7 +2772,7 @@ mod tests {
         let fresh = scored_model(&ctx, &data, &four, &straight, role).unwrap();
         // Stage 3's epochs: (loss, validation, wall seconds).
         let history = |dir: &Path| -> Vec<(f64, f64, f64)> {
-            TrainingState::read(&weft_nn::embed_training::stage_dir(dir, 3))
+            TrainingState::read(&weft_nn::embed::stage_dir(dir, 3))
                 .unwrap()
                 .history
                 .iter()
@@ -2929,7 +2928,7 @@ mod tests {
         std::fs::create_dir_all(&ours).unwrap();
         std::fs::create_dir_all(&baseline).unwrap();
         let config = training_config(Size::Quick);
-        assert_eq!(config.phys_scale, weft_nn::embed_training::PhysScale::Curvature);
+        assert_eq!(config.phys_scale, weft_nn::embed::PhysScale::Curvature);
         assert!(!stale(&dir.join("nothing"), &config), "no model is not a stale model");
         // A configuration as stored before the field existed.
         let legacy = |c: &EmbedTrainingConfig| {
@@ -2950,7 +2949,7 @@ mod tests {
         more.schedule.early_stopping_patience = Some(20);
         assert!(!stale(&baseline, &more));
         // Unless a stage trained more epochs than asked: its kept weights may be beyond them.
-        let stage_1 = weft_nn::embed_training::stage_dir(&baseline, 1);
+        let stage_1 = weft_nn::embed::stage_dir(&baseline, 1);
         std::fs::create_dir_all(&stage_1).unwrap();
         let trained = TrainingState {
             config: zeroed.trainer(1),

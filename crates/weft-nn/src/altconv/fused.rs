@@ -39,7 +39,7 @@ use candle_core::{CpuStorage, Layout, Shape, Tensor};
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::{AltConvNet, Drive, INPUT_CHANNELS, Peephole, Variant};
+use super::model::{AltConvNet, Drive, INPUT_CHANNELS, Peephole, Variant};
 use crate::error::{Error, Result};
 use crate::fast::{sigmoid_f32, tanh_f32};
 use crate::graph::{Columns, NormalizedAdjacency};
@@ -74,7 +74,7 @@ struct Plan {
     variant: Variant,
     cells: Vec<CellPlan>,
     num_params: usize,
-    /// Output unit (m) and the input standardisation ([`super::Scaling`]).
+    /// Output unit (m) and the input standardisation ([`super::model::Scaling`]).
     unit: f32,
     mean: [f32; INPUT_CHANNELS],
     inv_std: [f32; INPUT_CHANNELS],

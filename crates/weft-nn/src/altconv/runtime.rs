@@ -22,7 +22,7 @@
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::{AltConvNet, INPUT_CHANNELS, Peephole, Variant};
+use super::model::{AltConvNet, INPUT_CHANNELS, Peephole, Variant};
 use crate::error::{Error, Result};
 use crate::fast::{sigmoid_f32, tanh_f32};
 use crate::graph::NormalizedAdjacency;
@@ -65,7 +65,7 @@ pub struct AltConvRuntime {
     x_previous: Vec<f32>,
     offset0: Vec<f32>,
     started: bool,
-    scaling: super::Scaling,
+    scaling: super::model::Scaling,
     /// Scratch reused every step (allocating megabytes per cell and step cost page
     /// faults): `[Â X | Â H]` and the gates.
     xh: Vec<f32>,

@@ -15,15 +15,13 @@ use std::sync::Arc;
 
 use candle_core::Tensor;
 
+use super::fused::{DecoderOp, EncoderOp, conv_parameters};
 use crate::Kernels;
 use crate::error::{Error, Result};
-use crate::fused_autoencoder::{DecoderOp, EncoderOp, conv_parameters};
 use crate::graph::MeshGraph;
 use crate::layers::{Dense, GraphConv, leaky_relu};
+use crate::ops::FEATURE_CHANNELS;
 use crate::params::Params;
-
-/// Channels of an ACAP feature.
-pub const FEATURE_CHANNELS: usize = 9;
 
 /// Shape of the autoencoder.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -18,8 +18,8 @@ use nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, Feature, FeatureNormalization, PoissonPseudoInverse};
 use weft_sim::{ClothSimulation, ImplicitEuler};
 
+use super::model::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
 use crate::adam::AdamSettings;
-use crate::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
 use crate::error::{Error, Result};
 use crate::graph::MeshGraph;
 use crate::ops::{AcapInverse, LPhys};

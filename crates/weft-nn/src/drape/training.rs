@@ -12,8 +12,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
 
+use super::model::{DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, DrapeTraining, Mu, Postprocess};
 use crate::adam::AdamSettings;
-use crate::drape::{DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, DrapeTraining, Mu, Postprocess};
 use crate::error::{Error, Result};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
 use crate::params::Params;
