@@ -12,9 +12,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use weft_acap::{AcapFeatures, AcapSettings, FeatureNormalization, PoissonPseudoInverse};
 use weft_mesh::unflatten;
 use weft_nn::embed::LatentRollout;
-use weft_nn::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
+use weft_nn::embed::{AutoencoderSettings, LatentSimulator, LatentSimulatorSettings, MeshAutoencoder};
 use weft_nn::graph::MeshGraph;
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_sim::{ClothScene, ClothSimulation};
 
 fn latent_rollout(c: &mut Criterion) {
@@ -37,11 +37,11 @@ fn latent_rollout(c: &mut Criterion) {
     // The CPU device, re-exported by weft-nn (the benches do not depend on candle).
     let device = weft_nn::Device::Cpu;
     let graph = Arc::new(MeshGraph::new(&mesh, &device).unwrap());
-    let mut params = Params::new(&device, 1);
-    let ae = MeshAutoencoder::new(&mut params, graph, AutoencoderConfig::default()).unwrap();
+    let mut params = ParamStore::new(&device, 1);
+    let ae = MeshAutoencoder::new(&mut params, graph, AutoencoderSettings::default()).unwrap();
     let latent_sim = LatentSimulator::new(
         &mut params,
-        LatentSimulatorConfig {
+        LatentSimulatorSettings {
             latent: 128,
             controls: q.len(),
             hidden: vec![256, 256],

@@ -36,7 +36,7 @@ pub enum Error {
     /// A training configuration field is out of its range: checked before any work, so
     /// nothing is written.
     #[error("configuration field `{field}` = {value} {reason}")]
-    InvalidConfig {
+    InvalidSettings {
         field: String,
         value: String,
         reason: &'static str,

@@ -42,11 +42,11 @@
 //! ```
 //! use std::sync::Arc;
 //! use candle_core::{Device, Tensor};
-//! use weft_nn::{embed::{AutoencoderConfig, MeshAutoencoder}, graph::MeshGraph, params::Params};
+//! use weft_nn::{embed::{AutoencoderSettings, MeshAutoencoder}, graph::MeshGraph, params::ParamStore};
 //! let sheet = weft_mesh::generators::sheet(5, 1.0)?;
 //! let graph = Arc::new(MeshGraph::new(&sheet, &Device::Cpu)?);
-//! let mut params = Params::new(&Device::Cpu, 42);
-//! let config = AutoencoderConfig { conv_layers: 1, latent: 8 };
+//! let mut params = ParamStore::new(&Device::Cpu, 42);
+//! let config = AutoencoderSettings { conv_layers: 1, latent: 8 };
 //! let model = MeshAutoencoder::new(&mut params, graph, config)?;
 //! let features = Tensor::zeros((2, 25, 9), candle_core::DType::F32, &Device::Cpu)?;
 //! let z = model.encode(&features)?;

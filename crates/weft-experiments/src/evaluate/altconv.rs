@@ -20,7 +20,7 @@ use std::path::Path;
 use crate::error::Context;
 use nalgebra::Vector3;
 use weft_data::{LimbDataset, LimbSequence};
-use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Recipe, Variant, score_sequence};
+use weft_nn::altconv::{AltConvNet, AltConvTrainingSettings, Recipe, Variant, score_sequence};
 use weft_nn::graph::NormalizedAdjacency;
 
 use super::context::EvalContext;
@@ -116,8 +116,8 @@ fn paper_value(split: &str, method: &str, single_step: bool, window: usize) -> O
 /// curriculum from 10 to 50 steps over the first 8 epochs, scheduled sampling rising from
 /// epoch 3 to pure roll-out training at epoch 15, gradients clipped to norm 1, and the
 /// kept epoch chosen by the 50-step validation roll-out (docs/ALTCONV.md, *The claim decided*).
-pub fn training_config(size: Size, scene: &str, variant: Variant) -> AltConvTrainingConfig {
-    let mut c = AltConvTrainingConfig::new(variant);
+pub fn training_config(size: Size, scene: &str, variant: Variant) -> AltConvTrainingSettings {
+    let mut c = AltConvTrainingSettings::new(variant);
     let jiggle = scene != "limb";
     match size {
         Size::Quick => {
@@ -178,16 +178,16 @@ const JIGGLE_EPOCHS: usize = 80;
 /// model trained for fewer epochs under the same configuration is kept: the trainer
 /// continues it to `config.epochs`, as a straight run would have gone (a larger epoch
 /// budget costs only the new epochs).
-fn discard_if_stale(dir: &Path, config: &AltConvTrainingConfig) -> crate::Result<()> {
+fn discard_if_stale(dir: &Path, config: &AltConvTrainingSettings) -> crate::Result<()> {
     let path = dir.join("config.json");
     if !path.exists() {
         return Ok(());
     }
-    let stored: Option<AltConvTrainingConfig> = std::fs::read_to_string(&path)
+    let stored: Option<AltConvTrainingSettings> = std::fs::read_to_string(&path)
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
-        .filter(|s: &AltConvTrainingConfig| s.epochs <= config.epochs)
-        .map(|s| AltConvTrainingConfig {
+        .filter(|s: &AltConvTrainingSettings| s.epochs <= config.epochs)
+        .map(|s| AltConvTrainingSettings {
             epochs: config.epochs,
             ..s
         });
@@ -314,7 +314,7 @@ fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: 
     for variant in Variant::ALL {
         let variant_dir = base.join("models").join(variant.name());
         let train = |seed: u64, lr: f64| -> crate::Result<(weft_nn::trainer::TrainingState, std::path::PathBuf)> {
-            let mut config = AltConvTrainingConfig {
+            let mut config = AltConvTrainingSettings {
                 seed,
                 ..training_config(ctx.size, scene, variant)
             };

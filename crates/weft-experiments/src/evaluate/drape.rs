@@ -22,9 +22,9 @@ use crate::error::Context;
 use nalgebra::Vector3;
 use weft_data::DrapeDataset;
 use weft_nn::Device;
-use weft_nn::drape::{DrapeModel, DrapeNetConfig, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
-use weft_nn::drape::{DrapeTrainingConfig, Fitted, Layer, Layers, Plan, fit};
-use weft_nn::params::Params;
+use weft_nn::drape::{DrapeModel, DrapeNetSettings, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
+use weft_nn::drape::{DrapeTrainingSettings, Fitted, Layer, Layers, Plan, fit};
+use weft_nn::params::ParamStore;
 use weft_proj::RestShape;
 
 use super::context::EvalContext;
@@ -41,19 +41,19 @@ const FIXED_MU: [(f64, &str); 3] = [(1.0, "mu1"), (0.1, "mu0.1"), (0.01, "mu0.01
 const MU_STARTS: [(f64, &str); 3] = [(1.0, "1"), (0.1, "0.1"), (0.01, "0.01")];
 
 /// The training configuration of each evaluation size (standard: the library's default).
-pub fn training_config(size: Size) -> DrapeTrainingConfig {
+pub fn training_config(size: Size) -> DrapeTrainingSettings {
     if size != Size::Quick {
-        return DrapeTrainingConfig::default();
+        return DrapeTrainingSettings::default();
     }
-    DrapeTrainingConfig {
-        net: DrapeNetConfig {
+    DrapeTrainingSettings {
+        net: DrapeNetSettings {
             hidden: vec![16, 32],
             offset_scale: 0.01,
         },
         pretrain_epochs: 30,
         finetune_epochs: 3,
         batch: 4,
-        ..DrapeTrainingConfig::default()
+        ..DrapeTrainingSettings::default()
     }
 }
 
@@ -376,8 +376,8 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
     let train_scored = train.select(&(0..train.len().min(TRAIN_SCORED)).collect::<Vec<_>>())?;
     let scored: [(&str, &DrapeTensors); 3] = [("train", &train_scored), ("validation", &validation), ("test", &test)];
     let seeds = seeds_of(garment, ctx.size);
-    let base = DrapeTrainingConfig {
-        net: DrapeNetConfig {
+    let base = DrapeTrainingSettings {
+        net: DrapeNetSettings {
             offset_scale: garment.offset_scale,
             ..training_config(ctx.size).net
         },
@@ -395,7 +395,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
             models
         }
     };
-    let config_of = |seed: u64, learning_rate: f64| DrapeTrainingConfig {
+    let config_of = |seed: u64, learning_rate: f64| DrapeTrainingSettings {
         seed,
         learning_rate,
         ..base.clone()
@@ -410,7 +410,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
                      dir: &Path,
                      name: &str,
                      layer: Layer,
-                     config: &DrapeTrainingConfig,
+                     config: &DrapeTrainingSettings,
                      init: Option<&Path>,
                      epochs: usize|
      -> crate::Result<Fitted> {
@@ -643,7 +643,7 @@ fn run_garment(ctx: &EvalContext, out: &mut ExperimentOutput, garment: &Garment)
         .fold((f64::INFINITY, 0.0f64), |(a, b), &m| (a.min(m), b.max(m)));
 
     // The methods per seed: trained models, and the seed's network with each layer after it.
-    let mut no_mu = Params::new(&device, 0);
+    let mut no_mu = ParamStore::new(&device, 0);
     let order: Vec<String> = std::iter::once("network-only".to_string())
         .chain(["postprocess-socp".into(), "trained-socp".into()])
         .chain(
@@ -1136,7 +1136,7 @@ pub fn summarize_trained(
     name: &str,
     fitted: &Fitted,
     layers: &Layers,
-    config: &DrapeTrainingConfig,
+    config: &DrapeTrainingSettings,
     validation: &DrapeTensors,
     test: &DrapeTensors,
     sleeve: &weft_mesh::TriMesh,

@@ -14,11 +14,11 @@ use crate::error::Context;
 
 use weft_data::ClothDataset;
 use weft_nn::embed::LatentRollout;
-use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
+use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingSettings, FrameRef};
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
-use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
+use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorSettings};
 use weft_nn::trainer::{Decay, Schedule, TrainingState};
 use weft_sim::ForceResidual;
 
@@ -110,8 +110,8 @@ fn seeds_cell(paper: Option<f64>, samples: impl Iterator<Item = f64>, digits: us
 /// loss has not improved for [`EARLY_STOPPING_PATIENCE`] epochs (issue 31: "train to
 /// convergence"); the learning-rate schedule is then chosen on validation
 /// ([`schedule_candidates`]). `quick` shrinks the networks and trains a fixed budget.
-fn training_config(size: Size) -> EmbedTrainingConfig {
-    let mut c = EmbedTrainingConfig::default();
+fn training_config(size: Size) -> EmbedTrainingSettings {
+    let mut c = EmbedTrainingSettings::default();
     match size {
         Size::Quick => {
             c.autoencoder.conv_layers = 1;
@@ -146,7 +146,7 @@ const BUDGET_STUDY_EPOCHS: usize = 150;
 
 /// The stage-1 epochs the first scene chooses between on validation: the configuration's and
 /// [`BUDGET_STUDY_EPOCHS`] (quick runs keep the configuration's).
-fn budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+fn budget_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<usize> {
     if size == Size::Quick {
         vec![config.epochs[0]]
     } else {
@@ -159,7 +159,7 @@ fn budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
 /// epochs. The first scene's `no-pb` models (every seed) are trained under each, and the one
 /// with the lowest mean validation M_rms is used by every model of the experiment. Quick
 /// runs keep the configuration's.
-fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'static str, Schedule)> {
+fn schedule_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<(&'static str, Schedule)> {
     let constant = config.schedule;
     if size == Size::Quick {
         return vec![("constant", constant)];
@@ -179,7 +179,7 @@ fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'stati
 /// starts a fresh Adam on both trained networks; at the full rate its first epoch raised
 /// the validation loss 4–8-fold and six of eight `sheet-ms` models kept their stage-2
 /// weights (docs/EMBEDDING.md). Quick runs keep the configuration's.
-fn fine_tune_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<Option<f64>> {
+fn fine_tune_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<Option<f64>> {
     if size == Size::Quick {
         vec![config.fine_tune_learning_rate]
     } else {
@@ -199,7 +199,7 @@ const STAGE_3_BUDGET_EPOCHS: usize = 30;
 
 /// The stage-3 epochs the first scene chooses between: the configuration's and
 /// [`STAGE_3_BUDGET_EPOCHS`] (quick runs keep the configuration's).
-fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<usize> {
     if size == Size::Quick || config.epochs[2] >= STAGE_3_BUDGET_EPOCHS {
         vec![config.epochs[2]]
     } else {
@@ -218,7 +218,7 @@ struct Studies {
 }
 
 impl Studies {
-    fn new(size: Size, config: &EmbedTrainingConfig) -> Self {
+    fn new(size: Size, config: &EmbedTrainingSettings) -> Self {
         Self {
             schedules: schedule_candidates(size, config),
             budgets: budget_candidates(size, config),
@@ -229,7 +229,7 @@ impl Studies {
 }
 
 /// The name of a stage-3 learning rate in the report and in directory names.
-fn fine_tune_name(config: &EmbedTrainingConfig, rate: Option<f64>) -> String {
+fn fine_tune_name(config: &EmbedTrainingSettings, rate: Option<f64>) -> String {
     match rate {
         None => format!("{} (every stage's)", config.adam.learning_rate),
         Some(r) => format!("{r}"),
@@ -325,8 +325,8 @@ fn seeds(size: Size) -> Vec<u64> {
 }
 
 /// `config` with its seed (initial weights and window order) set to `seed`.
-fn with_seed(config: &EmbedTrainingConfig, seed: u64) -> EmbedTrainingConfig {
-    EmbedTrainingConfig { seed, ..config.clone() }
+fn with_seed(config: &EmbedTrainingSettings, seed: u64) -> EmbedTrainingSettings {
+    EmbedTrainingSettings { seed, ..config.clone() }
 }
 
 /// The λ_ephys grid of a scene, one chosen on the validation windows ([`choose_ephys`]). Tan et al. tuned λ_ephys per dataset among Table II's 0.1,
@@ -340,7 +340,7 @@ fn with_seed(config: &EmbedTrainingConfig, seed: u64) -> EmbedTrainingConfig {
 /// side; without it (a baseline with no residual) the configuration's weight. Quick runs
 /// keep fixed weights: the configuration's, except on `sheet-ms`, where the grid is Table
 /// II's weights (trained at every size anyway).
-fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingConfig, parity: Option<f64>) -> Vec<f64> {
+fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingSettings, parity: Option<f64>) -> Vec<f64> {
     let e = config.weights.ephys;
     let mut grid = match (size, scene, parity.and_then(one_significant_digit)) {
         (Size::Quick, "sheet-ms", _) => vec![TABLE_II_EPHYS[0], e, TABLE_II_EPHYS[1]],
@@ -470,7 +470,7 @@ fn choose_ephys(candidates: &[(f64, ValidationScores)], baseline: ValidationScor
 }
 
 /// The configuration a method trains under: `no-pb` zeroes the physics weights.
-fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConfig {
+fn method_config(config: &EmbedTrainingSettings, no_pb: bool) -> EmbedTrainingSettings {
     let mut c = config.clone();
     if no_pb {
         c.weights.ephys = 0.0;
@@ -483,7 +483,7 @@ fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConf
 /// one from an older version of the experiment. A model that stopped under fewer epochs or
 /// a shorter early-stopping patience is not stale: training it on gives exactly the model
 /// `config` trains ([`weft_nn::embed::continues_exactly`]).
-fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
+fn stale(dir: &Path, config: &EmbedTrainingSettings) -> bool {
     dir.join("config.json").exists() && !weft_nn::embed::continues_exactly(dir, config)
 }
 
@@ -510,7 +510,7 @@ fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result<()> {
 /// Trains (or resumes) one model of the experiment into `dir`, all three stages; a model
 /// trained under another configuration is discarded and retrained (it is the
 /// experiment's own output, rebuilt by the same command).
-fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingConfig, dir: &Path) -> crate::Result<()> {
+fn train(ctx: &EvalContext, data: &EmbedData, config: &EmbedTrainingSettings, dir: &Path) -> crate::Result<()> {
     if stale(dir, config) {
         eprintln!(
             "embed: {} was trained under another configuration; retraining it",
@@ -1041,7 +1041,7 @@ fn ik_table(rows: &[IkRow], settings: IkSettings) -> Table {
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct ModelScores {
     /// The configuration the model trained under (a model of another is retrained).
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     validation: ValidationScores,
     test: Scores,
     /// Seconds per test frame to reconstruct (encode and decode).
@@ -1078,13 +1078,13 @@ struct Role<'a> {
 /// directory and role.
 #[derive(Clone)]
 struct Job<'a> {
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     dir: PathBuf,
     role: Role<'a>,
 }
 
 impl<'a> Job<'a> {
-    fn new(config: EmbedTrainingConfig, dir: PathBuf, role: Role<'a>) -> Self {
+    fn new(config: EmbedTrainingSettings, dir: PathBuf, role: Role<'a>) -> Self {
         Self { config, dir, role }
     }
 }
@@ -1113,7 +1113,7 @@ fn stage_3_candidate_runs(
     ctx: &EvalContext,
     data: &EmbedData,
     scene: &str,
-    configs: &[EmbedTrainingConfig],
+    configs: &[EmbedTrainingSettings],
     sources: &[PathBuf],
     copy: Option<(&Path, u8)>,
 ) -> crate::Result<Vec<(PathBuf, ModelScores)>> {
@@ -1158,7 +1158,7 @@ const PREDICTIONS_FILE: &str = "test-predictions.safetensors";
 fn scored_model(
     ctx: &EvalContext,
     data: &EmbedData,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     dir: &Path,
     role: Role,
 ) -> crate::Result<ModelScores> {
@@ -1235,7 +1235,7 @@ fn scored_model(
 struct SceneResults {
     /// The experiment's configuration after the scene (the first scene chooses the
     /// learning-rate schedule).
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     /// The scene's records, curves, scatters, learning curves, notes and failures.
     output: ExperimentOutput,
     ephys_row: Option<(Vec<f64>, Vec<String>)>,
@@ -1280,7 +1280,7 @@ enum KeptScene {
 
 /// The results kept at `path` if they were made under `config` (on the first scene, under
 /// any candidate schedule and stage-1 budget: the scene makes the choices).
-fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> KeptScene {
+fn restored_scene(path: &Path, config: &EmbedTrainingSettings, studies: &Studies, first: bool) -> KeptScene {
     let Ok(text) = std::fs::read_to_string(path) else {
         return KeptScene::Run;
     };
@@ -1292,7 +1292,7 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
         }
     };
     let same = if first {
-        let mut before_the_studies = EmbedTrainingConfig {
+        let mut before_the_studies = EmbedTrainingSettings {
             schedule: config.schedule,
             fine_tune_learning_rate: config.fine_tune_learning_rate,
             ..kept.config.clone()
@@ -1523,7 +1523,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
 fn run_scene(
     ctx: &EvalContext,
     scene: &str,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     studies: &Studies,
     first: bool,
 ) -> crate::Result<SceneResults> {
@@ -1603,7 +1603,7 @@ fn run_scene(
     // has the configuration a `no-pb` seed needs.
     let mut study: Vec<(std::path::PathBuf, ModelScores)> = Vec::new();
     // The directory of a study model trained under `c`, else `otherwise`.
-    let study_dir_or = |study: &[(std::path::PathBuf, ModelScores)], c: &EmbedTrainingConfig, otherwise| {
+    let study_dir_or = |study: &[(std::path::PathBuf, ModelScores)], c: &EmbedTrainingSettings, otherwise| {
         study
             .iter()
             .find(|(_, s)| c.trains_like(&s.config))
@@ -1611,7 +1611,7 @@ fn run_scene(
     };
     // The `no-pb` model each seed's stage 3 starts from in the stage-3 studies: the study's
     // run that trains like `c`, or the seed's `no-pb` model.
-    let stage_3_sources = |study: &[(std::path::PathBuf, ModelScores)], configs: &[EmbedTrainingConfig]| {
+    let stage_3_sources = |study: &[(std::path::PathBuf, ModelScores)], configs: &[EmbedTrainingSettings]| {
         configs
             .iter()
             .map(|c| study_dir_or(study, c, seed_dir("no-pb", c.seed)))
@@ -1626,7 +1626,7 @@ fn run_scene(
             .flat_map(|(name, schedule)| {
                 let study_root = &study_root;
                 seeds.iter().enumerate().map(move |(k, &seed)| {
-                    let c = EmbedTrainingConfig {
+                    let c = EmbedTrainingSettings {
                         schedule: *schedule,
                         ..with_seed(&method_config(config, true), seed)
                     };
@@ -1707,15 +1707,15 @@ fn run_scene(
         let mut scored = Vec::new();
         let mut curves = Vec::new();
         let current = r.config.fine_tune_learning_rate;
-        let at = |rate: Option<f64>, seed: u64| EmbedTrainingConfig {
+        let at = |rate: Option<f64>, seed: u64| EmbedTrainingSettings {
             fine_tune_learning_rate: rate,
             ..with_seed(&method_config(&r.config, true), seed)
         };
-        let currents: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(current, seed)).collect();
+        let currents: Vec<EmbedTrainingSettings> = seeds.iter().map(|&seed| at(current, seed)).collect();
         let sources = stage_3_sources(&study, &currents);
         for &rate in &studies.fine_tune {
             let name = fine_tune_name(&r.config, rate);
-            let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(rate, seed)).collect();
+            let configs: Vec<EmbedTrainingSettings> = seeds.iter().map(|&seed| at(rate, seed)).collect();
             let copies = models.join("stage-3-study").join(format!("lr-{name}"));
             let copy = (rate != current).then_some((copies.as_path(), 2));
             let runs = stage_3_candidate_runs(ctx, &data, scene, &configs, &sources, copy)?;
@@ -1746,10 +1746,10 @@ fn run_scene(
         };
         let mut scored = Vec::new();
         let mut curves = Vec::new();
-        let currents: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(current, seed)).collect();
+        let currents: Vec<EmbedTrainingSettings> = seeds.iter().map(|&seed| at(current, seed)).collect();
         let sources = stage_3_sources(&study, &currents);
         for &epochs in &studies.stage_3_budgets {
-            let configs: Vec<EmbedTrainingConfig> = seeds.iter().map(|&seed| at(epochs, seed)).collect();
+            let configs: Vec<EmbedTrainingSettings> = seeds.iter().map(|&seed| at(epochs, seed)).collect();
             let copies = models.join("stage-3-budget-study").join(format!("stage-3-{epochs}"));
             let copy = (epochs != current).then_some((copies.as_path(), 3));
             let runs = stage_3_candidate_runs(ctx, &data, scene, &configs, &sources, copy)?;
@@ -1954,7 +1954,7 @@ fn run_scene(
     // scores, and the first its long roll-out too.
     let pca_runs = ctx.concurrently(seeds.len(), |k| {
         let seed = seeds[k];
-        let pca_config = PcaSimulatorConfig {
+        let pca_config = PcaSimulatorSettings {
             hidden: config.latent_hidden.clone(),
             adam: config.adam,
             batch: config.batch,
@@ -1963,7 +1963,7 @@ fn run_scene(
             schedule: config.schedule,
         };
         let pca_dir = models.join("pca-mlp").join(format!("seed-{seed}"));
-        let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
+        let stored: Option<PcaSimulatorSettings> = std::fs::read_to_string(pca_dir.join("config.json"))
             .ok()
             .and_then(|t| serde_json::from_str(&t).ok());
         if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
@@ -2537,7 +2537,7 @@ mod tests {
         let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
         let dir = std::env::temp_dir().join(format!("weft-embed-curves-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [2, 0, 1],
             ..training_config(Size::Quick)
         };
@@ -2581,7 +2581,7 @@ mod tests {
             ..EvalContext::new(Size::Quick, root.clone())
         };
         let dir = root.join("model");
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [1, 1, 1],
             ..training_config(Size::Quick)
         };
@@ -2624,7 +2624,7 @@ mod tests {
             serde_json::to_string(&first).unwrap()
         );
         assert!(weights(&dir).is_empty(), "nothing was trained again");
-        let longer = EmbedTrainingConfig {
+        let longer = EmbedTrainingSettings {
             epochs: [1, 1, 2],
             ..config.clone()
         };
@@ -2653,7 +2653,7 @@ mod tests {
             [(0, true, 0.5), (1, false, 0.0)]
                 .into_iter()
                 .map(|(seed, first_seed, ephys)| {
-                    let mut config = EmbedTrainingConfig {
+                    let mut config = EmbedTrainingSettings {
                         epochs: [1, 1, 1],
                         ..with_seed(&training_config(Size::Quick), seed)
                     };
@@ -2702,7 +2702,7 @@ mod tests {
             quiet: true,
             ..EvalContext::new(Size::Quick, root.clone())
         };
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [1, 1, 2],
             ..method_config(&quick, true)
         };
@@ -2718,7 +2718,7 @@ mod tests {
         let source_stage_3 = state(&source, 3);
         share_stages(&source, &study, 2).unwrap();
         assert!(!weft_nn::embed::stage_dir(&study, 3).exists());
-        let slower = EmbedTrainingConfig {
+        let slower = EmbedTrainingSettings {
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
@@ -2729,7 +2729,7 @@ mod tests {
         }
         assert_ne!(state(&study, 3), source_stage_3);
         assert_eq!(state(&source, 3), source_stage_3, "the source is untouched");
-        let stored: EmbedTrainingConfig = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
+        let stored: EmbedTrainingSettings = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
         assert_eq!(stored.fine_tune_learning_rate, Some(1e-4));
 
         // The stage-3 budget study: a copy of all three stages whose stage 3 trains on is
@@ -2752,7 +2752,7 @@ mod tests {
         .unwrap();
         assert_eq!(kept[0].0, source);
         assert_eq!(state(&source, 3), source_stage_3, "kept, not retrained");
-        let four = EmbedTrainingConfig {
+        let four = EmbedTrainingSettings {
             epochs: [1, 1, 4],
             ..config.clone()
         };
@@ -2825,13 +2825,13 @@ mod tests {
         let path = dir.join("sheet-ms.json");
         let config = training_config(Size::Standard);
         let schedules = schedule_candidates(Size::Standard, &config);
-        let chosen = EmbedTrainingConfig {
+        let chosen = EmbedTrainingSettings {
             schedule: schedules[1].1,
             epochs: [BUDGET_STUDY_EPOCHS, 30, STAGE_3_BUDGET_EPOCHS],
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
-        let results = |config: &EmbedTrainingConfig| SceneResults {
+        let results = |config: &EmbedTrainingSettings| SceneResults {
             config: config.clone(),
             output: ExperimentOutput::new("embed", Size::Standard),
             ephys_row: Some((vec![0.1, 0.5], vec!["`sheet-ms`".into()])),
@@ -2862,7 +2862,7 @@ mod tests {
             stage_3_budgets: stage_3_budget_candidates(Size::Standard, &config),
         };
         assert_eq!(studies.fine_tune, [None, Some(1e-4)]);
-        let restored = |c: &EmbedTrainingConfig, first| match restored_scene(&path, c, &studies, first) {
+        let restored = |c: &EmbedTrainingSettings, first| match restored_scene(&path, c, &studies, first) {
             KeptScene::Done(r) => Some(*r),
             _ => None,
         };
@@ -2892,22 +2892,22 @@ mod tests {
         more.epochs[1] += 1;
         assert!(restored(&more, true).is_none());
         for odd in [
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 schedule: Schedule {
                     early_stopping_patience: Some(9),
                     ..chosen.schedule
                 },
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 epochs: [77, 30, 10],
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 epochs: [BUDGET_STUDY_EPOCHS, 30, 20],
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 fine_tune_learning_rate: Some(0.5),
                 ..chosen.clone()
             },
@@ -2931,7 +2931,7 @@ mod tests {
         assert_eq!(config.phys_scale, weft_nn::embed::PhysScale::Curvature);
         assert!(!stale(&dir.join("nothing"), &config), "no model is not a stale model");
         // A configuration as stored before the field existed.
-        let legacy = |c: &EmbedTrainingConfig| {
+        let legacy = |c: &EmbedTrainingSettings| {
             let mut v = serde_json::to_value(c).unwrap();
             v.as_object_mut().unwrap().remove("phys_scale");
             v.to_string()

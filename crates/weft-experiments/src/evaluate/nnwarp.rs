@@ -21,7 +21,7 @@ use crate::error::Context;
 use nalgebra::Vector3;
 use weft_mesh::TetMesh;
 use weft_mesh::generators::{BeamParams, beam, bent_beam, t_beam, tapered_beam};
-use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, WarpContext, WarpTrainingConfig, load_model, rel_error};
+use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, WarpContext, WarpTrainingSettings, load_model, rel_error};
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
 use weft_sim::scenes::volume::LimbResolution;
 use weft_sim::warp::{
@@ -113,8 +113,8 @@ fn limb(resolution: LimbResolution) -> crate::Result<Shape> {
     })
 }
 
-fn training_config(size: Size) -> WarpTrainingConfig {
-    let mut c = WarpTrainingConfig::default();
+fn training_config(size: Size) -> WarpTrainingSettings {
+    let mut c = WarpTrainingSettings::default();
     if size == Size::Quick {
         c.batch = 256;
         c.epochs = 40;
@@ -724,7 +724,7 @@ fn data_size_study(
     root: &Path,
     data: &Path,
     m: WarpMaterial,
-    config: &WarpTrainingConfig,
+    config: &WarpTrainingSettings,
     seeds: &[u64],
 ) -> crate::Result<Study> {
     let full = weft_data::WarpDataset::load(data, m.key())?;
@@ -738,7 +738,7 @@ fn data_size_study(
         let subset = full.with_training_prefix(k);
         for &seed in seeds {
             let dir = root.join("models").join(m.key()).join(format!("n{k}-seed{seed}"));
-            let config = WarpTrainingConfig { seed, ..config.clone() };
+            let config = WarpTrainingSettings { seed, ..config.clone() };
             let label = format!("nnwarp/{}/n{k}-seed{seed}", m.key());
             let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
             let (state, _, _) = weft_nn::nnwarp::train_model(&dir, &subset, &config, &mut progress)

@@ -42,7 +42,7 @@
 //! - `cell`: each cell's gate layout and elementwise equations over f32 slices, written
 //!   once for the fused kernels and the runtime;
 //! - `fused`: a whole teacher-forced sequence and its backward pass as one candle op;
-//! - `training`: [`AltConvTrainingConfig`], [`train_model`], [`score_sequence`];
+//! - `training`: [`AltConvTrainingSettings`], [`train_model`], [`score_sequence`];
 //! - `runtime`: [`AltConvRuntime`], the roll-out outside candle.
 //!
 //! Everything public is re-exported here: `weft_nn::altconv::X` is the one path of every

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::graph::NormalizedAdjacency;
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 
 /// Channels of the first cell's input `[X_t, X_t − X_{t−1}, Y₀ − X₀]`.
 pub const INPUT_CHANNELS: usize = 9;
@@ -110,7 +110,7 @@ struct CellState {
 
 impl Cell {
     /// A cell with Glorot-uniform weights scaled by `gain`.
-    fn new(params: &mut Params, name: &str, c_in: usize, c: usize, peephole: Peephole, gain: f64) -> Result<Self> {
+    fn new(params: &mut ParamStore, name: &str, c_in: usize, c: usize, peephole: Peephole, gain: f64) -> Result<Self> {
         // Glorot-uniform over the gate block, as for the other sigmoid/tanh networks here.
         let glorot = |fan_in: usize, fan_out: usize| Init::Uniform(gain * (6.0 / (fan_in + fan_out) as f64).sqrt());
         let mut bias = vec![0.0f32; 4 * c];
@@ -260,7 +260,7 @@ pub struct Drive {
 
 impl AltConvNet {
     /// A model with `hidden` cells (the paper's is [`HIDDEN`]) in `params`.
-    pub fn new(params: &mut Params, variant: Variant, hidden: &[usize]) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, variant: Variant, hidden: &[usize]) -> Result<Self> {
         if hidden.is_empty() || hidden.contains(&0) {
             return Err(Error::InvalidParameter {
                 name: "Alt-ConvLSTM hidden channels",

@@ -11,7 +11,7 @@ use super::runtime::AltConvRuntime;
 use crate::Kernels;
 use crate::error::{Error, Result};
 use crate::graph::NormalizedAdjacency;
-use crate::params::Params;
+use crate::params::ParamStore;
 
 impl Scaling {
     /// Fitted on the first `steps` steps of the training sequences: each input channel's
@@ -184,10 +184,10 @@ impl Recipe {
 }
 
 /// Training settings of one model (Alt-ConvLSTM §5.1). A stored configuration may omit
-/// fields; they keep the defaults of [`AltConvTrainingConfig::new`] for Alt-ConvLSTM.
+/// fields; they keep the defaults of [`AltConvTrainingSettings::new`] for Alt-ConvLSTM.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct AltConvTrainingConfig {
+pub struct AltConvTrainingSettings {
     pub variant: Variant,
     pub hidden: Vec<usize>,
     /// Teacher-forced steps per training sequence (the paper: 20, after the initial frame).
@@ -207,13 +207,13 @@ pub struct AltConvTrainingConfig {
     pub kernels: Kernels,
 }
 
-impl Default for AltConvTrainingConfig {
+impl Default for AltConvTrainingSettings {
     fn default() -> Self {
         Self::new(Variant::Alt)
     }
 }
 
-impl AltConvTrainingConfig {
+impl AltConvTrainingSettings {
     pub fn new(variant: Variant) -> Self {
         Self {
             variant,
@@ -251,8 +251,8 @@ impl AltConvTrainingConfig {
     }
 
     /// The trainer's part of the configuration.
-    pub fn trainer(&self) -> crate::trainer::TrainerConfig {
-        crate::trainer::TrainerConfig {
+    pub fn trainer(&self) -> crate::trainer::TrainerSettings {
+        crate::trainer::TrainerSettings {
             epochs: self.epochs,
             batch: self.batch,
             seed: self.seed,
@@ -313,7 +313,7 @@ impl SequenceTensors {
 #[derive(Debug)]
 pub struct AltConvTraining<'a> {
     pub net: &'a AltConvNet,
-    pub params: &'a Params,
+    pub params: &'a ParamStore,
     pub adj: &'a NormalizedAdjacency,
     pub train: &'a [SequenceTensors],
     pub validation: &'a [SequenceTensors],
@@ -438,14 +438,14 @@ pub fn mean_error(
 
 /// A trained model directory written by `cargo xtask train altconv`: `config.json`,
 /// `scaling.json` and the trainer's run, loaded at its best validation weights.
-pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingConfig, Params, AltConvNet)> {
+pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrainingSettings, ParamStore, AltConvNet)> {
     crate::checkpoint::check_model_kind(dir, "altconv")?;
     let path = dir.join("config.json");
     let text = std::fs::read_to_string(&path).map_err(|source| Error::Io {
         path: path.display().to_string(),
         source,
     })?;
-    let config: AltConvTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+    let config: AltConvTrainingSettings = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
         path: path.display().to_string(),
         reason: e.to_string(),
     })?;
@@ -462,7 +462,7 @@ pub fn load_model(dir: &std::path::Path, device: &Device) -> Result<(AltConvTrai
             });
         }
     };
-    let mut params = Params::new(device, config.seed);
+    let mut params = ParamStore::new(device, config.seed);
     let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?.with_scaling(scaling);
     crate::checkpoint::load_params(&dir.join("best").join("net"), &params)?;
     Ok((config, params, net))
@@ -549,7 +549,7 @@ pub fn score_sequence(
 #[derive(Debug)]
 pub struct TrainedAltConv {
     pub state: crate::trainer::TrainingState,
-    pub params: Params,
+    pub params: ParamStore,
     pub net: AltConvNet,
     pub adj: NormalizedAdjacency,
 }
@@ -563,7 +563,7 @@ pub struct TrainedAltConv {
 pub fn train_model(
     dir: &std::path::Path,
     dataset: &weft_data::LimbDataset,
-    config: &AltConvTrainingConfig,
+    config: &AltConvTrainingSettings,
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<TrainedAltConv> {
     config.validate()?;
@@ -610,8 +610,8 @@ pub fn train_model(
     let config_path = dir.join("config.json");
     let scaling_path = dir.join("scaling.json");
     let scaling: Scaling = if crate::trainer::has_run(dir) {
-        let stored: AltConvTrainingConfig = crate::checkpoint::read_json(&config_path)?;
-        let stored = AltConvTrainingConfig {
+        let stored: AltConvTrainingSettings = crate::checkpoint::read_json(&config_path)?;
+        let stored = AltConvTrainingSettings {
             epochs: config.epochs,
             kernels: config.kernels,
             ..stored
@@ -628,7 +628,7 @@ pub fn train_model(
         s
     };
     crate::checkpoint::write_json(&config_path, config)?;
-    let mut params = Params::new(&device, config.seed);
+    let mut params = ParamStore::new(&device, config.seed);
     let net = AltConvNet::new(&mut params, config.variant, &config.hidden)?.with_scaling(scaling);
     let mut training = AltConvTraining {
         net: &net,

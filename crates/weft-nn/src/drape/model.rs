@@ -19,19 +19,19 @@ use candle_core::{DType, Device, Tensor};
 use crate::error::{Error, Result};
 use crate::layers::{Dense, leaky_relu};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 pub use weft_sim::scenes::drape::POSE_ANGLES;
 
 /// Shape of [`DrapeNet`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct DrapeNetConfig {
+pub struct DrapeNetSettings {
     /// Widths of the hidden layers.
     pub hidden: Vec<usize>,
     /// The output is `offset_scale · (x W + b)` metres.
     pub offset_scale: f64,
 }
 
-impl Default for DrapeNetConfig {
+impl Default for DrapeNetSettings {
     fn default() -> Self {
         Self {
             hidden: vec![64, 256],
@@ -50,7 +50,7 @@ pub struct DrapeNet {
 }
 
 impl DrapeNet {
-    pub fn new(params: &mut Params, config: &DrapeNetConfig, num_vertices: usize) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, config: &DrapeNetSettings, num_vertices: usize) -> Result<Self> {
         if config.hidden.is_empty() || config.hidden.contains(&0) || !(config.offset_scale > 0.0) {
             return Err(Error::InvalidParameter {
                 name: "drape network shape",
@@ -106,7 +106,7 @@ pub enum Mu {
 
 impl Mu {
     /// A learned μ starting at `start` everywhere, in `params` under `mu.log`.
-    pub fn learned(params: &mut Params, start: f64, per_vertex: Option<usize>) -> Result<Self> {
+    pub fn learned(params: &mut ParamStore, start: f64, per_vertex: Option<usize>) -> Result<Self> {
         if !(start > 0.0 && start.is_finite()) {
             return Err(Error::InvalidParameter {
                 name: "learned mu start",

@@ -13,20 +13,20 @@ use serde::{Deserialize, Serialize};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
 
 use super::model::{
-    DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, Mu, Postprocess, loss, predict_each_keyed, sqrtmse_maxdist_mm,
+    DrapeModel, DrapeNet, DrapeNetSettings, DrapeTensors, Mu, Postprocess, loss, predict_each_keyed, sqrtmse_maxdist_mm,
 };
 use crate::adam::AdamSettings;
 use crate::error::{Error, Result};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
-use crate::params::Params;
-use crate::trainer::{Observer, Schedule, Trainer, TrainerConfig, TrainingState};
+use crate::params::ParamStore;
+use crate::trainer::{Observer, Schedule, Trainer, TrainerSettings, TrainingState};
 
 /// Everything that decides a trained model but its number of epochs. Omitted fields in a
 /// configuration file keep the standard evaluation's values ([`Default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct DrapeTrainingConfig {
-    pub net: DrapeNetConfig,
+pub struct DrapeTrainingSettings {
+    pub net: DrapeNetSettings,
     /// Epochs of `network-only`.
     pub pretrain_epochs: usize,
     /// Epochs of each `trained-*` model after it.
@@ -43,11 +43,11 @@ pub struct DrapeTrainingConfig {
     pub schedule: Schedule,
 }
 
-impl Default for DrapeTrainingConfig {
+impl Default for DrapeTrainingSettings {
     /// The standard evaluation's configuration.
     fn default() -> Self {
         Self {
-            net: DrapeNetConfig::default(),
+            net: DrapeNetSettings::default(),
             pretrain_epochs: 200,
             // Five: in the first standard run (10 epochs, docs/DRAPE.md) the fixed-layer
             // models kept epochs 1, 1 and 2, and the whole evaluation must fit one
@@ -69,7 +69,7 @@ impl Default for DrapeTrainingConfig {
     }
 }
 
-impl DrapeTrainingConfig {
+impl DrapeTrainingSettings {
     /// Checks every field before any work: a typed error naming the first bad one.
     pub fn validate(&self) -> Result<()> {
         use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_count, check_learning_rate, invalid};
@@ -138,7 +138,7 @@ pub struct Layers {
 }
 
 impl Layers {
-    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingConfig) -> Result<Self> {
+    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingSettings) -> Result<Self> {
         Ok(Self {
             socp: Arc::new(InextensibilityLayer::new(
                 sleeve,
@@ -172,7 +172,7 @@ impl Layers {
     }
 
     /// The postprocess of `layer` (a learned μ created in `mu_params`, `v` vertices).
-    pub fn postprocess(&self, layer: Layer, mu_params: &mut Params, v: usize) -> Result<Postprocess> {
+    pub fn postprocess(&self, layer: Layer, mu_params: &mut ParamStore, v: usize) -> Result<Postprocess> {
         Ok(match layer {
             Layer::None => Postprocess::None,
             Layer::Socp => self.inextensibility(),
@@ -227,7 +227,7 @@ pub fn best_net_dir(dir: &Path) -> std::path::PathBuf {
 /// its epoch counts, the layer and the starting weights (by content, so a retrained
 /// `network-only` retrains the models started from it, and another path to the same
 /// model does not).
-fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> Result<serde_json::Value> {
+fn stamp(config: &DrapeTrainingSettings, layer: Layer, init: Option<&Path>) -> Result<serde_json::Value> {
     let mut config = serde_json::to_value(config).expect("plain data");
     if let Some(c) = config.as_object_mut() {
         c.remove("pretrain_epochs");
@@ -246,7 +246,7 @@ fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> Res
 pub fn fit(
     dir: &Path,
     plan: &Plan<'_>,
-    config: &DrapeTrainingConfig,
+    config: &DrapeTrainingSettings,
     layers: &Layers,
     train: &DrapeTensors,
     validation: &DrapeTensors,
@@ -289,9 +289,9 @@ pub fn fit(
     let text = serde_json::to_string_pretty(&stamp).expect("plain data");
     std::fs::write(&stamp_path, text).map_err(|e| io(&stamp_path, e))?;
     let device = candle_core::Device::Cpu;
-    let mut net_params = Params::new(&device, config.seed);
+    let mut net_params = ParamStore::new(&device, config.seed);
     let net = DrapeNet::new(&mut net_params, &config.net, v)?;
-    let mut mu_params = Params::new(&device, config.seed + 1);
+    let mut mu_params = ParamStore::new(&device, config.seed + 1);
     let post = layers.postprocess(plan.layer, &mut mu_params, v)?;
     let learned = matches!(plan.layer, Layer::LearnedMu { .. });
     let net_adam = AdamSettings {
@@ -308,7 +308,7 @@ pub fn fit(
     let model = DrapeModel { net, post };
     let trainer = Trainer::new(
         format!("drape/{}", plan.name),
-        TrainerConfig {
+        TrainerSettings {
             epochs: plan.epochs,
             batch: config.batch,
             seed: config.seed,
@@ -331,22 +331,22 @@ pub fn fit(
 /// A trained drape model from its directory (written by [`fit`]): the network and its
 /// layer at the best validation weights, rebuilt on `sleeve` from the stored stamp.
 /// Returns the model, its layer and its training configuration.
-pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingConfig)> {
+pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingSettings)> {
     crate::checkpoint::check_model_kind(dir, "drape")?;
     let stamp: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
     let bad = |reason: String| Error::Checkpoint {
         path: dir.join("config.json").display().to_string(),
         reason,
     };
-    let config: DrapeTrainingConfig =
+    let config: DrapeTrainingSettings =
         serde_json::from_value(stamp["config"].clone()).map_err(|e| bad(format!("config: {e}")))?;
     let layer: Layer = serde_json::from_value(stamp["layer"].clone()).map_err(|e| bad(format!("layer: {e}")))?;
     let layers = Layers::new(sleeve, &config)?;
     let v = sleeve.num_vertices();
     let device = candle_core::Device::Cpu;
-    let mut net_params = Params::new(&device, config.seed);
+    let mut net_params = ParamStore::new(&device, config.seed);
     let net = DrapeNet::new(&mut net_params, &config.net, v)?;
-    let mut mu_params = Params::new(&device, config.seed + 1);
+    let mut mu_params = ParamStore::new(&device, config.seed + 1);
     let post = layers.postprocess(layer, &mut mu_params, v)?;
     crate::checkpoint::load_params(&best_net_dir(dir), &net_params)?;
     if matches!(layer, Layer::LearnedMu { .. }) {
@@ -394,10 +394,10 @@ impl GradientStats {
 #[derive(Debug)]
 pub struct DrapeTraining<'a> {
     pub model: &'a DrapeModel,
-    pub net_params: &'a Params,
+    pub net_params: &'a ParamStore,
     pub net_adam: crate::adam::AdamSettings,
     /// A learned μ's parameters and Adam settings.
-    pub mu: Option<(&'a Params, crate::adam::AdamSettings)>,
+    pub mu: Option<(&'a ParamStore, crate::adam::AdamSettings)>,
     pub train: &'a DrapeTensors,
     pub validation: &'a DrapeTensors,
     /// Examples per layer call in the validation pass.
@@ -408,8 +408,8 @@ pub struct DrapeTraining<'a> {
 impl<'a> DrapeTraining<'a> {
     pub fn new(
         model: &'a DrapeModel,
-        net: (&'a Params, crate::adam::AdamSettings),
-        mu: Option<(&'a Params, crate::adam::AdamSettings)>,
+        net: (&'a ParamStore, crate::adam::AdamSettings),
+        mu: Option<(&'a ParamStore, crate::adam::AdamSettings)>,
         train: &'a DrapeTensors,
         validation: &'a DrapeTensors,
         batch: usize,

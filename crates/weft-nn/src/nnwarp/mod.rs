@@ -5,7 +5,7 @@
 //!   standardisation and the network in candle ([`WarpMlp`]);
 //! - `runtime`: the same weights outside candle ([`NodeMlp`]), the correction of a linear
 //!   solution ([`NnWarp`]) and the corrected linear simulation ([`NnWarpSimulation`]);
-//! - `training`: the training pairs of a dataset, [`WarpTrainingConfig`] and
+//! - `training`: the training pairs of a dataset, [`WarpTrainingSettings`] and
 //!   [`train_model`].
 //!
 //! Everything public is re-exported here: `weft_nn::nnwarp::X` is the one path of every

@@ -27,7 +27,7 @@ use weft_mesh::TetMesh;
 use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics, contextual_features};
 
 use crate::error::{Error, Result};
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 
 /// Inputs per node: three kinematic scalars, geodesic, potential, digression, ν.
 pub const INPUTS: usize = 7;
@@ -265,7 +265,7 @@ impl WarpMlp {
     /// Creates `layer{k}.w` `[in, out]` and `layer{k}.b` in `params`, Glorot-uniform
     /// (the initialisation made for tanh), for inputs and outputs standardised by
     /// `standardization`.
-    pub fn new(params: &mut Params, hidden: &[usize], standardization: &Standardization) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, hidden: &[usize], standardization: &Standardization) -> Result<Self> {
         let mut widths = vec![INPUTS];
         widths.extend(hidden);
         widths.push(OUTPUTS);

@@ -10,7 +10,7 @@ use weft_sim::warp::NodalGradients;
 use super::model::{INPUTS, OUTPUTS, Standardization, WarpContext, WarpMlp, hidden_layers};
 use super::runtime::NodeMlp;
 use crate::error::{Error, Result};
-use crate::params::Params;
+use crate::params::ParamStore;
 
 /// The training pairs of one split of a dataset: every free node of every frame after
 /// the first (the rest frame has nothing to correct).
@@ -44,7 +44,7 @@ pub fn collect_pairs(
 /// about 10 epochs).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct WarpTrainingConfig {
+pub struct WarpTrainingSettings {
     /// The material the network was trained for (the dataset's array name, e.g.
     /// `neo-hookean`); set by the trainer.
     pub material: String,
@@ -58,7 +58,7 @@ pub struct WarpTrainingConfig {
     pub schedule: crate::trainer::Schedule,
 }
 
-impl WarpTrainingConfig {
+impl WarpTrainingSettings {
     /// Checks every field before any work: a typed error naming the first bad one.
     pub fn validate(&self) -> Result<()> {
         use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_adam, check_count};
@@ -73,8 +73,8 @@ impl WarpTrainingConfig {
     }
 
     /// The trainer's part of the configuration.
-    pub fn trainer(&self) -> crate::trainer::TrainerConfig {
-        crate::trainer::TrainerConfig {
+    pub fn trainer(&self) -> crate::trainer::TrainerSettings {
+        crate::trainer::TrainerSettings {
             epochs: self.epochs,
             batch: self.batch,
             seed: self.seed,
@@ -83,7 +83,7 @@ impl WarpTrainingConfig {
     }
 }
 
-impl Default for WarpTrainingConfig {
+impl Default for WarpTrainingSettings {
     fn default() -> Self {
         Self {
             material: String::new(),
@@ -181,7 +181,7 @@ pub fn correction_rms(mlp: &NodeMlp, inputs: &[[f64; INPUTS]], targets: &[[f64; 
 #[derive(Debug)]
 pub struct WarpTraining<'a> {
     pub mlp: &'a WarpMlp,
-    pub params: &'a Params,
+    pub params: &'a ParamStore,
     pub x: &'a Tensor,
     pub y: &'a Tensor,
     pub validation_x: &'a Tensor,
@@ -225,7 +225,7 @@ impl crate::trainer::Trainable for WarpTraining<'_> {
 /// A trained model directory written by `cargo xtask train nnwarp`: `config.json` (the
 /// training configuration, hidden widths resolved), `standardization.json` and the
 /// trainer's run, loaded at its best validation weights.
-pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)> {
+pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingSettings, NodeMlp)> {
     crate::checkpoint::check_model_kind(dir, "nnwarp")?;
     let read = |name: &str| -> Result<String> {
         let path = dir.join(name);
@@ -238,11 +238,11 @@ pub fn load_model(dir: &std::path::Path) -> Result<(WarpTrainingConfig, NodeMlp)
         path: dir.join(name).display().to_string(),
         reason: e.to_string(),
     };
-    let config: WarpTrainingConfig =
+    let config: WarpTrainingSettings =
         serde_json::from_str(&read("config.json")?).map_err(|e| parse_error("config.json", e))?;
     let standardization: Standardization =
         serde_json::from_str(&read("standardization.json")?).map_err(|e| parse_error("standardization.json", e))?;
-    let mut params = Params::new(&candle_core::Device::Cpu, config.seed);
+    let mut params = ParamStore::new(&candle_core::Device::Cpu, config.seed);
     let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
     crate::checkpoint::load_params(&dir.join("best").join("net"), &params)?;
     let node = mlp.to_node_mlp(standardization)?;
@@ -271,12 +271,12 @@ pub fn rel_error(predicted: &[f64], reference: &[f64]) -> f64 {
 pub fn train_model(
     dir: &std::path::Path,
     dataset: &weft_data::WarpDataset,
-    config: &WarpTrainingConfig,
+    config: &WarpTrainingSettings,
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<(crate::trainer::TrainingState, usize, usize)> {
     let mut config = config.clone();
     if !config.material.is_empty() && config.material != dataset.material {
-        return Err(Error::InvalidConfig {
+        return Err(Error::InvalidSettings {
             field: "material".into(),
             value: config.material.clone(),
             reason: "differs from the material read from the dataset",
@@ -306,8 +306,8 @@ pub fn train_model(
     let config_path = dir.join("config.json");
     let standardization_path = dir.join("standardization.json");
     let standardization: Standardization = if crate::trainer::has_run(dir) {
-        let stored: WarpTrainingConfig = crate::checkpoint::read_json(&config_path)?;
-        let stored = WarpTrainingConfig {
+        let stored: WarpTrainingSettings = crate::checkpoint::read_json(&config_path)?;
+        let stored = WarpTrainingSettings {
             epochs: config.epochs,
             ..stored
         };
@@ -326,7 +326,7 @@ pub fn train_model(
     let device = candle_core::Device::Cpu;
     let (x, y) = pair_tensors(&train_x, &train_y, &standardization, &device)?;
     let (vx, vy) = pair_tensors(&val_x, &val_y, &standardization, &device)?;
-    let mut params = Params::new(&device, config.seed);
+    let mut params = ParamStore::new(&device, config.seed);
     let mlp = WarpMlp::new(&mut params, &config.hidden, &standardization)?;
     let mut training = WarpTraining {
         mlp: &mlp,
