@@ -1,4 +1,4 @@
-//! Integration tests of weft-nn: layers against per-vertex loops, custom ops against
+//! Layers against per-vertex loops, custom ops against
 //! finite differences of the f64 physics, the stop-gradient of Eq. 9–10, checkpoint round
 //! trips, and a training smoke test on the quick sheet.
 
