@@ -48,6 +48,7 @@
 //! Everything public is re-exported here: `weft_nn::altconv::X` is the one path of every
 //! item.
 
+mod cell;
 mod fused;
 mod model;
 mod runtime;

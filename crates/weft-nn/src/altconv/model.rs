@@ -6,6 +6,7 @@
 use candle_core::{DType, Device, Tensor};
 use serde::{Deserialize, Serialize};
 
+use super::cell::Peephole;
 use crate::error::{Error, Result};
 use crate::graph::NormalizedAdjacency;
 use crate::params::{Init, ParamStore};
@@ -30,17 +31,6 @@ pub enum Variant {
     CpY,
     #[serde(rename = "convlstm-np-y")]
     NpY,
-}
-
-/// What a cell's peepholes look at.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Peephole {
-    /// Alt-ConvLSTM: the accumulation `Y`.
-    Accumulation,
-    /// Vanilla ConvLSTM-CP: the cell state `C`.
-    Cell,
-    /// Vanilla ConvLSTM-NP.
-    None,
 }
 
 impl Variant {
