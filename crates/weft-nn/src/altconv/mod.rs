@@ -2,7 +2,7 @@
 //! with (§5.2), on a surface mesh in vertex correspondence over time.
 //!
 //! Every convolution is the graph convolution of Eq. 9, `Â_n X Θ` with the Kipf–Welling
-//! normalised adjacency ([`NormalizedAdjacency`]). Because `Â_n (X Θ) = (Â_n X) Θ`, a cell
+//! normalised adjacency ([`crate::graph::NormalizedAdjacency`]). Because `Â_n (X Θ) = (Â_n X) Θ`, a cell
 //! multiplies each of its inputs by `Â_n` once and then runs one dense product per input
 //! for all four gates together: a few large operations per layer, and weights whose size
 //! depends only on the channel counts, never on the vertex count.

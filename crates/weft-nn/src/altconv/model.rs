@@ -312,7 +312,7 @@ impl AltConvNet {
 
     /// [`AltConvNet::run`] with teacher forcing at step `t > 1` only where `forced(t)`:
     /// elsewhere the step starts from the model's own previous prediction, as a roll-out
-    /// does (scheduled sampling, [`Recipe`]).
+    /// does (scheduled sampling, [`super::Recipe`]).
     pub fn run_forced(
         &self,
         adj: &NormalizedAdjacency,

@@ -26,7 +26,7 @@ use crate::ops::{AcapInverse, LPhys};
 use crate::params::ParamStore;
 use weft_data::{ClothDataset, is_train_frame, is_validation_frame};
 
-/// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "[46] +
+/// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "\[46\] +
 /// L_vert" baseline sets λ_ephys = 0).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
