@@ -14,7 +14,7 @@ use std::time::Instant;
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_nn::altconv::{AltConvNet, AltConvRuntime, HIDDEN, Variant};
 use weft_nn::graph::NormalizedAdjacency;
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_sim::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
 
 fn altconv(c: &mut Criterion) {
@@ -28,7 +28,7 @@ fn altconv(c: &mut Criterion) {
     let mut group = c.benchmark_group("altconv-limb-6890");
     group.sample_size(10);
     for variant in [Variant::Alt, Variant::NpY] {
-        let mut params = Params::new(&weft_nn::Device::Cpu, 3);
+        let mut params = ParamStore::new(&weft_nn::Device::Cpu, 3);
         let net = AltConvNet::new(&mut params, variant, &HIDDEN).unwrap();
         let mut runtime = AltConvRuntime::new(&net, adj.clone()).unwrap();
         runtime.start(&x0, &y0).unwrap();

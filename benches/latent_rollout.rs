@@ -11,10 +11,10 @@ use std::sync::Arc;
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_acap::{AcapFeatures, AcapSettings, FeatureNormalization, PoissonPseudoInverse};
 use weft_mesh::unflatten;
-use weft_nn::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
+use weft_nn::embed::LatentRollout;
+use weft_nn::embed::{AutoencoderSettings, LatentSimulator, LatentSimulatorSettings, MeshAutoencoder};
 use weft_nn::graph::MeshGraph;
-use weft_nn::params::Params;
-use weft_nn::rollout::LatentRollout;
+use weft_nn::params::ParamStore;
 use weft_sim::{ClothScene, ClothSimulation};
 
 fn latent_rollout(c: &mut Criterion) {
@@ -37,11 +37,11 @@ fn latent_rollout(c: &mut Criterion) {
     // The CPU device, re-exported by weft-nn (the benches do not depend on candle).
     let device = weft_nn::Device::Cpu;
     let graph = Arc::new(MeshGraph::new(&mesh, &device).unwrap());
-    let mut params = Params::new(&device, 1);
-    let ae = MeshAutoencoder::new(&mut params, graph, AutoencoderConfig::default()).unwrap();
+    let mut params = ParamStore::new(&device, 1);
+    let ae = MeshAutoencoder::new(&mut params, graph, AutoencoderSettings::default()).unwrap();
     let latent_sim = LatentSimulator::new(
         &mut params,
-        LatentSimulatorConfig {
+        LatentSimulatorSettings {
             latent: 128,
             controls: q.len(),
             hidden: vec![256, 256],
@@ -52,7 +52,7 @@ fn latent_rollout(c: &mut Criterion) {
     let rollout =
         RefCell::new(LatentRollout::new(&ae, &latent_sim, inverse.clone(), normalization.clone(), &z, &z).unwrap());
     // Where a roll-out frame's time goes, averaged over 50 frames.
-    let mut total = weft_nn::rollout::FrameProfile::default();
+    let mut total = weft_nn::embed::FrameProfile::default();
     // Each frame is one step from the same two codes: with untrained weights a long
     // recurrent roll-out grows without bound (and the NaN guard stops it).
     for _ in 0..50 {

@@ -14,7 +14,7 @@ use std::cell::RefCell;
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_mesh::TetMesh;
 use weft_nn::nnwarp::{NnWarpSimulation, Standardization, WarpBody, WarpMlp, hidden_layers};
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_sim::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use weft_sim::warp::FieldDirection;
 use weft_sim::{Energy, ImplicitEuler, LinearSolve, PrefactorizedLinear};
@@ -28,7 +28,7 @@ fn network() -> weft_nn::nnwarp::NodeMlp {
         .map(|k| std::array::from_fn(|d| ((k * 3 + d) % 7) as f64 / 50.0))
         .collect();
     let standardization = Standardization::fit(&rows, &outs).unwrap();
-    let mut params = Params::new(&weft_nn::Device::Cpu, 1);
+    let mut params = ParamStore::new(&weft_nn::Device::Cpu, 1);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     mlp.to_node_mlp(standardization).unwrap()
 }

@@ -16,7 +16,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use weft_nn::adam::{Adam, AdamSettings};
 use weft_nn::altconv::{AltConvNet, AltConvTraining, HIDDEN, Kernels, SequenceTensors, TrainingPath, Variant};
 use weft_nn::graph::NormalizedAdjacency;
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
 use weft_sim::scenes::soft_tissue::{SoftTissue, SoftTissueParams};
 
@@ -70,7 +70,7 @@ fn altconv_pass(c: &mut Criterion, limb: weft_mesh::limb::LimbParams, vertices: 
         simulated: (0..=STEPS).map(|t| frame(&y0, t, 1.5)).collect(),
     };
     let data = vec![SequenceTensors::new(&seq, STEPS + 1, &weft_nn::Device::Cpu).unwrap()];
-    let mut params = Params::new(&weft_nn::Device::Cpu, 3);
+    let mut params = ParamStore::new(&weft_nn::Device::Cpu, 3);
     let net = AltConvNet::new(&mut params, Variant::Alt, &HIDDEN).unwrap();
     let settings = AdamSettings::default();
     let mut adams = vec![Adam::new(&params, settings).unwrap()];
@@ -112,7 +112,7 @@ fn altconv(c: &mut Criterion) {
 }
 
 fn embedding(c: &mut Criterion) {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingSettings};
     use weft_sim::ClothScene;
     // Three simulated frames of the standard sheet: one training window.
     let scene = ClothScene::builtin("sheet-ms", false).unwrap();
@@ -125,7 +125,7 @@ fn embedding(c: &mut Criterion) {
         ("fused", weft_nn::Kernels::Fused),
         ("candle autograd", weft_nn::Kernels::Autograd),
     ] {
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             kernels,
             ..Default::default()
         };
@@ -166,7 +166,7 @@ fn nnwarp(c: &mut Criterion) {
     let (x, y) = pair_tensors(&rows, &outs, &standardization, &weft_nn::Device::Cpu).unwrap();
     let batch: Vec<usize> = (0..1024).map(|k| (k * 7) % n).collect();
     let mut group = c.benchmark_group("training-nnwarp");
-    let mut params = Params::new(&weft_nn::Device::Cpu, 1);
+    let mut params = ParamStore::new(&weft_nn::Device::Cpu, 1);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     let settings = AdamSettings::default();
     let mut adams = vec![Adam::new(&params, settings).unwrap()];

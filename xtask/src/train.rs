@@ -279,9 +279,9 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
+    use weft_nn::drape::{DrapeTrainingSettings, Layer, Layers, Plan, fit};
     let c = &args.common;
-    let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
+    let mut config: DrapeTrainingSettings = read_config(c.config.as_deref())?;
     let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
     c.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
     [config.pretrain_epochs, config.finetune_epochs] = epochs;
@@ -382,9 +382,9 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingSettings, train_model};
     let c = &args.common;
-    let mut config: EmbedTrainingConfig = read_config(c.config.as_deref())?;
+    let mut config: EmbedTrainingSettings = read_config(c.config.as_deref())?;
     if args.no_pb {
         config.weights.ephys = 0.0;
         config.weights.mphys = 0.0;
@@ -427,12 +427,12 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
 }
 
 fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{AltConvTrainingConfig, Variant, train_model};
+    use weft_nn::altconv::{AltConvTrainingSettings, Variant, train_model};
     let c = &args.common;
     let variant = Variant::from_name(&args.model)?;
-    let mut config: AltConvTrainingConfig = match &c.config {
+    let mut config: AltConvTrainingSettings = match &c.config {
         Some(_) => read_config(c.config.as_deref())?,
-        None => AltConvTrainingConfig::new(variant),
+        None => AltConvTrainingSettings::new(variant),
     };
     config.variant = variant;
     c.apply(
@@ -471,9 +471,9 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
 }
 
 fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
-    use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
+    use weft_nn::nnwarp::{WarpTrainingSettings, train_model};
     let c = &args.common;
-    let mut config: WarpTrainingConfig = read_config(c.config.as_deref())?;
+    let mut config: WarpTrainingSettings = read_config(c.config.as_deref())?;
     let material = args.material.key();
     if !config.material.is_empty() && config.material != material {
         bail!(
@@ -507,7 +507,7 @@ mod tests {
     /// are the `--autograd` flag's).
     #[test]
     fn the_embed_configuration_help_names_every_field() {
-        let config = weft_nn::embed_training::EmbedTrainingConfig {
+        let config = weft_nn::embed::EmbedTrainingSettings {
             fine_tune_learning_rate: Some(1e-4),
             ..Default::default()
         };

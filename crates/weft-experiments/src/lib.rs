@@ -32,7 +32,7 @@
 //! generate(&spec, "data/limb".as_ref(), &GenerateOptions::default())?;
 //! let other = GenerateOptions { seed: 1, ..GenerateOptions::default() };
 //! generate(&spec, "data/limb-seed1".as_ref(), &other)?;
-//! let mut config = weft_nn::altconv::AltConvTrainingConfig::default();
+//! let mut config = weft_nn::altconv::AltConvTrainingSettings::default();
 //! config.hidden = vec![8, 8];
 //! config.steps = 4;
 //! config.epochs = 2;

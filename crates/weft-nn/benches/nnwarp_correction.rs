@@ -6,7 +6,7 @@
 use candle_core::{Device, Tensor};
 use criterion::{Criterion, criterion_group, criterion_main};
 use weft_nn::nnwarp::{INPUTS, Standardization, WarpMlp, hidden_layers};
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 
 fn correction(c: &mut Criterion) {
     let n = 637;
@@ -17,7 +17,7 @@ fn correction(c: &mut Criterion) {
         .map(|k| std::array::from_fn(|d| ((k * 3 + d) % 7) as f64 / 50.0))
         .collect();
     let standardization = Standardization::fit(&rows, &outs).unwrap();
-    let mut params = Params::new(&Device::Cpu, 1);
+    let mut params = ParamStore::new(&Device::Cpu, 1);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     let node = mlp.to_node_mlp(standardization.clone()).unwrap();
     let x: Vec<f32> = rows

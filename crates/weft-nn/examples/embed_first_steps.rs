@@ -3,7 +3,7 @@
 //! `cargo xtask train embed` trains it, printing at chosen batches the batch loss and the
 //! mean |code| `E(x)` over 32 fixed training windows (the weights after that many steps),
 //! and before the last batch the fraction of decoder outputs beyond ±0.96 on them (a
-//! saturated `tanh`). It is the measurement behind `weft_nn::embed_training::WARMUP_STEPS`
+//! saturated `tanh`). It is the measurement behind `weft_nn::embed::WARMUP_STEPS`
 //! (docs/EMBEDDING.md, "Adam's first steps"). `DATA_DIR` is an `embed` dataset (`cargo
 //! xtask dataset`, or an evaluation's `embed/data/<scene>`); `--config` a training
 //! configuration (default: the library's), whose warm-up `--warmup` overrides. Training
@@ -18,7 +18,7 @@ use std::path::PathBuf;
 
 use candle_core::{DType, Tensor};
 use weft_nn::Device;
-use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig, FrameRef};
+use weft_nn::embed::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingSettings, FrameRef};
 use weft_nn::trainer::{BatchAt, BatchLoss, Group, Silent, Trainable, Trainer};
 
 const USAGE: &str = "usage: embed_first_steps DATA_DIR [--config FILE] [--seeds 0 1 2] [--warmup 0 50] [--steps 500]";
@@ -114,10 +114,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds = parse("--seeds", "0 1 2")?;
     let warmups = parse("--warmup", "0 50")?;
     let steps = parse("--steps", "500")?[0].max(1);
-    let base: EmbedTrainingConfig = match values(&args, "--config").as_deref() {
+    let base: EmbedTrainingSettings = match values(&args, "--config").as_deref() {
         Some([file]) => serde_json::from_str(&std::fs::read_to_string(file)?)?,
         Some(_) => return Err(format!("--config needs one file; {USAGE}").into()),
-        None => EmbedTrainingConfig::default(),
+        None => EmbedTrainingSettings::default(),
     };
     let data = EmbedData::new(weft_data::ClothDataset::load(&data_dir)?)?;
     let windows = &data.train_windows;

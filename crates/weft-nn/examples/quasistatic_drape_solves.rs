@@ -13,8 +13,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use weft_nn::drape::load_model;
 use weft_nn::drape::{DrapeModel, DrapeTensors, Postprocess, predict_all};
-use weft_nn::drape_training::load_model;
 use weft_proj::{QuasistaticLayer, ZeroLengthScaling};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -12,7 +12,7 @@ use candle_core::{Tensor, Var};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::params::Params;
+use crate::params::ParamStore;
 
 /// Adam's hyper-parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -35,7 +35,7 @@ impl Default for AdamSettings {
     }
 }
 
-/// Adam over every parameter of a [`Params`].
+/// Adam over every parameter of a [`ParamStore`].
 ///
 /// The moments live in plain `Vec<f32>`s and each step is one fused loop per parameter:
 /// written as tensor operations, a step allocated a dozen temporaries the size of the
@@ -61,7 +61,7 @@ fn values(t: &Tensor) -> Result<Vec<f32>> {
 }
 
 impl Adam {
-    pub fn new(params: &Params, settings: AdamSettings) -> Result<Self> {
+    pub fn new(params: &ParamStore, settings: AdamSettings) -> Result<Self> {
         if !(settings.learning_rate > 0.0
             && (0.0..1.0).contains(&settings.beta1)
             && (0.0..1.0).contains(&settings.beta2))
@@ -99,14 +99,14 @@ impl Adam {
 
     /// One Adam step on every parameter that has a gradient in `grads`. A non-finite
     /// gradient is an error and changes nothing.
-    pub fn step(&mut self, params: &Params, grads: &GradStore) -> Result<()> {
+    pub fn step(&mut self, params: &ParamStore, grads: &GradStore) -> Result<()> {
         self.step_scaled(params, grads, 1.0)
     }
 
     /// One Adam step on the gradients multiplied by `scale` (gradient clipping: the
     /// trainer scales every group by one factor so the global norm stays bounded).
     /// Multiplying by 1 is exact, so an unclipped step is [`Adam::step`] bit for bit.
-    pub fn step_scaled(&mut self, params: &Params, grads: &GradStore, scale: f64) -> Result<()> {
+    pub fn step_scaled(&mut self, params: &ParamStore, grads: &GradStore, scale: f64) -> Result<()> {
         let scale = scale as f32;
         // Every gradient is checked before any parameter changes.
         let mut gradients: Vec<(&String, &Var, &Tensor)> = Vec::new();
@@ -211,7 +211,7 @@ impl Adam {
 }
 
 /// The squared Euclidean norm of the gradients `grads` holds for `params`.
-pub fn gradient_sq_norm(params: &Params, grads: &GradStore) -> Result<f64> {
+pub fn gradient_sq_norm(params: &ParamStore, grads: &GradStore) -> Result<f64> {
     let mut sum = 0.0f64;
     for var in params.vars().values() {
         if let Some(g) = grads.get(var.as_tensor()) {
@@ -290,7 +290,7 @@ mod tests {
     #[test]
     fn first_step_moves_each_weight_by_the_learning_rate_against_its_gradient_sign() {
         // Adam's first step is −lr · g/(|g| + ε/…) ≈ −lr · sign(g), whatever g's scale.
-        let mut p = Params::new(&Device::Cpu, 1);
+        let mut p = ParamStore::new(&Device::Cpu, 1);
         let w = p.create("w", &[3], Init::Uniform(1.0)).unwrap();
         let before: Vec<f32> = w.to_vec1().unwrap();
         let target = Tensor::new(&[10.0f32, -10.0, 0.5], &Device::Cpu).unwrap();
@@ -309,7 +309,7 @@ mod tests {
 
     #[test]
     fn minimises_a_quadratic() {
-        let mut p = Params::new(&Device::Cpu, 2);
+        let mut p = ParamStore::new(&Device::Cpu, 2);
         let w = p.create("w", &[4], Init::Uniform(1.0)).unwrap();
         let target = Tensor::new(&[0.3f32, -0.7, 0.1, 0.9], &Device::Cpu).unwrap();
         let mut adam = Adam::new(

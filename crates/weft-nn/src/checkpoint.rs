@@ -17,7 +17,7 @@ use candle_core::Tensor;
 
 use crate::adam::Adam;
 use crate::error::{Error, Result};
-use crate::params::Params;
+use crate::params::ParamStore;
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
 struct State {
@@ -39,7 +39,7 @@ fn write_safetensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<(
     std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
 }
 
-fn read_safetensors(path: &Path, params: &Params) -> Result<BTreeMap<String, Tensor>> {
+fn read_safetensors(path: &Path, params: &ParamStore) -> Result<BTreeMap<String, Tensor>> {
     if !path.exists() {
         return Err(Error::Checkpoint {
             path: path.display().to_string(),
@@ -56,7 +56,7 @@ fn read_safetensors(path: &Path, params: &Params) -> Result<BTreeMap<String, Ten
 }
 
 /// Saves `params`, `adam` and the caller's `extra` record into `dir` (created if needed).
-pub fn save(dir: &Path, params: &Params, adam: &Adam, extra: &serde_json::Value) -> Result<()> {
+pub fn save(dir: &Path, params: &ParamStore, adam: &Adam, extra: &serde_json::Value) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
     write_safetensors(&dir.join("params.safetensors"), params.tensors())?;
     let (moments, adam_steps) = adam.state(params.device())?;
@@ -81,7 +81,7 @@ pub fn exists(dir: &Path) -> bool {
 
 /// Restores `params` and `adam` from `dir` and returns the caller's `extra` record. The
 /// checkpoint must hold exactly this model's parameters with the same shapes.
-pub fn load(dir: &Path, params: &Params, adam: &mut Adam) -> Result<serde_json::Value> {
+pub fn load(dir: &Path, params: &ParamStore, adam: &mut Adam) -> Result<serde_json::Value> {
     let path = dir.join("state.json");
     let text = std::fs::read_to_string(&path).map_err(|e| io_error(&path, e))?;
     let state: State = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
@@ -100,7 +100,7 @@ pub fn load(dir: &Path, params: &Params, adam: &mut Adam) -> Result<serde_json::
 }
 
 /// Restores only the parameters (inference).
-pub fn load_params(dir: &Path, params: &Params) -> Result<()> {
+pub fn load_params(dir: &Path, params: &ParamStore) -> Result<()> {
     let p = dir.join("params.safetensors");
     params.assign(&read_safetensors(&p, params)?, &p.display().to_string())
 }

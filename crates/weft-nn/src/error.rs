@@ -2,6 +2,7 @@
 
 /// Everything that can go wrong in weft-nn, by cause.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A tensor operation failed (shape mismatch inside candle, unsupported dtype, …).
     #[error("tensor operation failed: {0}")]
@@ -35,7 +36,7 @@ pub enum Error {
     /// A training configuration field is out of its range: checked before any work, so
     /// nothing is written.
     #[error("configuration field `{field}` = {value} {reason}")]
-    InvalidConfig {
+    InvalidSettings {
         field: String,
         value: String,
         reason: &'static str,
@@ -65,4 +66,5 @@ pub enum Error {
     },
 }
 
-pub type Result<T> = std::result::Result<T, Error>;
+/// weft-nn's result, with [`Error`] unless another error is named.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -13,10 +13,10 @@ use candle_core::Tensor;
 use nalgebra::Vector3;
 
 use crate::adam::{Adam, AdamSettings};
-use crate::embed_training::{EmbedData, EmbedModel};
+use crate::embed::{EmbedData, EmbedModel};
 use crate::error::{Error, Result};
 use crate::ops::{AcapInverse, ClothPotential};
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 
 /// How the latent minimisation runs: Adam on `z` (invariant to the energy's scale, which
 /// spans orders of magnitude between scenes), keeping the best code seen.
@@ -81,7 +81,7 @@ pub fn latent_ik(
         });
     }
     let device = model.autoencoder_params.device();
-    let mut params = Params::new(device, 0);
+    let mut params = ParamStore::new(device, 0);
     params.create("z", &[1, z0.len()], Init::Zeros)?;
     let z = params.vars()["z"].clone();
     z.set(&Tensor::from_vec(

@@ -6,7 +6,7 @@ use candle_core::Tensor;
 
 use crate::error::Result;
 use crate::graph::MeshGraph;
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 
 /// The slope of every leaky ReLU in weft's networks.
 pub const LEAKY_SLOPE: f64 = 0.02;
@@ -28,7 +28,7 @@ pub struct GraphConv {
 }
 
 impl GraphConv {
-    pub fn new(params: &mut Params, name: &str, graph: Arc<MeshGraph>, c_in: usize, c_out: usize) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, name: &str, graph: Arc<MeshGraph>, c_in: usize, c_out: usize) -> Result<Self> {
         // Two inputs of fan-in c_in each feed every output.
         let init = Init::kaiming(2 * c_in, LEAKY_SLOPE);
         Ok(Self {
@@ -54,7 +54,7 @@ pub struct Dense {
 }
 
 impl Dense {
-    pub fn new(params: &mut Params, name: &str, c_in: usize, c_out: usize) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, name: &str, c_in: usize, c_out: usize) -> Result<Self> {
         Ok(Self {
             weight: params.create(&format!("{name}.w"), &[c_in, c_out], Init::kaiming(c_in, LEAKY_SLOPE))?,
             bias: params.create(&format!("{name}.b"), &[c_out], Init::Zeros)?,

@@ -1,19 +1,13 @@
 //! Neural models of weft, on candle — the only crate of the workspace that touches it.
 //!
-//! What is here:
-//! - [`graph`], [`layers`]: a mesh's 1-ring graph as tensors and Tan et al.'s graph
-//!   convolution `M x_i + M_N · mean_{j∈N¹(i)} x_j + b`, a few large tensor operations per
-//!   layer, with weights independent of the vertex count;
-//! - [`embed`]: Tan et al.'s graph-CNN mesh autoencoder and latent simulator (Eq. 7);
-//! - [`ops`]: the physics as custom ops with hand-written backward passes — ACAP⁻¹ through
-//!   weft-acap's pre-factorised Poisson solve and its vector–Jacobian product, and
-//!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
-//!   frames stopped (Eq. 9–10), the elastic potential `P_s + P_b`, and Geng et al.'s
-//!   inextensibility and quasistatic projections through weft-proj's backward passes;
-//! - [`pca_simulator`]: the same latent MLP on a PCA subspace — the linear baseline for
-//!   reduced simulation beside the embedding;
-//! - [`ik`]: cloth inverse kinematics in the latent space (Tan et al. §V-A) beside the
-//!   same potential minimised over every vertex;
+//! **The four models** share one layout: each is a folder with `model.rs` (the network
+//! in candle), `training.rs` (its settings, data and the run through [`trainer`]) and,
+//! where one exists, `runtime.rs` (the trained model used outside training) and
+//! `fused.rs` (fused kernels with hand-written backward passes, the default
+//! [`Kernels`]). The files are private; every public item has one path at the folder's
+//! root (`weft_nn::embed::train_model`, `weft_nn::altconv::AltConvRuntime`).
+//! - [`embed`]: Tan et al.'s graph-CNN mesh autoencoder and latent simulator (Eq. 7), its
+//!   three training stages and the latent roll-out;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
 //!   sequences, training in candle, and a runtime over the trained weights outside it;
 //! - [`drape`]: Geng et al.'s pose → cloth network with the projection layers inside
@@ -21,20 +15,43 @@
 //! - [`altconv`]: Alt-ConvLSTM and its graph ConvLSTM baselines for soft-tissue dynamics —
 //!   the cells on the Kipf–Welling normalised adjacency
 //!   ([`graph::NormalizedAdjacency`]), teacher-forced training, and a roll-out runtime
-//!   outside candle; [`fast`] holds the f32 activations both runtimes share;
+//!   outside candle; the cells' elementwise equations are written once (`altconv/cell.rs`)
+//!   for the fused kernels and the runtime.
+//!
+//! **Beside the models:**
+//! - [`pca_simulator`]: the embedding's latent MLP on a PCA subspace ([`pca`]) — the
+//!   linear baseline for reduced simulation;
+//! - [`ik`]: cloth inverse kinematics in the embedding's latent space (Tan et al. §V-A)
+//!   beside the same potential minimised over every vertex;
+//! - [`metrics`]: the error measures the experiments report (M_RMS, STED, nDCG).
+//!
+//! **Blocks every model is built from** (the models import these, never each other, but
+//! for [`pca_simulator`] and [`ik`] on [`embed`]):
+//! - [`graph`], [`layers`]: a mesh's 1-ring graph as tensors and Tan et al.'s graph
+//!   convolution `M x_i + M_N · mean_{j∈N¹(i)} x_j + b`, a few large tensor operations per
+//!   layer, with weights independent of the vertex count;
+//! - [`ops`]: the physics as custom ops with hand-written backward passes — ACAP⁻¹ through
+//!   weft-acap's pre-factorised Poisson solve and its vector–Jacobian product, and
+//!   L_phys (Eq. 4) through weft-sim's energies, with the gradient into the two previous
+//!   frames stopped (Eq. 9–10), the elastic potential `P_s + P_b`, and Geng et al.'s
+//!   inextensibility and quasistatic projections through weft-proj's backward passes;
 //! - [`trainer`]: the one training loop every model runs through — epochs, batches, Adam
 //!   per parameter group, learning-rate schedules, gradient clipping, model selection and
 //!   early stopping on the validation split only, a checkpoint each epoch and
 //!   bit-identical resume;
-//! - training blocks shared by every model: seeded parameters ([`params`]), Adam with
-//!   checkpointable state ([`adam`]), resumable checkpoints ([`checkpoint`]), and the one
-//!   f32 ↔ f64 boundary ([`convert`]). The datasets are read by weft-data.
+//! - seeded parameters ([`params::ParamStore`]), Adam with checkpointable state
+//!   ([`adam`]), resumable checkpoints ([`checkpoint`]), the one f32 ↔ f64 boundary
+//!   ([`convert`]) and the vectorised f32 activations of the runtimes ([`fast`]).
+//!
+//! **Conventions:** configuration types are `*Settings` (their serialised field names are
+//! the model directories' `config.json`); one [`Error`], `#[non_exhaustive]`, with
+//! `Result<T, E = Error>`.
 //!
 //! What is not here: no physics or geometry of its own (every formula of the simulation
 //! lives in weft-sim, weft-acap or weft-proj and is called, never re-derived in
 //! tensors), no file formats beyond checkpoints and model directories (datasets are
-//! weft-data's), no
-//! command line (that is xtask's).
+//! weft-data's), no command line (that is xtask's), no experiment (that is
+//! weft-experiments').
 //!
 //! Precision: networks run in f32; everything that crosses into the physics is converted
 //! to f64 and checked for NaN at that boundary.
@@ -42,11 +59,11 @@
 //! ```
 //! use std::sync::Arc;
 //! use candle_core::{Device, Tensor};
-//! use weft_nn::{embed::{AutoencoderConfig, MeshAutoencoder}, graph::MeshGraph, params::Params};
+//! use weft_nn::{embed::{AutoencoderSettings, MeshAutoencoder}, graph::MeshGraph, params::ParamStore};
 //! let sheet = weft_mesh::generators::sheet(5, 1.0)?;
 //! let graph = Arc::new(MeshGraph::new(&sheet, &Device::Cpu)?);
-//! let mut params = Params::new(&Device::Cpu, 42);
-//! let config = AutoencoderConfig { conv_layers: 1, latent: 8 };
+//! let mut params = ParamStore::new(&Device::Cpu, 42);
+//! let config = AutoencoderSettings { conv_layers: 1, latent: 8 };
 //! let model = MeshAutoencoder::new(&mut params, graph, config)?;
 //! let features = Tensor::zeros((2, 25, 9), candle_core::DType::F32, &Device::Cpu)?;
 //! let z = model.encode(&features)?;
@@ -60,12 +77,9 @@ pub mod altconv;
 pub mod checkpoint;
 pub mod convert;
 pub mod drape;
-pub mod drape_training;
 pub mod embed;
-pub mod embed_training;
 pub mod error;
 pub mod fast;
-mod fused_autoencoder;
 pub mod graph;
 pub mod ik;
 pub mod layers;
@@ -75,7 +89,6 @@ pub mod ops;
 pub mod params;
 pub mod pca;
 pub mod pca_simulator;
-pub mod rollout;
 pub mod trainer;
 
 pub use candle_core::Device;

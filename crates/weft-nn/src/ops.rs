@@ -29,6 +29,11 @@ fn f32_slice<'a>(op: &str, s: &'a CpuStorage, l: &Layout) -> candle_core::Result
     }
 }
 
+/// Channels of an ACAP feature (`weft_acap::Feature`): what [`AcapInverse`] takes per
+/// vertex and what the mesh autoencoder reconstructs. Here, below both the autoencoder and
+/// its fused kernels, so that each imports it downward.
+pub const FEATURE_CHANNELS: usize = 9;
+
 /// ACAP⁻¹ ∘ denormalisation on a batch: `[B, V, 9]` normalised features → `[B, V, 3]`
 /// positions (metres), each frame with its own pinned (grasped) vertex positions.
 #[derive(Debug, Clone)]

@@ -33,13 +33,13 @@ impl Init {
 
 /// Named trainable parameters (f32), in a stable order.
 #[derive(Debug)]
-pub struct Params {
+pub struct ParamStore {
     device: Device,
     vars: BTreeMap<String, Var>,
     rng: SplitMix64,
 }
 
-impl Params {
+impl ParamStore {
     /// An empty store whose initialisations are drawn from SplitMix64(`seed`).
     pub fn new(device: &Device, seed: u64) -> Self {
         Self {
@@ -125,7 +125,7 @@ mod tests {
     fn same_seed_same_weights_and_duplicate_names_rejected() {
         let d = Device::Cpu;
         let draw = |seed| {
-            let mut p = Params::new(&d, seed);
+            let mut p = ParamStore::new(&d, seed);
             let a = p.create("a", &[3, 4], Init::kaiming(3, 0.2)).unwrap();
             let b = p.create("b", &[4], Init::Zeros).unwrap();
             assert!(p.create("a", &[1], Init::Zeros).is_err());

@@ -13,17 +13,16 @@
 use candle_core::{DType, Device, Tensor};
 
 use crate::adam::AdamSettings;
-use crate::embed::{LatentSimulator, LatentSimulatorConfig};
-use crate::embed_training::{EmbedData, FrameRef};
+use crate::embed::{EmbedData, FrameRef, LatentSimulator, LatentSimulatorSettings};
 use crate::error::{Error, Result};
-use crate::params::Params;
+use crate::params::ParamStore;
 use crate::pca::PositionPca;
-use crate::trainer::{BatchAt, BatchLoss, Group, Observer, Schedule, Trainable, Trainer, TrainerConfig};
+use crate::trainer::{BatchAt, BatchLoss, Group, Observer, Schedule, Trainable, Trainer, TrainerSettings};
 
 /// How the simulator is trained.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct PcaSimulatorConfig {
+pub struct PcaSimulatorSettings {
     pub hidden: Vec<usize>,
     pub adam: AdamSettings,
     pub batch: usize,
@@ -32,7 +31,7 @@ pub struct PcaSimulatorConfig {
     pub schedule: Schedule,
 }
 
-impl Default for PcaSimulatorConfig {
+impl Default for PcaSimulatorSettings {
     fn default() -> Self {
         Self {
             hidden: vec![256, 256],
@@ -51,7 +50,7 @@ pub struct PcaSimulator {
     pub pca: PositionPca,
     /// Codes are multiplied by this before the MLP (1/m).
     pub scale: f64,
-    pub params: Params,
+    pub params: ParamStore,
     pub mlp: LatentSimulator,
 }
 
@@ -87,7 +86,7 @@ fn windows(data: &EmbedData, pca: &PositionPca, scale: f64, frames: &[FrameRef])
 
 struct Training<'a> {
     mlp: &'a LatentSimulator,
-    params: &'a Params,
+    params: &'a ParamStore,
     adam: AdamSettings,
     train: Windows,
     validation: Windows,
@@ -147,7 +146,7 @@ pub fn train(
     dir: &std::path::Path,
     data: &EmbedData,
     pca: PositionPca,
-    config: &PcaSimulatorConfig,
+    config: &PcaSimulatorSettings,
     observer: &mut dyn Observer,
 ) -> Result<PcaSimulator> {
     let k = pca.num_components();
@@ -160,10 +159,10 @@ pub fn train(
         });
     }
     let scale = 1.0 / mean_variance.sqrt();
-    let mut params = Params::new(&Device::Cpu, config.seed ^ 0x5151_5151);
+    let mut params = ParamStore::new(&Device::Cpu, config.seed ^ 0x5151_5151);
     let mlp = LatentSimulator::new(
         &mut params,
-        LatentSimulatorConfig {
+        LatentSimulatorSettings {
             latent: k,
             controls: 3 * data.dataset.grasp.len(),
             hidden: config.hidden.clone(),
@@ -178,7 +177,7 @@ pub fn train(
     };
     let trainer = Trainer::new(
         format!("pca-simulator/{}", data.dataset.name),
-        TrainerConfig {
+        TrainerSettings {
             epochs: config.epochs,
             batch: config.batch,
             seed: config.seed,

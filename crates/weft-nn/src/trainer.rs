@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::adam::{Adam, AdamSettings, gradient_sq_norm};
 use crate::error::{Error, Result};
-use crate::params::Params;
+use crate::params::ParamStore;
 
 /// How the learning rate moves from epoch to epoch after warm-up.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -93,7 +93,7 @@ pub const MAX_WARMUP_STEPS: usize = 1 << 30;
 
 /// A configuration field out of its range, as a typed error naming the field.
 pub fn invalid(field: &str, value: impl std::fmt::Debug, reason: &'static str) -> Error {
-    Error::InvalidConfig {
+    Error::InvalidSettings {
         field: field.to_string(),
         value: format!("{value:?}"),
         reason,
@@ -111,7 +111,7 @@ pub fn check_learning_rate(field: &str, lr: f64) -> Result<()> {
 /// Checks a count that must lie in `1..=max`.
 pub fn check_count(field: &str, value: usize, max: usize) -> Result<()> {
     if value == 0 || value > max {
-        return Err(Error::InvalidConfig {
+        return Err(Error::InvalidSettings {
             field: field.to_string(),
             value: value.to_string(),
             reason: if value == 0 {
@@ -195,7 +195,7 @@ impl Schedule {
 
 /// The trainer's own settings; everything model-specific stays in the model.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct TrainerConfig {
+pub struct TrainerSettings {
     /// Epochs in all (a resumed run continues up to this many).
     pub epochs: usize,
     /// Training examples per step.
@@ -205,7 +205,7 @@ pub struct TrainerConfig {
     pub schedule: Schedule,
 }
 
-impl TrainerConfig {
+impl TrainerSettings {
     pub fn validate(&self) -> Result<()> {
         check_count("epochs", self.epochs, MAX_EPOCHS)?;
         check_count("batch", self.batch, MAX_BATCH)?;
@@ -244,7 +244,7 @@ impl TrainerConfig {
 pub struct Group<'a> {
     /// The directory name under `last/` and `best/`.
     pub name: &'static str,
-    pub params: &'a Params,
+    pub params: &'a ParamStore,
     /// Adam at the base learning rate; the schedule scales it.
     pub adam: AdamSettings,
 }
@@ -327,7 +327,7 @@ pub struct EpochRecord {
 /// Where a run stands, `training.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainingState {
-    pub config: TrainerConfig,
+    pub config: TrainerSettings,
     pub epochs_done: usize,
     /// The validation score of the starting weights (epoch 0).
     pub initial_validation: f64,
@@ -379,15 +379,15 @@ impl TrainingState {
 
     /// Whether the run is complete under `config` (its epochs all trained, or stopped by
     /// `config`'s early stopping), so continuing it would train nothing more.
-    pub fn finished_under(&self, config: &TrainerConfig) -> bool {
+    pub fn finished_under(&self, config: &TrainerSettings) -> bool {
         self.epochs_done >= config.epochs || config.stops(self.epochs_since_best)
     }
 
     /// Whether continuing this run under `config` gives exactly the run a fresh trainer
     /// under `config` would make: `config` continues the run's configuration
-    /// ([`TrainerConfig::continues_as`]) and allows at least the epochs already trained
+    /// ([`TrainerSettings::continues_as`]) and allows at least the epochs already trained
     /// (a shorter budget could have kept another epoch's weights).
-    pub fn continues_exactly_as(&self, config: &TrainerConfig) -> bool {
+    pub fn continues_exactly_as(&self, config: &TrainerSettings) -> bool {
         self.config.continues_as(config) && self.epochs_done <= config.epochs
     }
 
@@ -427,7 +427,7 @@ impl Observer for EpochLines {
 /// The one training loop.
 #[derive(Debug, Clone)]
 pub struct Trainer {
-    pub config: TrainerConfig,
+    pub config: TrainerSettings,
     /// Written at the start of every log line (e.g. `altconv/alt`).
     pub label: String,
 }
@@ -516,7 +516,7 @@ pub fn shuffled(n: usize, seed: u64) -> Vec<usize> {
 }
 
 impl Trainer {
-    pub fn new(label: impl Into<String>, config: TrainerConfig) -> Self {
+    pub fn new(label: impl Into<String>, config: TrainerSettings) -> Self {
         Self {
             config,
             label: label.into(),
@@ -803,7 +803,7 @@ mod tests {
 
     /// Linear regression `y = w·x` on fixed data, validated on held-out points.
     struct Line {
-        params: Params,
+        params: ParamStore,
         w: Tensor,
         x: Vec<f32>,
         y: Vec<f32>,
@@ -814,7 +814,7 @@ mod tests {
 
     impl Line {
         fn new(lr: f64) -> Self {
-            let mut params = Params::new(&Device::Cpu, 3);
+            let mut params = ParamStore::new(&Device::Cpu, 3);
             let w = params.create("w", &[1], Init::Constant(0.0)).unwrap();
             let x: Vec<f32> = (0..20).map(|i| i as f32 / 10.0).collect();
             let y = x.iter().map(|x| 2.0 * x + 0.1 * (x * 7.0).sin()).collect();
@@ -869,8 +869,8 @@ mod tests {
         }
     }
 
-    fn config(epochs: usize) -> TrainerConfig {
-        TrainerConfig {
+    fn config(epochs: usize) -> TrainerSettings {
+        TrainerSettings {
             epochs,
             batch: 3,
             seed: 7,
@@ -925,7 +925,7 @@ mod tests {
     /// run resumed inside the ramp continues it bit for bit, and the ramp changes the run.
     #[test]
     fn warmup_ramps_by_batch_and_a_run_resumed_mid_ramp_continues_it() {
-        let warm = |epochs| TrainerConfig {
+        let warm = |epochs| TrainerSettings {
             schedule: Schedule {
                 warmup_steps: 20,
                 ..Schedule::default()

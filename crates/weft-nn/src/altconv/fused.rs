@@ -39,9 +39,9 @@ use candle_core::{CpuStorage, Layout, Shape, Tensor};
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::{AltConvNet, Drive, INPUT_CHANNELS, Peephole, Variant};
+use super::cell::{self, Peephole};
+use super::model::{AltConvNet, Drive, INPUT_CHANNELS, Variant};
 use crate::error::{Error, Result};
-use crate::fast::{sigmoid_f32, tanh_f32};
 use crate::graph::{Columns, NormalizedAdjacency};
 
 /// One cell's shape and where its parameters sit in θ.
@@ -74,7 +74,7 @@ struct Plan {
     variant: Variant,
     cells: Vec<CellPlan>,
     num_params: usize,
-    /// Output unit (m) and the input standardisation ([`super::Scaling`]).
+    /// Output unit (m) and the input standardisation ([`super::model::Scaling`]).
     unit: f32,
     mean: [f32; INPUT_CHANNELS],
     inv_std: [f32; INPUT_CHANNELS],
@@ -411,199 +411,6 @@ fn view_mut(data: &mut [f32], rows: usize, cols: usize) -> MatMut<'_, f32> {
     MatMut::from_row_major_slice_mut(data, rows, cols)
 }
 
-/// `data` in chunks of `ROWS_PER_TASK` rows of `width`.
-fn chunks(data: &mut [f32], width: usize) -> Vec<&mut [f32]> {
-    data.chunks_mut(ROWS_PER_TASK * width).collect()
-}
-
-fn chunks_opt(data: Option<&mut [f32]>, width: usize, n: usize) -> Vec<Option<&mut [f32]>> {
-    match data {
-        Some(d) => d.chunks_mut(ROWS_PER_TASK * width).map(Some).collect(),
-        None => (0..n).map(|_| None).collect(),
-    }
-}
-
-/// Eq. 5, lines 1–4, on a block of rows: activates i, f and c̃ in place, writes
-/// `C_t = f∘C_{t−1} + i∘c̃` and adds `unit · C_t + skip` onto the accumulation.
-#[inline(always)]
-fn cell_update(
-    c: usize,
-    gates: &mut [f32],
-    cell: &mut [f32],
-    cell_prev: &[f32],
-    y: Option<&mut [f32]>,
-    skip: Option<&[f32]>,
-    unit: f32,
-) {
-    for ((g, ct), cp) in gates
-        .chunks_exact_mut(4 * c)
-        .zip(cell.chunks_exact_mut(c))
-        .zip(cell_prev.chunks_exact(c))
-    {
-        let (i, rest) = g.split_at_mut(c);
-        let (f, rest) = rest.split_at_mut(c);
-        let candidate = &mut rest[..c];
-        for ((((ck, ik), fk), gk), pk) in ct.iter_mut().zip(i).zip(f).zip(candidate).zip(cp) {
-            *ik = sigmoid_f32(*ik);
-            *fk = sigmoid_f32(*fk);
-            *gk = tanh_f32(*gk);
-            *ck = *fk * pk + *ik * *gk;
-        }
-    }
-    if let Some(y) = y {
-        for (yk, ck) in y.iter_mut().zip(cell.iter()) {
-            *yk += unit * ck;
-        }
-        if let Some(skip) = skip {
-            for (yk, sk) in y.iter_mut().zip(skip) {
-                *yk += sk;
-            }
-        }
-    }
-}
-
-/// Eq. 5, lines 5–6: activates o in place and writes `H_t = o∘tanh(C_t)`.
-#[inline(always)]
-fn hidden_update(c: usize, gates: &mut [f32], cell: &[f32], h: &mut [f32]) {
-    for ((g, ct), hr) in gates
-        .chunks_exact_mut(4 * c)
-        .zip(cell.chunks_exact(c))
-        .zip(h.chunks_exact_mut(c))
-    {
-        for ((hk, ok), ck) in hr.iter_mut().zip(&mut g[3 * c..]).zip(ct) {
-            *ok = sigmoid_f32(*ok);
-            *hk = *ok * tanh_f32(*ck);
-        }
-    }
-}
-
-/// The backward pass through line 6: `∂L/∂o_pre = ∂L/∂H ∘ tanh C ∘ o(1 − o)` into the o
-/// slot, and `∂L/∂C += ∂L/∂H ∘ o ∘ (1 − tanh² C)`.
-#[inline(always)]
-fn hidden_backward(c: usize, gates: &mut [f32], cell: &[f32], dh: &[f32], dc: &mut [f32]) {
-    for (((g, ct), dhr), dcr) in gates
-        .chunks_exact_mut(4 * c)
-        .zip(cell.chunks_exact(c))
-        .zip(dh.chunks_exact(c))
-        .zip(dc.chunks_exact_mut(c))
-    {
-        for (((ok, ck), dhk), dck) in g[3 * c..].iter_mut().zip(ct).zip(dhr).zip(dcr) {
-            let o = *ok;
-            let tc = tanh_f32(*ck);
-            *ok = dhk * tc * o * (1.0 - o);
-            *dck += dhk * o * (1.0 - tc * tc);
-        }
-    }
-}
-
-/// The backward pass through lines 1–4 (after `∂L/∂C_t` is complete but for the
-/// accumulation's `unit · ∂L/∂Y_t`, added here): the pre-activation gradients of i, f and
-/// c̃ into their slots, and `∂L/∂C_t` replaced by its share of `∂L/∂C_{t−1}`, `∘ f`.
-#[inline(always)]
-fn cell_backward(c: usize, gates: &mut [f32], cell_prev: &[f32], dc: &mut [f32], dy: Option<&[f32]>, unit: f32) {
-    for (r, ((g, cp), dcr)) in gates
-        .chunks_exact_mut(4 * c)
-        .zip(cell_prev.chunks_exact(c))
-        .zip(dc.chunks_exact_mut(c))
-        .enumerate()
-    {
-        let dyr = dy.map(|d| &d[r * c..(r + 1) * c]);
-        let (i, rest) = g.split_at_mut(c);
-        let (f, rest) = rest.split_at_mut(c);
-        let candidate = &mut rest[..c];
-        for (k, ((((ik, fk), gk), pk), dck)) in i.iter_mut().zip(f).zip(candidate).zip(cp).zip(dcr).enumerate() {
-            let d = *dck + dyr.map_or(0.0, |y| unit * y[k]);
-            let (iv, fv, gv) = (*ik, *fk, *gk);
-            *ik = d * gv * iv * (1.0 - iv);
-            *fk = d * pk * fv * (1.0 - fv);
-            *gk = d * iv * (1.0 - gv * gv);
-            *dck = d * fv;
-        }
-    }
-}
-
-// The passes as `pulp` kernels: each is compiled for the CPU's widest vectors at run time
-// (the workspace targets baseline x86-64). A closure handed to `dispatch` was not inlined
-// into the vectorised context, and its fused multiply-adds became calls to `fmaf`.
-
-struct CellUpdate<'a> {
-    c: usize,
-    gates: &'a mut [f32],
-    cell: &'a mut [f32],
-    cell_prev: &'a [f32],
-    y: Option<&'a mut [f32]>,
-    skip: Option<&'a [f32]>,
-    unit: f32,
-}
-
-impl pulp::WithSimd for CellUpdate<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        cell_update(
-            self.c,
-            self.gates,
-            self.cell,
-            self.cell_prev,
-            self.y,
-            self.skip,
-            self.unit,
-        )
-    }
-}
-
-struct HiddenUpdate<'a> {
-    c: usize,
-    gates: &'a mut [f32],
-    cell: &'a [f32],
-    h: &'a mut [f32],
-}
-
-impl pulp::WithSimd for HiddenUpdate<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        hidden_update(self.c, self.gates, self.cell, self.h)
-    }
-}
-
-struct HiddenBackward<'a> {
-    c: usize,
-    gates: &'a mut [f32],
-    cell: &'a [f32],
-    dh: &'a [f32],
-    dc: &'a mut [f32],
-}
-
-impl pulp::WithSimd for HiddenBackward<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        hidden_backward(self.c, self.gates, self.cell, self.dh, self.dc)
-    }
-}
-
-struct CellBackward<'a> {
-    c: usize,
-    gates: &'a mut [f32],
-    cell_prev: &'a [f32],
-    dc: &'a mut [f32],
-    dy: Option<&'a [f32]>,
-    unit: f32,
-}
-
-impl pulp::WithSimd for CellBackward<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        cell_backward(self.c, self.gates, self.cell_prev, self.dc, self.dy, self.unit)
-    }
-}
-
 struct AddScaled<'a> {
     a: &'a mut [f32],
     b: &'a [f32],
@@ -742,16 +549,7 @@ fn forward(
                 previous.copy_from_slice(&tr[t - 1]);
             }
         }
-        // [X_t, X_t − X_{t−1}, Y₀ − X₀], standardised.
-        for (r, row) in input.chunks_exact_mut(INPUT_CHANNELS).enumerate() {
-            let v = 3 * r..3 * r + 3;
-            row[..3].copy_from_slice(&xt[v.clone()]);
-            row[3..6].copy_from_slice(&dx[v.clone()]);
-            row[6..].copy_from_slice(&offset0[v]);
-            for ((x, m), s) in row.iter_mut().zip(&plan.mean).zip(&plan.inv_std) {
-                *x = (*x - m) * s;
-            }
-        }
+        cell::standardized_input(xt, &dx, &offset0, &plan.mean, &plan.inv_std, &mut input);
         for l in 0..=out {
             let p = &plan.cells[l];
             let (c_in, c, k) = (p.c_in, p.c, p.k());
@@ -807,30 +605,8 @@ fn forward(
             } else {
                 p.skip_from.map(|f| &below[f].cell[t * n..(t + 1) * n])
             };
-            {
-                let y = (!y.is_empty()).then_some(y.as_mut_slice());
-                let g_chunks = chunks(gates, 4 * c);
-                let count = g_chunks.len();
-                let c_chunks = chunks(cell_t, c);
-                let y_chunks = chunks_opt(y, c, count);
-                (g_chunks, c_chunks, y_chunks)
-                    .into_par_iter()
-                    .enumerate()
-                    .for_each(|(task, (g, ct, y))| {
-                        let r = task * ROWS_PER_TASK * c..task * ROWS_PER_TASK * c + ct.len();
-                        let cp = &cell_prev[r.clone()];
-                        let sk = skip.map(|s| &s[r]);
-                        pulp::Arch::new().dispatch(CellUpdate {
-                            c,
-                            gates: g,
-                            cell: ct,
-                            cell_prev: cp,
-                            y,
-                            skip: sk,
-                            unit: p.unit,
-                        })
-                    });
-            }
+            let y_now = (!y.is_empty()).then_some(y.as_mut_slice());
+            cell::cell_forward(ROWS_PER_TASK, c, gates, cell_t, cell_prev, y_now, skip, p.unit);
             let cell_t = &cell_after[..n];
             // Â of the watched state now, and the output gate's peephole on it.
             if p.peephole != Peephole::None {
@@ -848,26 +624,11 @@ fn forward(
                 );
             }
             // Lines 5–6.
-            (chunks(gates, 4 * c), chunks(h, c))
-                .into_par_iter()
-                .enumerate()
-                .for_each(|(task, (g, hr))| {
-                    let r = task * ROWS_PER_TASK * c..task * ROWS_PER_TASK * c + hr.len();
-                    let ct = &cell_t[r];
-                    pulp::Arch::new().dispatch(HiddenUpdate {
-                        c,
-                        gates: g,
-                        cell: ct,
-                        h: hr,
-                    })
-                });
+            cell::hidden_forward(ROWS_PER_TASK, c, gates, cell_t, h);
         }
         let c_out = &cells[out].cell[t * rows * 3..(t + 1) * rows * 3];
-        let prediction: Vec<f32> = match plan.variant {
-            Variant::Alt => cells[out].y.clone(),
-            v if v.outputs_position() => xt.iter().zip(c_out).map(|(x, c)| x + unit * c).collect(),
-            _ => (0..3 * rows).map(|d| previous[d] + unit * c_out[d] + dx[d]).collect(),
-        };
+        let y_out = (plan.variant == Variant::Alt).then_some(cells[out].y.as_slice());
+        let prediction = cell::readout(plan.variant, y_out, c_out, xt, &previous, &dx, unit);
         previous.copy_from_slice(&prediction);
         predictions.push(prediction);
     }
@@ -937,23 +698,7 @@ fn backward(
                 &cell_used[(t - 1) * n..t * n]
             };
             // Line 6.
-            {
-                let dh_l = &dh[l];
-                (chunks(gates, 4 * c), chunks(&mut dc[l], c))
-                    .into_par_iter()
-                    .enumerate()
-                    .for_each(|(task, (g, dcr))| {
-                        let r = task * ROWS_PER_TASK * c..task * ROWS_PER_TASK * c + dcr.len();
-                        let (ct, dhr) = (&cell_t[r.clone()], &dh_l[r]);
-                        pulp::Arch::new().dispatch(HiddenBackward {
-                            c,
-                            gates: g,
-                            cell: ct,
-                            dh: dhr,
-                            dc: dcr,
-                        })
-                    });
-            }
+            cell::hidden_backward(ROWS_PER_TASK, c, gates, cell_t, &dh[l], &mut dc[l]);
             // The output gate's peephole on Â of the new watched state (Y_t or C_t).
             if p.peephole != Peephole::None {
                 let w_o = view(&theta[p.w_o..p.w_o + c * c], c, c);
@@ -975,26 +720,8 @@ fn backward(
                 add_scaled(&mut dc[from], &dy[l], 1.0);
             }
             // Lines 1–4, and the carry of ∂L/∂C to the previous step.
-            {
-                let dy_l: Option<&[f32]> = (!dy[l].is_empty()).then_some(dy[l].as_slice());
-                let unit_l = p.unit;
-                (chunks(gates, 4 * c), chunks(&mut dc[l], c))
-                    .into_par_iter()
-                    .enumerate()
-                    .for_each(|(task, (g, dcr))| {
-                        let r = task * ROWS_PER_TASK * c..task * ROWS_PER_TASK * c + dcr.len();
-                        let cp = &cell_prev[r.clone()];
-                        let dyr = dy_l.map(|d| &d[r]);
-                        pulp::Arch::new().dispatch(CellBackward {
-                            c,
-                            gates: g,
-                            cell_prev: cp,
-                            dc: dcr,
-                            dy: dyr,
-                            unit: unit_l,
-                        })
-                    });
-            }
+            let dy_l: Option<&[f32]> = (!dy[l].is_empty()).then_some(dy[l].as_slice());
+            cell::cell_backward(ROWS_PER_TASK, c, gates, cell_prev, &mut dc[l], dy_l, p.unit);
             // Teacher forcing replaced the previous state: nothing flows into it.
             let cut = l == out && replaced && plan.replaces_out_state();
             if cut {

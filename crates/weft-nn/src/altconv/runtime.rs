@@ -20,11 +20,10 @@
 //! round-off); only the arithmetic's order differs.
 
 use faer::{Accum, MatMut, MatRef, Par};
-use rayon::prelude::*;
 
-use super::{AltConvNet, INPUT_CHANNELS, Peephole, Variant};
+use super::cell::{self, Peephole};
+use super::model::{AltConvNet, INPUT_CHANNELS, Variant};
 use crate::error::{Error, Result};
-use crate::fast::{sigmoid_f32, tanh_f32};
 use crate::graph::NormalizedAdjacency;
 
 /// One cell's weights as row-major f32 buffers (candle's layout).
@@ -47,6 +46,8 @@ struct Weights {
 struct State {
     h: Vec<f32>,
     c: Vec<f32>,
+    /// `C_{t−1}` during a step (swapped with `c` before the update).
+    c_prev: Vec<f32>,
     y: Option<Vec<f32>>,
     watched: Option<Vec<f32>>,
 }
@@ -65,7 +66,7 @@ pub struct AltConvRuntime {
     x_previous: Vec<f32>,
     offset0: Vec<f32>,
     started: bool,
-    scaling: super::Scaling,
+    scaling: super::model::Scaling,
     /// Scratch reused every step (allocating megabytes per cell and step cost page
     /// faults): `[Â X | Â H]` and the gates.
     xh: Vec<f32>,
@@ -88,73 +89,6 @@ fn gemm_add(out: MatMut<'_, f32>, a: &[f32], w: &[f32], k: usize) {
         1.0,
         Par::rayon(0),
     );
-}
-
-/// The first fused pass of a cell over a block of vertex rows (Eq. 5, lines 1–4): gates
-/// i, f and the candidate, the new cell state, and the accumulation with its skip.
-struct CellUpdate<'a> {
-    c: usize,
-    gates: &'a [f32],
-    cell: &'a mut [f32],
-    y: Option<&'a mut [f32]>,
-    /// The cell state's unit in the accumulation's.
-    unit: f32,
-    skip: Option<&'a [f32]>,
-}
-
-impl pulp::WithSimd for CellUpdate<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        let c = self.c;
-        for (g, cell) in self.gates.chunks_exact(4 * c).zip(self.cell.chunks_exact_mut(c)) {
-            let (i, rest) = g.split_at(c);
-            let (f, rest) = rest.split_at(c);
-            let candidate = &rest[..c];
-            for (((ck, ik), fk), gk) in cell.iter_mut().zip(i).zip(f).zip(candidate) {
-                *ck = sigmoid_f32(*fk) * *ck + sigmoid_f32(*ik) * tanh_f32(*gk);
-            }
-        }
-        if let Some(y) = self.y {
-            for (yk, ck) in y.iter_mut().zip(self.cell.iter()) {
-                *yk += self.unit * ck;
-            }
-            if let Some(skip) = self.skip {
-                for (yk, sk) in y.iter_mut().zip(skip) {
-                    *yk += sk;
-                }
-            }
-        }
-    }
-}
-
-/// The second fused pass over a block of vertex rows (Eq. 5, lines 5–6):
-/// `H_t = σ(o) ∘ tanh(C_t)`.
-struct HiddenUpdate<'a> {
-    c: usize,
-    gates: &'a [f32],
-    cell: &'a [f32],
-    h: &'a mut [f32],
-}
-
-impl pulp::WithSimd for HiddenUpdate<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        let c = self.c;
-        for ((g, cell), h) in self
-            .gates
-            .chunks_exact(4 * c)
-            .zip(self.cell.chunks_exact(c))
-            .zip(self.h.chunks_exact_mut(c))
-        {
-            for ((hk, ok), ck) in h.iter_mut().zip(&g[3 * c..]).zip(cell) {
-                *hk = sigmoid_f32(*ok) * tanh_f32(*ck);
-            }
-        }
-    }
 }
 
 /// Vertex rows per parallel task of the fused passes.
@@ -235,6 +169,7 @@ impl AltConvRuntime {
                 let mut s = State {
                     h: vec![0.0; v * w.c],
                     c: vec![0.0; v * w.c],
+                    c_prev: vec![0.0; v * w.c],
                     y: (w.peephole == Peephole::Accumulation).then(|| vec![0.0; v * w.c]),
                     watched: None,
                 };
@@ -312,18 +247,8 @@ impl AltConvRuntime {
         // Standardised as the network was trained (`Scaling`).
         let mean = self.scaling.input_mean.map(|m| m as f32);
         let inv_std = self.scaling.input_std.map(|s| (1.0 / s) as f32);
-        let mut input = Vec::with_capacity(9 * v);
-        for i in 0..v {
-            let r = 3 * i..3 * i + 3;
-            input.extend_from_slice(&xt[r.clone()]);
-            input.extend_from_slice(&dx[r.clone()]);
-            input.extend_from_slice(&self.offset0[r]);
-        }
-        for row in input.chunks_exact_mut(INPUT_CHANNELS) {
-            for ((x, m), s) in row.iter_mut().zip(&mean).zip(&inv_std) {
-                *x = (*x - m) * s;
-            }
-        }
+        let mut input = vec![0.0; INPUT_CHANNELS * v];
+        cell::standardized_input(&xt, &dx, &self.offset0, &mean, &inv_std, &mut input);
         let unit = self.scaling.output as f32;
         let out = self.cells.len() - 1;
         for l in 0..self.cells.len() {
@@ -358,41 +283,18 @@ impl AltConvRuntime {
                     .find(|(to, _)| *to == l)
                     .map(|(_, from)| states_below[*from].c.as_slice())
             };
-            let gates = &self.gates;
-            let rows = ROWS_PER_TASK * c;
-            match state.y.as_mut() {
-                Some(y) => state
-                    .c
-                    .par_chunks_mut(rows)
-                    .zip(y.par_chunks_mut(rows))
-                    .zip(gates.par_chunks(4 * rows))
-                    .enumerate()
-                    .for_each(|(t, ((cell, y), gates))| {
-                        let skip = skip.map(|s| &s[t * rows..t * rows + y.len()]);
-                        pulp::Arch::new().dispatch(CellUpdate {
-                            c,
-                            gates,
-                            cell,
-                            y: Some(y),
-                            unit: if l == out { unit } else { 1.0 },
-                            skip,
-                        })
-                    }),
-                None => state
-                    .c
-                    .par_chunks_mut(rows)
-                    .zip(gates.par_chunks(4 * rows))
-                    .for_each(|(cell, gates)| {
-                        pulp::Arch::new().dispatch(CellUpdate {
-                            c,
-                            gates,
-                            cell,
-                            y: None,
-                            unit: 1.0,
-                            skip: None,
-                        })
-                    }),
-            }
+            // Eq. 5, lines 1–4: C_{t−1} moves to `c_prev`, C_t is written into `c`.
+            std::mem::swap(&mut state.c, &mut state.c_prev);
+            cell::cell_forward(
+                ROWS_PER_TASK,
+                c,
+                &mut self.gates,
+                &mut state.c,
+                &state.c_prev,
+                state.y.as_deref_mut(),
+                skip,
+                if l == out { unit } else { 1.0 },
+            );
             // Â of what the peepholes watch, now: the output gate's, and the input and
             // forget gates' at the next step.
             let watched_now = match w.peephole {
@@ -407,24 +309,12 @@ impl AltConvRuntime {
                 let mut g = MatMut::from_row_major_slice_mut(&mut self.gates, v, 4 * c);
                 gemm_add(g.as_mut().subcols_mut(3 * c, c), watched, w_o, c);
             }
-            let gates = &self.gates;
-            let cell = &state.c;
-            state
-                .h
-                .par_chunks_mut(rows)
-                .zip(cell.par_chunks(rows))
-                .zip(gates.par_chunks(4 * rows))
-                .for_each(|((h, cell), gates)| pulp::Arch::new().dispatch(HiddenUpdate { c, gates, cell, h }));
+            // Lines 5–6.
+            cell::hidden_forward(ROWS_PER_TASK, c, &mut self.gates, &state.c, &mut state.h);
         }
         let c_out = &self.states[out].c;
-        let prediction: Vec<f32> = match self.variant {
-            Variant::Alt => self.states[out]
-                .y
-                .clone()
-                .unwrap_or_else(|| unreachable!("Alt-ConvLSTM accumulates")),
-            v if v.outputs_position() => xt.iter().zip(c_out).map(|(x, c)| x + unit * c).collect(),
-            _ => (0..3 * v).map(|d| self.previous[d] + unit * c_out[d] + dx[d]).collect(),
-        };
+        let y_out = self.states[out].y.as_deref();
+        let prediction = cell::readout(self.variant, y_out, c_out, &xt, &self.previous, &dx, unit);
         if let Some(index) = prediction.iter().position(|p| !p.is_finite()) {
             return Err(Error::NonFinite {
                 what: "Alt-ConvLSTM prediction",

@@ -23,7 +23,7 @@ mod studies;
 mod tables;
 
 use weft_data::LimbDataset;
-use weft_nn::altconv::{AltConvNet, AltConvTrainingConfig, Recipe, Variant};
+use weft_nn::altconv::{AltConvNet, AltConvTrainingSettings, Recipe, Variant};
 use weft_nn::graph::NormalizedAdjacency;
 
 use crate::error::Context;
@@ -60,8 +60,8 @@ const QUICK_FRAMES: usize = 12;
 /// curriculum from 10 to 50 steps over the first 8 epochs, scheduled sampling rising from
 /// epoch 3 to pure roll-out training at epoch 15, gradients clipped to norm 1, and the
 /// kept epoch chosen by the 50-step validation roll-out (docs/ALTCONV.md, *The claim decided*).
-pub fn training_config(size: Size, scene: &str, variant: Variant) -> AltConvTrainingConfig {
-    let mut c = AltConvTrainingConfig::new(variant);
+pub fn training_config(size: Size, scene: &str, variant: Variant) -> AltConvTrainingSettings {
+    let mut c = AltConvTrainingSettings::new(variant);
     let jiggle = scene != "limb";
     match size {
         Size::Quick => {

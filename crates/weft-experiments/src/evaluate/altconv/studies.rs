@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use weft_data::LimbDataset;
-use weft_nn::altconv::{AltConvTrainingConfig, Variant};
+use weft_nn::altconv::{AltConvTrainingSettings, Variant};
 use weft_nn::trainer::TrainingState;
 
 use super::{learning_rates, training_config};
@@ -41,7 +41,7 @@ impl VariantTraining<'_> {
     /// directory.
     fn train(&self, seed: u64, lr: f64) -> crate::Result<(TrainingState, PathBuf)> {
         let (scene, variant) = (self.scene, self.variant);
-        let mut config = AltConvTrainingConfig {
+        let mut config = AltConvTrainingSettings {
             seed,
             ..training_config(self.ctx.size, scene, variant)
         };
@@ -175,16 +175,16 @@ fn validation_curve(variant: Variant, runs: &[(TrainingState, PathBuf)]) -> Seri
 /// model trained for fewer epochs under the same configuration is kept: the trainer
 /// continues it to `config.epochs`, as a straight run would have gone (a larger epoch
 /// budget costs only the new epochs).
-pub(super) fn discard_if_stale(dir: &Path, config: &AltConvTrainingConfig) -> crate::Result<()> {
+pub(super) fn discard_if_stale(dir: &Path, config: &AltConvTrainingSettings) -> crate::Result<()> {
     let path = dir.join("config.json");
     if !path.exists() {
         return Ok(());
     }
-    let stored: Option<AltConvTrainingConfig> = std::fs::read_to_string(&path)
+    let stored: Option<AltConvTrainingSettings> = std::fs::read_to_string(&path)
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
-        .filter(|s: &AltConvTrainingConfig| s.epochs <= config.epochs)
-        .map(|s| AltConvTrainingConfig {
+        .filter(|s: &AltConvTrainingSettings| s.epochs <= config.epochs)
+        .map(|s| AltConvTrainingSettings {
             epochs: config.epochs,
             ..s
         });

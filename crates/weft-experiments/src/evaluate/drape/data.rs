@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use weft_data::DrapeDataset;
 use weft_data::files::write_json;
 use weft_nn::Device;
-use weft_nn::drape::{DrapeNetConfig, DrapeTensors, sqrtmse_maxdist_mm};
-use weft_nn::drape_training::{DrapeTrainingConfig, Layers};
+use weft_nn::drape::{DrapeNetSettings, DrapeTensors, sqrtmse_maxdist_mm};
+use weft_nn::drape::{DrapeTrainingSettings, Layers};
 use weft_proj::RestShape;
 
 use super::{Garment, SPLITS, TRAIN_SCORED, seeds_of, training_config};
@@ -35,7 +35,7 @@ pub(super) struct GarmentData {
     pub v: usize,
     pub seeds: Vec<u64>,
     /// The configuration every model starts from (`root/config.json`).
-    pub base: DrapeTrainingConfig,
+    pub base: DrapeTrainingSettings,
     pub layers: Layers,
     pub rest: RestShape,
     /// Epochs of the learned global μ from each start (the μ study).
@@ -58,8 +58,8 @@ impl GarmentData {
         let tensors = |s: &str| DrapeTensors::of_split(&dataset, s, &device).with_context(|| format!("the {s} split"));
         let (train, validation, test) = (tensors("train")?, tensors("validation")?, tensors("test")?);
         let train_scored = train.select(&(0..train.len().min(TRAIN_SCORED)).collect::<Vec<_>>())?;
-        let base = DrapeTrainingConfig {
-            net: DrapeNetConfig {
+        let base = DrapeTrainingSettings {
+            net: DrapeNetSettings {
                 offset_scale: garment.offset_scale,
                 ..training_config(ctx.size).net
             },
@@ -116,8 +116,8 @@ impl GarmentData {
     }
 
     /// The base configuration at `seed` and `learning_rate`.
-    pub fn config_of(&self, seed: u64, learning_rate: f64) -> DrapeTrainingConfig {
-        DrapeTrainingConfig {
+    pub fn config_of(&self, seed: u64, learning_rate: f64) -> DrapeTrainingSettings {
+        DrapeTrainingSettings {
             seed,
             learning_rate,
             ..self.base.clone()

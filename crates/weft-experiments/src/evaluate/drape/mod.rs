@@ -25,8 +25,8 @@ mod scoring;
 mod studies;
 mod tables;
 
-use weft_nn::drape::DrapeNetConfig;
-use weft_nn::drape_training::{DrapeTrainingConfig, Layer};
+use weft_nn::drape::DrapeNetSettings;
+use weft_nn::drape::{DrapeTrainingSettings, Layer};
 
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;
@@ -43,19 +43,19 @@ const FIXED_MU: [(f64, &str); 3] = [(1.0, "mu1"), (0.1, "mu0.1"), (0.01, "mu0.01
 const MU_STARTS: [(f64, &str); 3] = [(1.0, "1"), (0.1, "0.1"), (0.01, "0.01")];
 
 /// The training configuration of each evaluation size (standard: the library's default).
-pub fn training_config(size: Size) -> DrapeTrainingConfig {
+pub fn training_config(size: Size) -> DrapeTrainingSettings {
     if size != Size::Quick {
-        return DrapeTrainingConfig::default();
+        return DrapeTrainingSettings::default();
     }
-    DrapeTrainingConfig {
-        net: DrapeNetConfig {
+    DrapeTrainingSettings {
+        net: DrapeNetSettings {
             hidden: vec![16, 32],
             offset_scale: 0.01,
         },
         pretrain_epochs: 30,
         finetune_epochs: 3,
         batch: 4,
-        ..DrapeTrainingConfig::default()
+        ..DrapeTrainingSettings::default()
     }
 }
 

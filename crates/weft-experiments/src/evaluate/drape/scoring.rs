@@ -10,8 +10,8 @@ use weft_data::DrapeDataset;
 use weft_data::files::progress_bar;
 use weft_nn::Device;
 use weft_nn::drape::{DrapeModel, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
-use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Layers};
-use weft_nn::params::Params;
+use weft_nn::drape::{DrapeTrainingSettings, Fitted, Layer, Layers};
+use weft_nn::params::ParamStore;
 use weft_proj::RestShape;
 
 use super::data::GarmentData;
@@ -44,7 +44,7 @@ fn seed_methods<'a>(
     g: &GarmentData,
     run: &'a SeedRun,
 ) -> crate::Result<Vec<(String, DrapeModel, String, Option<&'a Fitted>)>> {
-    let mut no_mu = Params::new(&Device::Cpu, 0);
+    let mut no_mu = ParamStore::new(&Device::Cpu, 0);
     let network = &run.fitted[0].1;
     let mut methods: Vec<(String, DrapeModel, String, Option<&Fitted>)> = run
         .fitted
@@ -319,7 +319,7 @@ pub(super) fn write_predictions(
 pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
     let (ctx, data_dir, split) = (scoring.ctx, scoring.data_dir, scoring.split);
     let dataset = DrapeDataset::load(data_dir)?;
-    let (model, layer, config) = scoring.load_model(|dir| weft_nn::drape_training::load_model(dir, &dataset.sleeve))?;
+    let (model, layer, config) = scoring.load_model(|dir| weft_nn::drape::load_model(dir, &dataset.sleeve))?;
     let data = DrapeTensors::of_split(&dataset, split, &Device::Cpu)?;
     scoring.require(data.len(), "example")?;
     let rest = RestShape::new(&dataset.sleeve)?;
@@ -368,7 +368,7 @@ pub fn summarize_trained(
     name: &str,
     fitted: &Fitted,
     layers: &Layers,
-    config: &DrapeTrainingConfig,
+    config: &DrapeTrainingSettings,
     validation: &DrapeTensors,
     test: &DrapeTensors,
     sleeve: &weft_mesh::TriMesh,

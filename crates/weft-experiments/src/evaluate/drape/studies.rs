@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use weft_nn::drape_training::{DrapeTrainingConfig, Fitted, Layer, Plan, fit};
+use weft_nn::drape::{DrapeTrainingSettings, Fitted, Layer, Plan, fit};
 
 use super::data::GarmentData;
 use super::scoring::score;
@@ -23,7 +23,7 @@ fn train_one(
     out: &mut ExperimentOutput,
     dir: &Path,
     plan: &Plan,
-    config: &DrapeTrainingConfig,
+    config: &DrapeTrainingSettings,
 ) -> crate::Result<Fitted> {
     let (scene, name, seed) = (g.scene, plan.name, config.seed);
     let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &format!("drape/{scene}/{name}/seed-{seed}"))?;

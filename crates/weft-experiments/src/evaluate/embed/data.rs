@@ -1,14 +1,14 @@
 //! The embed experiment's data: each scene's dataset generated and loaded, the frame sets
 //! the metrics read (test windows, validation windows, the frames PCA fits) and the test
 //! predictions written beside the ground truth. Not the dataset format (weft-data) nor the
-//! networks' features (`weft_nn::embed_training::EmbedData`).
+//! networks' features (`weft_nn::embed::EmbedData`).
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use weft_data::ClothDataset;
 use weft_data::files::{Array, write_safetensors};
-use weft_nn::embed_training::{EmbedData, FrameRef};
+use weft_nn::embed::{EmbedData, FrameRef};
 
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;

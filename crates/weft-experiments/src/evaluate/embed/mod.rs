@@ -11,7 +11,7 @@
 //! studies, each scene's λ_ephys), [`scoring`] training and scoring one model and the
 //! metrics, [`tables`] the paper's tables, the plots and the records. This module holds the
 //! experiment's entry, its types and the loop over the scenes. The networks and their
-//! training are weft-nn's (`weft_nn::embed_training`), not this module's.
+//! training are weft-nn's (`weft_nn::embed`), not this module's.
 
 mod data;
 mod scoring;
@@ -21,7 +21,7 @@ mod tables;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use weft_nn::embed_training::EmbedTrainingConfig;
+use weft_nn::embed::EmbedTrainingSettings;
 use weft_nn::trainer::Schedule;
 
 use super::context::EvalContext;
@@ -42,8 +42,8 @@ fn scenes() -> &'static [&'static str] {
 /// loss has not improved for [`EARLY_STOPPING_PATIENCE`] epochs (issue 31: "train to
 /// convergence"); the learning-rate schedule is then chosen on validation
 /// ([`schedule_candidates`]). `quick` shrinks the networks and trains a fixed budget.
-fn training_config(size: Size) -> EmbedTrainingConfig {
-    let mut c = EmbedTrainingConfig::default();
+fn training_config(size: Size) -> EmbedTrainingSettings {
+    let mut c = EmbedTrainingSettings::default();
     match size {
         Size::Quick => {
             c.autoencoder.conv_layers = 1;
@@ -78,7 +78,7 @@ struct Studies {
 }
 
 impl Studies {
-    fn new(size: Size, config: &EmbedTrainingConfig) -> Self {
+    fn new(size: Size, config: &EmbedTrainingSettings) -> Self {
         Self {
             schedules: schedule_candidates(size, config),
             budgets: budget_candidates(size, config),
@@ -97,12 +97,12 @@ fn seeds(size: Size) -> Vec<u64> {
 }
 
 /// `config` with its seed (initial weights and window order) set to `seed`.
-fn with_seed(config: &EmbedTrainingConfig, seed: u64) -> EmbedTrainingConfig {
-    EmbedTrainingConfig { seed, ..config.clone() }
+fn with_seed(config: &EmbedTrainingSettings, seed: u64) -> EmbedTrainingSettings {
+    EmbedTrainingSettings { seed, ..config.clone() }
 }
 
 /// The configuration a method trains under: `no-pb` zeroes the physics weights.
-fn method_config(config: &EmbedTrainingConfig, no_pb: bool) -> EmbedTrainingConfig {
+fn method_config(config: &EmbedTrainingSettings, no_pb: bool) -> EmbedTrainingSettings {
     let mut c = config.clone();
     if no_pb {
         c.weights.ephys = 0.0;
@@ -152,7 +152,7 @@ struct IkRow {
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct ModelScores {
     /// The configuration the model trained under (a model of another is retrained).
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     validation: ValidationScores,
     test: Scores,
     /// Seconds per test frame to reconstruct (encode and decode).
@@ -189,13 +189,13 @@ struct Role<'a> {
 /// directory and role.
 #[derive(Clone)]
 struct Job<'a> {
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     dir: PathBuf,
     role: Role<'a>,
 }
 
 impl<'a> Job<'a> {
-    fn new(config: EmbedTrainingConfig, dir: PathBuf, role: Role<'a>) -> Self {
+    fn new(config: EmbedTrainingSettings, dir: PathBuf, role: Role<'a>) -> Self {
         Self { config, dir, role }
     }
 }
@@ -207,7 +207,7 @@ impl<'a> Job<'a> {
 struct SceneResults {
     /// The experiment's configuration after the scene (the first scene chooses the
     /// learning-rate schedule).
-    config: EmbedTrainingConfig,
+    config: EmbedTrainingSettings,
     /// The scene's records, curves, scatters, learning curves, notes and failures.
     output: ExperimentOutput,
     ephys_row: Option<(Vec<f64>, Vec<String>)>,
@@ -252,7 +252,7 @@ enum KeptScene {
 
 /// The results kept at `path` if they were made under `config` (on the first scene, under
 /// any candidate schedule and stage-1 budget: the scene makes the choices).
-fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, first: bool) -> KeptScene {
+fn restored_scene(path: &Path, config: &EmbedTrainingSettings, studies: &Studies, first: bool) -> KeptScene {
     let Ok(text) = std::fs::read_to_string(path) else {
         return KeptScene::Run;
     };
@@ -264,7 +264,7 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
         }
     };
     let same = if first {
-        let mut before_the_studies = EmbedTrainingConfig {
+        let mut before_the_studies = EmbedTrainingSettings {
             schedule: config.schedule,
             fine_tune_learning_rate: config.fine_tune_learning_rate,
             ..kept.config.clone()
@@ -299,7 +299,7 @@ fn restored_scene(path: &Path, config: &EmbedTrainingConfig, studies: &Studies, 
 struct Scene<'a> {
     ctx: &'a EvalContext,
     name: &'a str,
-    data: weft_nn::embed_training::EmbedData,
+    data: weft_nn::embed::EmbedData,
     /// The simulator's seconds per frame, every method's timing reference.
     gt_seconds: f64,
     seeds: Vec<u64>,
@@ -324,7 +324,7 @@ impl<'a> Scene<'a> {
 
 impl SceneResults {
     /// A scene's results before any model: nothing but the configuration.
-    fn new(config: &EmbedTrainingConfig, size: Size) -> Self {
+    fn new(config: &EmbedTrainingSettings, size: Size) -> Self {
         Self {
             config: config.clone(),
             output: ExperimentOutput::new("embed", size),
@@ -378,7 +378,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
 fn finished_scene(
     ctx: &EvalContext,
     scene: &str,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     studies: &Studies,
     first: bool,
 ) -> crate::Result<(SceneResults, f64)> {
@@ -411,7 +411,7 @@ fn finished_scene(
 fn run_scene(
     ctx: &EvalContext,
     scene: &str,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     studies: &Studies,
     first: bool,
 ) -> crate::Result<SceneResults> {
@@ -481,13 +481,13 @@ mod tests {
         let path = dir.join("sheet-ms.json");
         let config = training_config(Size::Standard);
         let schedules = schedule_candidates(Size::Standard, &config);
-        let chosen = EmbedTrainingConfig {
+        let chosen = EmbedTrainingSettings {
             schedule: schedules[1].1,
             epochs: [BUDGET_STUDY_EPOCHS, 30, STAGE_3_BUDGET_EPOCHS],
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
-        let results = |config: &EmbedTrainingConfig| SceneResults {
+        let results = |config: &EmbedTrainingSettings| SceneResults {
             ephys_row: Some((vec![0.1, 0.5], vec!["`sheet-ms`".into()])),
             table_4: vec![(
                 "sheet-ms".into(),
@@ -510,7 +510,7 @@ mod tests {
             stage_3_budgets: stage_3_budget_candidates(Size::Standard, &config),
         };
         assert_eq!(studies.fine_tune, [None, Some(1e-4)]);
-        let restored = |c: &EmbedTrainingConfig, first| match restored_scene(&path, c, &studies, first) {
+        let restored = |c: &EmbedTrainingSettings, first| match restored_scene(&path, c, &studies, first) {
             KeptScene::Done(r) => Some(*r),
             _ => None,
         };
@@ -540,22 +540,22 @@ mod tests {
         more.epochs[1] += 1;
         assert!(restored(&more, true).is_none());
         for odd in [
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 schedule: Schedule {
                     early_stopping_patience: Some(9),
                     ..chosen.schedule
                 },
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 epochs: [77, 30, 10],
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 epochs: [BUDGET_STUDY_EPOCHS, 30, 20],
                 ..chosen.clone()
             },
-            EmbedTrainingConfig {
+            EmbedTrainingSettings {
                 fine_tune_learning_rate: Some(0.5),
                 ..chosen.clone()
             },

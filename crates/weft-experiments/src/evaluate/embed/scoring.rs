@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use weft_data::ClothDataset;
-use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, FrameRef};
+use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingSettings, FrameRef};
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
-use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorConfig};
-use weft_nn::rollout::LatentRollout;
+use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorSettings};
+use weft_nn::embed::LatentRollout;
 use weft_sim::ForceResidual;
 
 use super::data::{validation_frames, windows, write_predictions};
@@ -76,21 +76,21 @@ pub(super) fn mean_force_residual(data: &EmbedData, positions: &[Vec<f64>]) -> c
 /// Whether `dir` holds a model that cannot be trained on into the one `config` asks for:
 /// one from an older version of the experiment. A model that stopped under fewer epochs or
 /// a shorter early-stopping patience is not stale: training it on gives exactly the model
-/// `config` trains ([`weft_nn::embed_training::continues_exactly`]).
-pub(super) fn stale(dir: &Path, config: &EmbedTrainingConfig) -> bool {
-    dir.join("config.json").exists() && !weft_nn::embed_training::continues_exactly(dir, config)
+/// `config` trains ([`weft_nn::embed::continues_exactly`]).
+pub(super) fn stale(dir: &Path, config: &EmbedTrainingSettings) -> bool {
+    dir.join("config.json").exists() && !weft_nn::embed::continues_exactly(dir, config)
 }
 
 /// Makes `to` a model directory holding `from`'s configuration, normalisation and trained
 /// stages 1 and 2 (copies, so neither model's later training touches the other's files),
 /// for a stage 3 trained under another learning rate
-/// ([`weft_nn::embed_training::train_model`] then discards nothing and trains stage 3).
+/// ([`weft_nn::embed::train_model`] then discards nothing and trains stage 3).
 pub(super) fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result<()> {
     std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
     for stage in 1..=through {
-        let run = weft_nn::embed_training::stage_dir(from, stage);
+        let run = weft_nn::embed::stage_dir(from, stage);
         if run.exists() {
-            crate::files::copy_tree(&run, &weft_nn::embed_training::stage_dir(to, stage))?;
+            crate::files::copy_tree(&run, &weft_nn::embed::stage_dir(to, stage))?;
         }
     }
     // The configuration last: a directory with it is a model (a copy cut short is redone).
@@ -107,7 +107,7 @@ pub(super) fn share_stages(from: &Path, to: &Path, through: u8) -> crate::Result
 pub(super) fn train(
     ctx: &EvalContext,
     data: &EmbedData,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     dir: &Path,
 ) -> crate::Result<()> {
     if stale(dir, config) {
@@ -127,7 +127,7 @@ pub(super) fn train(
         .collect();
     let tag = tag.into_iter().rev().collect::<Vec<_>>().join("/");
     let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?.tagged(tag);
-    weft_nn::embed_training::train_model(dir, data, config, &[1, 2, 3], &mut progress)
+    weft_nn::embed::train_model(dir, data, config, &[1, 2, 3], &mut progress)
         .with_context(|| format!("training {}", dir.display()))?;
     Ok(())
 }
@@ -161,7 +161,7 @@ pub(super) fn scored_models(ctx: &EvalContext, data: &EmbedData, jobs: &[Job]) -
 pub(super) fn scored_model(
     ctx: &EvalContext,
     data: &EmbedData,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     dir: &Path,
     role: Role,
 ) -> crate::Result<ModelScores> {
@@ -728,8 +728,8 @@ pub(super) fn pca_baselines(s: &Scene, r: &mut SceneResults) -> crate::Result<(f
 /// The latent MLP on `pca`'s codes with `seed`, trained like stage 2 on the same windows
 /// and selected on the same validation windows (a model of another configuration is
 /// retrained): its Table IV roll-out scores and its long roll-out.
-fn pca_mlp(s: &Scene, config: &EmbedTrainingConfig, pca: &PositionPca, seed: u64) -> crate::Result<(Scores, Curve)> {
-    let pca_config = PcaSimulatorConfig {
+fn pca_mlp(s: &Scene, config: &EmbedTrainingSettings, pca: &PositionPca, seed: u64) -> crate::Result<(Scores, Curve)> {
+    let pca_config = PcaSimulatorSettings {
         hidden: config.latent_hidden.clone(),
         adam: config.adam,
         batch: config.batch,
@@ -738,7 +738,7 @@ fn pca_mlp(s: &Scene, config: &EmbedTrainingConfig, pca: &PositionPca, seed: u64
         schedule: config.schedule,
     };
     let pca_dir = s.models.join("pca-mlp").join(format!("seed-{seed}"));
-    let stored: Option<PcaSimulatorConfig> = std::fs::read_to_string(pca_dir.join("config.json"))
+    let stored: Option<PcaSimulatorSettings> = std::fs::read_to_string(pca_dir.join("config.json"))
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok());
     if pca_dir.exists() && stored.as_ref() != Some(&pca_config) {
@@ -849,7 +849,7 @@ mod tests {
             ..EvalContext::new(Size::Quick, root.clone())
         };
         let dir = root.join("model");
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [1, 1, 1],
             ..training_config(Size::Quick)
         };
@@ -892,7 +892,7 @@ mod tests {
             serde_json::to_string(&first).unwrap()
         );
         assert!(weights(&dir).is_empty(), "nothing was trained again");
-        let longer = EmbedTrainingConfig {
+        let longer = EmbedTrainingSettings {
             epochs: [1, 1, 2],
             ..config.clone()
         };
@@ -921,7 +921,7 @@ mod tests {
             [(0, true, 0.5), (1, false, 0.0)]
                 .into_iter()
                 .map(|(seed, first_seed, ephys)| {
-                    let mut config = EmbedTrainingConfig {
+                    let mut config = EmbedTrainingSettings {
                         epochs: [1, 1, 1],
                         ..with_seed(&training_config(Size::Quick), seed)
                     };
@@ -958,10 +958,10 @@ mod tests {
         std::fs::create_dir_all(&ours).unwrap();
         std::fs::create_dir_all(&baseline).unwrap();
         let config = training_config(Size::Quick);
-        assert_eq!(config.phys_scale, weft_nn::embed_training::PhysScale::Curvature);
+        assert_eq!(config.phys_scale, weft_nn::embed::PhysScale::Curvature);
         assert!(!stale(&dir.join("nothing"), &config), "no model is not a stale model");
         // A configuration as stored before the field existed.
-        let legacy = |c: &EmbedTrainingConfig| {
+        let legacy = |c: &EmbedTrainingSettings| {
             let mut v = serde_json::to_value(c).unwrap();
             v.as_object_mut().unwrap().remove("phys_scale");
             v.to_string()
@@ -979,7 +979,7 @@ mod tests {
         more.schedule.early_stopping_patience = Some(20);
         assert!(!stale(&baseline, &more));
         // Unless a stage trained more epochs than asked: its kept weights may be beyond them.
-        let stage_1 = weft_nn::embed_training::stage_dir(&baseline, 1);
+        let stage_1 = weft_nn::embed::stage_dir(&baseline, 1);
         std::fs::create_dir_all(&stage_1).unwrap();
         let trained = TrainingState {
             config: zeroed.trainer(1),

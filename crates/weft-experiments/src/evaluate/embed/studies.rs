@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use weft_data::Size;
-use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig};
+use weft_nn::embed::{EmbedData, EmbedTrainingSettings};
 use weft_nn::trainer::{Decay, Schedule, TrainingState};
 
 use super::scoring::{scored_model, scored_models, scored_runs, share_stages};
@@ -33,7 +33,7 @@ pub(super) const BUDGET_STUDY_EPOCHS: usize = 150;
 
 /// The stage-1 epochs the first scene chooses between on validation: the configuration's and
 /// [`BUDGET_STUDY_EPOCHS`] (quick runs keep the configuration's).
-pub(super) fn budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+pub(super) fn budget_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<usize> {
     if size == Size::Quick {
         vec![config.epochs[0]]
     } else {
@@ -46,7 +46,7 @@ pub(super) fn budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec
 /// epochs. The first scene's `no-pb` models (every seed) are trained under each, and the one
 /// with the lowest mean validation M_rms is used by every model of the experiment. Quick
 /// runs keep the configuration's.
-pub(super) fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<(&'static str, Schedule)> {
+pub(super) fn schedule_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<(&'static str, Schedule)> {
     let constant = config.schedule;
     if size == Size::Quick {
         return vec![("constant", constant)];
@@ -66,7 +66,7 @@ pub(super) fn schedule_candidates(size: Size, config: &EmbedTrainingConfig) -> V
 /// starts a fresh Adam on both trained networks; at the full rate its first epoch raised
 /// the validation loss 4–8-fold and six of eight `sheet-ms` models kept their stage-2
 /// weights (docs/EMBEDDING.md). Quick runs keep the configuration's.
-pub(super) fn fine_tune_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<Option<f64>> {
+pub(super) fn fine_tune_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<Option<f64>> {
     if size == Size::Quick {
         vec![config.fine_tune_learning_rate]
     } else {
@@ -86,7 +86,7 @@ pub(super) const STAGE_3_BUDGET_EPOCHS: usize = 30;
 
 /// The stage-3 epochs the first scene chooses between: the configuration's and
 /// [`STAGE_3_BUDGET_EPOCHS`] (quick runs keep the configuration's).
-pub(super) fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingConfig) -> Vec<usize> {
+pub(super) fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingSettings) -> Vec<usize> {
     if size == Size::Quick || config.epochs[2] >= STAGE_3_BUDGET_EPOCHS {
         vec![config.epochs[2]]
     } else {
@@ -95,7 +95,7 @@ pub(super) fn stage_3_budget_candidates(size: Size, config: &EmbedTrainingConfig
 }
 
 /// The name of a stage-3 learning rate in the report and in directory names.
-pub(super) fn fine_tune_name(config: &EmbedTrainingConfig, rate: Option<f64>) -> String {
+pub(super) fn fine_tune_name(config: &EmbedTrainingSettings, rate: Option<f64>) -> String {
     match rate {
         None => format!("{} (every stage's)", config.adam.learning_rate),
         Some(r) => format!("{r}"),
@@ -121,7 +121,7 @@ pub(super) fn study_row(candidate: String, runs: &[(std::path::PathBuf, ModelSco
             stages
                 .iter()
                 .map(|&stage| {
-                    TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage))
+                    TrainingState::read(&weft_nn::embed::stage_dir(dir, stage))
                         .map_or("—".into(), |t| format!("{} ({})", t.epochs_done, t.best_epoch))
                 })
                 .collect::<Vec<_>>()
@@ -148,7 +148,7 @@ pub(super) fn study_row(candidate: String, runs: &[(std::path::PathBuf, ModelSco
 /// side; without it (a baseline with no residual) the configuration's weight. Quick runs
 /// keep fixed weights: the configuration's, except on `sheet-ms`, where the grid is Table
 /// II's weights (trained at every size anyway).
-pub(super) fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingConfig, parity: Option<f64>) -> Vec<f64> {
+pub(super) fn ephys_grid(size: Size, scene: &str, config: &EmbedTrainingSettings, parity: Option<f64>) -> Vec<f64> {
     let e = config.weights.ephys;
     let mut grid = match (size, scene, parity.and_then(one_significant_digit)) {
         (Size::Quick, "sheet-ms", _) => vec![TABLE_II_EPHYS[0], e, TABLE_II_EPHYS[1]],
@@ -224,7 +224,7 @@ pub(super) fn stage_3_candidate_runs(
     ctx: &EvalContext,
     data: &EmbedData,
     scene: &str,
-    configs: &[EmbedTrainingConfig],
+    configs: &[EmbedTrainingSettings],
     sources: &[PathBuf],
     copy: Option<(&Path, u8)>,
 ) -> crate::Result<Vec<(PathBuf, ModelScores)>> {
@@ -254,7 +254,7 @@ pub(super) fn stage_3_candidate_runs(
 pub(super) type Run = (PathBuf, ModelScores);
 
 /// The directory of a study model (in `study`) trained under `c`, else `otherwise`.
-pub(super) fn study_dir_or(study: &[Run], c: &EmbedTrainingConfig, otherwise: PathBuf) -> PathBuf {
+pub(super) fn study_dir_or(study: &[Run], c: &EmbedTrainingSettings, otherwise: PathBuf) -> PathBuf {
     study
         .iter()
         .find(|(_, s)| c.trains_like(&s.config))
@@ -301,7 +301,7 @@ fn schedule_study(
         .flat_map(|(name, schedule)| {
             let (study_root, no_pb) = (&study_root, &no_pb);
             s.seeds.iter().enumerate().map(move |(k, &seed)| {
-                let c = EmbedTrainingConfig {
+                let c = EmbedTrainingSettings {
                     schedule: *schedule,
                     ..with_seed(no_pb, seed)
                 };
@@ -376,7 +376,7 @@ fn budget_study(s: &Scene, budgets: &[usize], r: &mut SceneResults, study: &mut 
 /// (and kept), its validation scores and its training seconds.
 fn budget_row(epochs: usize, dir: &Path, validation: ValidationScores) -> Vec<String> {
     let states: Vec<Option<TrainingState>> = (1..=3u8)
-        .map(|stage| TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage)).ok())
+        .map(|stage| TrainingState::read(&weft_nn::embed::stage_dir(dir, stage)).ok())
         .collect();
     let trained: Vec<String> = states
         .iter()
@@ -405,10 +405,10 @@ pub(super) struct Stage3Study<T> {
     /// The source stages a candidate other than the configuration's copies (2: it trains
     /// its own stage 3; 3: it trains the source's stage 3 on).
     through: u8,
-    get: fn(&EmbedTrainingConfig) -> T,
-    set: fn(&mut EmbedTrainingConfig, T),
+    get: fn(&EmbedTrainingSettings) -> T,
+    set: fn(&mut EmbedTrainingSettings, T),
     /// A candidate's name in the table.
-    name: fn(&EmbedTrainingConfig, T) -> String,
+    name: fn(&EmbedTrainingSettings, T) -> String,
     /// A candidate's directory (under `dir`), from its name.
     candidate_dir: fn(&str) -> String,
     /// A candidate's line in the plot, from its name.
@@ -485,7 +485,7 @@ fn stage_3_study<T: Copy + PartialEq>(
         candidates.iter().copied(),
         |&value| {
             let name = (spec.name)(config, value);
-            let configs: Vec<EmbedTrainingConfig> = s.seeds.iter().map(|&seed| at(value, seed)).collect();
+            let configs: Vec<EmbedTrainingSettings> = s.seeds.iter().map(|&seed| at(value, seed)).collect();
             let copies = s.models.join(spec.dir).join((spec.candidate_dir)(&name));
             let copy = (value != current).then_some((copies.as_path(), spec.through));
             let runs = stage_3_candidate_runs(s.ctx, &s.data, s.name, &configs, &sources, copy)?;
@@ -512,7 +512,7 @@ fn stage_3_study<T: Copy + PartialEq>(
 }
 
 /// `ours`'s configuration at λ_ephys `ephys` with `seed`.
-fn ours_config(config: &EmbedTrainingConfig, ephys: f64, seed: u64) -> EmbedTrainingConfig {
+fn ours_config(config: &EmbedTrainingSettings, ephys: f64, seed: u64) -> EmbedTrainingSettings {
     let mut c = with_seed(&method_config(config, false), seed);
     c.weights.ephys = ephys;
     c
@@ -649,7 +649,7 @@ mod tests {
     use super::*;
     use crate::evaluate::embed::tests::simulated_sheet;
     use crate::evaluate::embed::*;
-    use weft_nn::embed_training::EmbedModel;
+    use weft_nn::embed::EmbedModel;
 
     /// λ_ephys is chosen from validation scores by the documented rule, and those scores
     /// read no test frame: poisoning every test frame changes the test scores and leaves
@@ -820,7 +820,7 @@ mod tests {
             quiet: true,
             ..EvalContext::new(Size::Quick, root.clone())
         };
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [1, 1, 2],
             ..method_config(&quick, true)
         };
@@ -832,12 +832,12 @@ mod tests {
         let (source, study) = (root.join("source"), root.join("study"));
         scored_model(&ctx, &data, &config, &source, role).unwrap();
         let state = |dir: &Path, stage: u8| {
-            std::fs::read(weft_nn::embed_training::stage_dir(dir, stage).join("training.json")).unwrap()
+            std::fs::read(weft_nn::embed::stage_dir(dir, stage).join("training.json")).unwrap()
         };
         let source_stage_3 = state(&source, 3);
         share_stages(&source, &study, 2).unwrap();
-        assert!(!weft_nn::embed_training::stage_dir(&study, 3).exists());
-        let slower = EmbedTrainingConfig {
+        assert!(!weft_nn::embed::stage_dir(&study, 3).exists());
+        let slower = EmbedTrainingSettings {
             fine_tune_learning_rate: Some(1e-4),
             ..config.clone()
         };
@@ -848,7 +848,7 @@ mod tests {
         }
         assert_ne!(state(&study, 3), source_stage_3);
         assert_eq!(state(&source, 3), source_stage_3, "the source is untouched");
-        let stored: EmbedTrainingConfig = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
+        let stored: EmbedTrainingSettings = weft_nn::checkpoint::read_json(&study.join("config.json")).unwrap();
         assert_eq!(stored.fine_tune_learning_rate, Some(1e-4));
 
         // The stage-3 budget study: a copy of all three stages whose stage 3 trains on is
@@ -871,7 +871,7 @@ mod tests {
         .unwrap();
         assert_eq!(kept[0].0, source);
         assert_eq!(state(&source, 3), source_stage_3, "kept, not retrained");
-        let four = EmbedTrainingConfig {
+        let four = EmbedTrainingSettings {
             epochs: [1, 1, 4],
             ..config.clone()
         };
@@ -891,7 +891,7 @@ mod tests {
         let fresh = scored_model(&ctx, &data, &four, &straight, role).unwrap();
         // Stage 3's epochs: (loss, validation, wall seconds).
         let history = |dir: &Path| -> Vec<(f64, f64, f64)> {
-            TrainingState::read(&weft_nn::embed_training::stage_dir(dir, 3))
+            TrainingState::read(&weft_nn::embed::stage_dir(dir, 3))
                 .unwrap()
                 .history
                 .iter()

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use weft_data::Size;
-use weft_nn::embed_training::EmbedTrainingConfig;
+use weft_nn::embed::EmbedTrainingSettings;
 use weft_nn::ik::IkSettings;
 use weft_nn::trainer::TrainingState;
 
@@ -134,7 +134,7 @@ pub(super) fn stage_curves(name: String, title: String, models: &[(&str, &Path)]
     let mut series = Vec::new();
     for (method, dir) in models {
         for &stage in stages {
-            let Ok(state) = TrainingState::read(&weft_nn::embed_training::stage_dir(dir, stage)) else {
+            let Ok(state) = TrainingState::read(&weft_nn::embed::stage_dir(dir, stage)) else {
                 continue;
             };
             let (mut x, mut y) = (vec![0.0], vec![state.initial_validation]);
@@ -379,7 +379,7 @@ pub(super) fn linear_baselines_table(records: &[Record], table_4: &[(String, Str
 }
 
 /// The experiment's opening note: the networks, the schedule, the weights and the seeds.
-pub(super) fn configuration_note(config: &EmbedTrainingConfig, size: Size) -> String {
+pub(super) fn configuration_note(config: &EmbedTrainingSettings, size: Size) -> String {
     format!(
         "embed: {} graph convolution(s), {}-D latent, latent MLP hidden {:?}, epochs per stage {:?}, batch {}, \
          Adam lr {}; λ_ephys chosen per scene on the validation windows (the λ_ephys table; {} without a \
@@ -681,7 +681,7 @@ mod tests {
     use super::*;
     use crate::evaluate::embed::tests::simulated_sheet;
     use crate::evaluate::embed::*;
-    use weft_nn::embed_training::EmbedData;
+    use weft_nn::embed::EmbedData;
 
     /// The learning curves read each stage's training state: one line per method and stage,
     /// starting at the stage's initial validation loss, the epochs in order.
@@ -690,15 +690,15 @@ mod tests {
         let data = EmbedData::new(simulated_sheet(20, false)).unwrap();
         let dir = std::env::temp_dir().join(format!("weft-embed-curves-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let config = EmbedTrainingConfig {
+        let config = EmbedTrainingSettings {
             epochs: [2, 0, 1],
             ..training_config(Size::Quick)
         };
-        weft_nn::embed_training::train_model(&dir, &data, &config, &[1, 2, 3], &mut weft_nn::trainer::Silent).unwrap();
+        weft_nn::embed::train_model(&dir, &data, &config, &[1, 2, 3], &mut weft_nn::trainer::Silent).unwrap();
         let plot = learning_curves("sheet-ms", &[("ours", &dir)]);
         let labels: Vec<&str> = plot.series.iter().map(|s| s.label.as_str()).collect();
         assert_eq!(labels, ["ours, stage 1", "ours, stage 3"]);
-        let first = TrainingState::read(&weft_nn::embed_training::stage_dir(&dir, 1)).unwrap();
+        let first = TrainingState::read(&weft_nn::embed::stage_dir(&dir, 1)).unwrap();
         assert_eq!(plot.series[0].x, [0.0, 1.0, 2.0]);
         assert_eq!(plot.series[0].y[0], first.initial_validation);
         assert_eq!(plot.series[0].y[2], first.history[1].validation);

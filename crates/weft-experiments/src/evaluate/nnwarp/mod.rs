@@ -27,7 +27,7 @@ mod studies;
 use std::path::Path;
 
 use nalgebra::Vector3;
-use weft_nn::nnwarp::WarpTrainingConfig;
+use weft_nn::nnwarp::WarpTrainingSettings;
 use weft_sim::energies::{LameParameters, Material};
 use weft_sim::warp::FieldDirection;
 
@@ -63,8 +63,8 @@ const YOUNG: f64 = 1e5;
 const POISSON: f64 = 0.3;
 const DENSITY: f64 = 1000.0;
 
-fn training_config(size: Size) -> WarpTrainingConfig {
-    let mut c = WarpTrainingConfig::default();
+fn training_config(size: Size) -> WarpTrainingSettings {
+    let mut c = WarpTrainingSettings::default();
     if size == Size::Quick {
         c.batch = 256;
         c.epochs = 40;

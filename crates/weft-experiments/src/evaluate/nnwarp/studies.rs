@@ -9,7 +9,7 @@ use crate::error::Context;
 use crate::evaluate::context::EvalContext;
 use crate::evaluate::study::Study;
 use crate::records::{ExperimentOutput, LinePlot, Series};
-use weft_nn::nnwarp::WarpTrainingConfig;
+use weft_nn::nnwarp::WarpTrainingSettings;
 
 /// Training sequences of the data-size study (NNWarp trains on 520): sizes at or beyond
 /// the dataset's training count are dropped and that count itself is always the last.
@@ -44,7 +44,7 @@ pub(super) fn data_size_study(
     root: &Path,
     data: &Path,
     m: WarpMaterial,
-    config: &WarpTrainingConfig,
+    config: &WarpTrainingSettings,
     seeds: &[u64],
 ) -> crate::Result<MaterialStudy> {
     let full = weft_data::WarpDataset::load(data, m.key())?;
@@ -58,7 +58,7 @@ pub(super) fn data_size_study(
         let subset = full.with_training_prefix(k);
         for &seed in seeds {
             let dir = root.join("models").join(m.key()).join(format!("n{k}-seed{seed}"));
-            let config = WarpTrainingConfig { seed, ..config.clone() };
+            let config = WarpTrainingSettings { seed, ..config.clone() };
             let label = format!("nnwarp/{}/n{k}-seed{seed}", m.key());
             let mut progress = crate::progress::TrainProgress::new(ctx.quiet, &label)?;
             let (state, _, _) = weft_nn::nnwarp::train_model(&dir, &subset, &config, &mut progress)

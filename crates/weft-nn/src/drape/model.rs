@@ -19,19 +19,19 @@ use candle_core::{DType, Device, Tensor};
 use crate::error::{Error, Result};
 use crate::layers::{Dense, leaky_relu};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
-use crate::params::{Init, Params};
+use crate::params::{Init, ParamStore};
 pub use weft_sim::scenes::drape::POSE_ANGLES;
 
 /// Shape of [`DrapeNet`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct DrapeNetConfig {
+pub struct DrapeNetSettings {
     /// Widths of the hidden layers.
     pub hidden: Vec<usize>,
     /// The output is `offset_scale · (x W + b)` metres.
     pub offset_scale: f64,
 }
 
-impl Default for DrapeNetConfig {
+impl Default for DrapeNetSettings {
     fn default() -> Self {
         Self {
             hidden: vec![64, 256],
@@ -50,7 +50,7 @@ pub struct DrapeNet {
 }
 
 impl DrapeNet {
-    pub fn new(params: &mut Params, config: &DrapeNetConfig, num_vertices: usize) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, config: &DrapeNetSettings, num_vertices: usize) -> Result<Self> {
         if config.hidden.is_empty() || config.hidden.contains(&0) || !(config.offset_scale > 0.0) {
             return Err(Error::InvalidParameter {
                 name: "drape network shape",
@@ -106,7 +106,7 @@ pub enum Mu {
 
 impl Mu {
     /// A learned μ starting at `start` everywhere, in `params` under `mu.log`.
-    pub fn learned(params: &mut Params, start: f64, per_vertex: Option<usize>) -> Result<Self> {
+    pub fn learned(params: &mut ParamStore, start: f64, per_vertex: Option<usize>) -> Result<Self> {
         if !(start > 0.0 && start.is_finite()) {
             return Err(Error::InvalidParameter {
                 name: "learned mu start",
@@ -255,32 +255,6 @@ impl DrapeTensors {
     }
 }
 
-/// Mean and standard deviation over an epoch's batches of one gradient (per batch, mm²
-/// per unit of the parameter).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct GradientStats {
-    pub mean: f64,
-    pub sd: f64,
-    pub batches: usize,
-}
-
-impl GradientStats {
-    /// Mean and sample standard deviation of `values` (`None` when empty).
-    pub fn of(values: &[f64]) -> Option<Self> {
-        let n = values.len();
-        if n == 0 {
-            return None;
-        }
-        let mean = values.iter().sum::<f64>() / n as f64;
-        let var = values.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n.max(2) - 1) as f64;
-        Some(Self {
-            mean,
-            sd: var.sqrt(),
-            batches: n,
-        })
-    }
-}
-
 impl DrapeModel {
     /// μ of a learned-μ quasistatic postprocess (the global value, or one per vertex);
     /// `None` for any other postprocess.
@@ -298,140 +272,6 @@ impl DrapeModel {
             ),
             _ => None,
         })
-    }
-}
-
-/// A drape model trained through [`crate::trainer::Trainer`]: the network (group `net`)
-/// and, with a learned μ, `log μ` (group `mu`, its own learning rate).
-///
-/// The layers warm-start every training example from its solution of the previous epoch
-/// (keys: the examples' indices in `train`) and every validation example likewise (keys
-/// after the training ones). A batch whose postprocess fails (a saddle equilibrium, a
-/// collapsed spring, a solve that did not converge) is skipped. The validation score is
-/// the mean SqrtMSE (mm) over the validation examples the postprocess succeeds on.
-/// Warm starts make a resumed run equal to an uninterrupted one only to the layers'
-/// solver tolerance (the network alone resumes bit for bit).
-#[derive(Debug)]
-pub struct DrapeTraining<'a> {
-    pub model: &'a DrapeModel,
-    pub net_params: &'a Params,
-    pub net_adam: crate::adam::AdamSettings,
-    /// A learned μ's parameters and Adam settings.
-    pub mu: Option<(&'a Params, crate::adam::AdamSettings)>,
-    pub train: &'a DrapeTensors,
-    pub validation: &'a DrapeTensors,
-    /// Examples per layer call in the validation pass.
-    pub batch: usize,
-    mu_grads: Vec<f64>,
-}
-
-impl<'a> DrapeTraining<'a> {
-    pub fn new(
-        model: &'a DrapeModel,
-        net: (&'a Params, crate::adam::AdamSettings),
-        mu: Option<(&'a Params, crate::adam::AdamSettings)>,
-        train: &'a DrapeTensors,
-        validation: &'a DrapeTensors,
-        batch: usize,
-    ) -> Self {
-        Self {
-            model,
-            net_params: net.0,
-            net_adam: net.1,
-            mu,
-            train,
-            validation,
-            batch,
-            mu_grads: Vec::new(),
-        }
-    }
-}
-
-impl crate::trainer::Trainable for DrapeTraining<'_> {
-    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
-        let mut g = vec![crate::trainer::Group {
-            name: "net",
-            params: self.net_params,
-            adam: self.net_adam,
-        }];
-        if let Some((params, adam)) = self.mu {
-            g.push(crate::trainer::Group {
-                name: "mu",
-                params,
-                adam,
-            });
-        }
-        g
-    }
-
-    fn num_examples(&self) -> usize {
-        self.train.len()
-    }
-
-    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
-        let b = self.train.select(batch)?;
-        match self
-            .model
-            .predict_keyed(&b.pose, &b.guess, Some(batch))
-            .and_then(|r| loss(&r, &b.truth))
-        {
-            Ok(loss) => Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] }),
-            Err(e) => Ok(crate::trainer::BatchLoss::Skipped { reason: e.to_string() }),
-        }
-    }
-
-    fn after_backward(&mut self, grads: &candle_core::backprop::GradStore) -> Result<()> {
-        if let Postprocess::Quasistatic {
-            mu: Mu::Learned(log_mu),
-            ..
-        } = &self.model.post
-        {
-            if let Some(g) = grads.get(log_mu) {
-                self.mu_grads.push(f64::from(g.mean_all()?.to_scalar::<f32>()?));
-            }
-        }
-        Ok(())
-    }
-
-    fn validation_score(&mut self) -> Result<f64> {
-        let pred = predict_each_keyed(self.model, self.validation, self.batch, self.train.len())?;
-        let truth = self.validation.truths()?;
-        let (mut sum, mut n) = (0.0, 0);
-        for (p, t) in pred.iter().zip(&truth) {
-            if let Ok(p) = p {
-                sum += sqrtmse_maxdist_mm(p, t)?.0;
-                n += 1;
-            }
-        }
-        if n == 0 {
-            return Err(Error::InvalidParameter {
-                name: "validation split",
-                value: format!("{} examples", self.validation.len()),
-                reason: "the postprocess failed on every validation example (or there are none)",
-            });
-        }
-        Ok(sum / n as f64)
-    }
-
-    /// A learned μ after the epoch (its mean over vertices) and how the per-batch
-    /// gradient of the loss in `log μ` varied over the epoch: Adam moves `log μ` by about
-    /// `lr · mean / sd` per step, so a ratio near zero is why a learned μ drifts slowly
-    /// (docs/DRAPE.md).
-    fn epoch_extra(&mut self) -> Result<std::collections::BTreeMap<String, f64>> {
-        let mut extra = std::collections::BTreeMap::new();
-        if let Some(mu) = self.model.learned_mu()? {
-            extra.insert("mu".into(), mu.iter().sum::<f64>() / mu.len().max(1) as f64);
-        }
-        if let Some(g) = GradientStats::of(&std::mem::take(&mut self.mu_grads)) {
-            extra.insert("mu_gradient_mean".into(), g.mean);
-            extra.insert("mu_gradient_sd".into(), g.sd);
-        }
-        Ok(extra)
-    }
-
-    /// Epoch `e` is ordered by SplitMix64(`seed · 1000 + e`), as before the trainer.
-    fn shuffle_seed(&self, seed: u64, epoch: usize) -> u64 {
-        seed.wrapping_mul(1000).wrapping_add(epoch as u64)
     }
 }
 

@@ -38,10 +38,10 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Shape, Storage, Tensor};
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use crate::embed::FEATURE_CHANNELS as C;
 use crate::error::{Error, Result};
 use crate::graph::MeshGraph;
 use crate::layers::{GraphConv, LEAKY_SLOPE};
+use crate::ops::FEATURE_CHANNELS as C;
 
 /// `[M; M_N]` (`[2C, C]`) and `b` of one graph convolution in θ.
 const CONV_PARAMS: usize = 2 * C * C + C;

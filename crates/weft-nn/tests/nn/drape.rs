@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use candle_core::{Device, Tensor};
 use weft_nn::adam::AdamSettings;
-use weft_nn::drape::{DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, DrapeTraining, Mu, Postprocess, loss};
+use weft_nn::drape::{DrapeModel, DrapeNet, DrapeNetSettings, DrapeTensors, DrapeTraining, Mu, Postprocess, loss};
 use weft_nn::ops::{InextensibilityProjection, QuasistaticProjection};
-use weft_nn::params::Params;
-use weft_nn::trainer::{Schedule, Silent, Trainer, TrainerConfig, TrainingState};
+use weft_nn::params::ParamStore;
+use weft_nn::trainer::{Schedule, Silent, Trainer, TrainerSettings, TrainingState};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
 use weft_sim::rng::SplitMix64;
 use weft_sim::scenes::drape::{Drape, DrapeParams};
@@ -20,8 +20,8 @@ use weft_sim::scenes::soft_tissue::ArmPose;
 #[allow(clippy::too_many_arguments)]
 fn fit(
     model: &DrapeModel,
-    net: (&Params, AdamSettings),
-    mu: Option<(&Params, AdamSettings)>,
+    net: (&ParamStore, AdamSettings),
+    mu: Option<(&ParamStore, AdamSettings)>,
     train: &DrapeTensors,
     validation: &DrapeTensors,
     batch: usize,
@@ -36,7 +36,7 @@ fn fit(
         N.fetch_add(1, Ordering::SeqCst)
     ));
     let _ = std::fs::remove_dir_all(&dir);
-    let config = TrainerConfig {
+    let config = TrainerSettings {
         epochs,
         batch,
         seed,
@@ -74,9 +74,9 @@ fn the_mu_gradient_of_the_training_loss_matches_finite_differences() {
     let (d, data) = examples();
     let v = d.sleeve().num_vertices();
     for per_vertex in [None, Some(v)] {
-        let mut net_params = Params::new(&Device::Cpu, 5);
-        let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
-        let mut mu_params = Params::new(&Device::Cpu, 6);
+        let mut net_params = ParamStore::new(&Device::Cpu, 5);
+        let net = DrapeNet::new(&mut net_params, &DrapeNetSettings::default(), v).unwrap();
+        let mut mu_params = ParamStore::new(&Device::Cpu, 6);
         let mu = Mu::learned(&mut mu_params, 0.1, per_vertex).unwrap();
         let Mu::Learned(log_mu) = &mu else { unreachable!() };
         let log_mu = log_mu.clone();
@@ -121,9 +121,9 @@ fn the_mu_gradient_of_the_training_loss_matches_finite_differences() {
 fn the_epoch_reports_the_per_batch_mu_gradient() {
     let (d, data) = examples();
     let v = d.sleeve().num_vertices();
-    let mut net_params = Params::new(&Device::Cpu, 5);
-    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
-    let mut mu_params = Params::new(&Device::Cpu, 6);
+    let mut net_params = ParamStore::new(&Device::Cpu, 5);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetSettings::default(), v).unwrap();
+    let mut mu_params = ParamStore::new(&Device::Cpu, 6);
     let mu = Mu::learned(&mut mu_params, 0.1, None).unwrap();
     let model = DrapeModel {
         net,
@@ -179,10 +179,10 @@ fn the_epoch_reports_the_per_batch_mu_gradient() {
 
 /// Trains the network alone for `epochs`, then with `post` for as many, returning the
 /// training loss with the postprocess before and after its training.
-fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params) -> Postprocess) -> (f64, f64) {
+fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut ParamStore) -> Postprocess) -> (f64, f64) {
     let v = d.sleeve().num_vertices();
-    let mut net_params = Params::new(&Device::Cpu, 9);
-    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+    let mut net_params = ParamStore::new(&Device::Cpu, 9);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetSettings::default(), v).unwrap();
     let settings = AdamSettings {
         learning_rate: 1e-3,
         ..AdamSettings::default()
@@ -192,7 +192,7 @@ fn pretrain_then_train(d: &Drape, data: &DrapeTensors, post: impl Fn(&mut Params
         post: Postprocess::None,
     };
     fit(&model, (&net_params, settings), None, data, data, 3, 30, 1).unwrap();
-    let mut mu_params = Params::new(&Device::Cpu, 10);
+    let mut mu_params = ParamStore::new(&Device::Cpu, 10);
     model.post = post(&mut mu_params);
     let eval = |m: &DrapeModel| {
         f64::from(
@@ -246,8 +246,8 @@ fn a_failing_example_is_left_out_of_predictions_and_its_batch_skipped_in_trainin
         .unwrap();
     let truth: Vec<f64> = data.truths().unwrap().concat();
     let bad = DrapeTensors::new(&pose, &guess, &truth, v, &Device::Cpu).unwrap();
-    let mut net_params = Params::new(&Device::Cpu, 21);
-    let net = DrapeNet::new(&mut net_params, &DrapeNetConfig::default(), v).unwrap();
+    let mut net_params = ParamStore::new(&Device::Cpu, 21);
+    let net = DrapeNet::new(&mut net_params, &DrapeNetSettings::default(), v).unwrap();
     let model = DrapeModel {
         net,
         post: Postprocess::Quasistatic {
@@ -292,9 +292,9 @@ fn keyed_predictions_started_from_another_models_solutions_match_cold_ones() {
     for post in posts {
         // Two networks sharing one layer op, hence one warm-start store.
         let model = |seed| {
-            let mut params = Params::new(&Device::Cpu, seed);
+            let mut params = ParamStore::new(&Device::Cpu, seed);
             DrapeModel {
-                net: DrapeNet::new(&mut params, &DrapeNetConfig::default(), v).unwrap(),
+                net: DrapeNet::new(&mut params, &DrapeNetSettings::default(), v).unwrap(),
                 post: post.clone(),
             }
         };

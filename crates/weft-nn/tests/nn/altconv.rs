@@ -6,10 +6,10 @@
 use candle_core::{Device, Tensor, Var};
 use weft_nn::adam::AdamSettings;
 use weft_nn::altconv::{
-    AltConvNet, AltConvTraining, AltConvTrainingConfig, Drive, Scaling, SequenceTensors, Variant, mean_vertex_error,
+    AltConvNet, AltConvTraining, AltConvTrainingSettings, Drive, Scaling, SequenceTensors, Variant, mean_vertex_error,
 };
 use weft_nn::graph::NormalizedAdjacency;
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_nn::trainer::{Decay, Silent, Trainer};
 use weft_testkit::TestRng;
 
@@ -30,10 +30,10 @@ fn run_dir(name: &str) -> std::path::PathBuf {
 /// the per-epoch mean training losses.
 fn fit(
     net: &AltConvNet,
-    params: &Params,
+    params: &ParamStore,
     adj: &NormalizedAdjacency,
     seqs: &[SequenceTensors],
-    config: &AltConvTrainingConfig,
+    config: &AltConvTrainingSettings,
 ) -> Vec<f64> {
     let mut t = AltConvTraining {
         net,
@@ -195,7 +195,7 @@ fn every_cell_has_the_right_shapes_and_every_weight_receives_a_gradient() {
     let b = sequence(&mesh, 5, 1.0);
     let batch = SequenceTensors::batch(&[&a, &b]).unwrap();
     for variant in Variant::ALL {
-        let mut params = Params::new(&cpu(), 1);
+        let mut params = ParamStore::new(&cpu(), 1);
         let net = AltConvNet::new(&mut params, variant, &[4, 6, 4]).unwrap();
         let predictions = net.run(&adj, &batch.drive, Some(&batch.truth), 4).unwrap();
         assert_eq!(predictions.len(), 4);
@@ -228,7 +228,7 @@ fn every_cell_has_the_right_shapes_and_every_weight_receives_a_gradient() {
 fn the_weights_do_not_depend_on_the_vertex_count() {
     let small = sheet(4);
     let large = sheet(9);
-    let mut params = Params::new(&cpu(), 2);
+    let mut params = ParamStore::new(&cpu(), 2);
     let net = AltConvNet::new(&mut params, Variant::Alt, &weft_nn::altconv::HIDDEN).unwrap();
     // The paper's network: per cell 4c(c_in + c) + 4c weights and biases plus 3c² of
     // peepholes, for 9 → 32 → 64 → 128 → 64 → 32 → 3 channels.
@@ -264,7 +264,7 @@ fn teacher_forcing_starts_each_step_from_the_previous_true_surface() {
     let adj = NormalizedAdjacency::new(&mesh).unwrap();
     let s = sequence(&mesh, 4, 0.5);
     for variant in Variant::ALL {
-        let mut params = Params::new(&cpu(), 4);
+        let mut params = ParamStore::new(&cpu(), 4);
         let net = AltConvNet::new(&mut params, variant, &[4, 4]).unwrap();
         let rollout = net.run(&adj, &s.drive, None, 3).unwrap();
         let own = Tensor::stack(
@@ -309,8 +309,8 @@ fn train(
     epochs: usize,
     seqs: &[SequenceTensors],
     adj: &NormalizedAdjacency,
-) -> (Params, Vec<f64>) {
-    let mut config = AltConvTrainingConfig::new(variant);
+) -> (ParamStore, Vec<f64>) {
+    let mut config = AltConvTrainingSettings::new(variant);
     config.hidden = vec![8, 8];
     config.steps = 8;
     config.batch = 1;
@@ -321,7 +321,7 @@ fn train(
         learning_rate: 3e-2,
         ..Default::default()
     };
-    let mut params = Params::new(&cpu(), seed);
+    let mut params = ParamStore::new(&cpu(), seed);
     let net = AltConvNet::new(&mut params, variant, &config.hidden).unwrap();
     let losses = fit(&net, &params, adj, seqs, &config);
     (params, losses)
@@ -381,7 +381,7 @@ fn bad_input_is_a_typed_error() {
     let mesh = sheet(4);
     let adj = NormalizedAdjacency::new(&mesh).unwrap();
     let s = sequence(&mesh, 4, 0.0);
-    let mut params = Params::new(&cpu(), 0);
+    let mut params = ParamStore::new(&cpu(), 0);
     let net = AltConvNet::new(&mut params, Variant::Alt, &[4]).unwrap();
     assert!(net.run(&adj, &s.drive, None, 4).is_err(), "more steps than frames");
     let other = NormalizedAdjacency::new(&sheet(5)).unwrap();
@@ -391,7 +391,7 @@ fn bad_input_is_a_typed_error() {
         initial: s.drive.initial.narrow(1, 0, 3).unwrap(),
     };
     assert!(net.run(&adj, &short, None, 2).is_err());
-    assert!(AltConvNet::new(&mut Params::new(&cpu(), 0), Variant::Alt, &[]).is_err());
+    assert!(AltConvNet::new(&mut ParamStore::new(&cpu(), 0), Variant::Alt, &[]).is_err());
     assert!(Variant::from_name("convlstm-xx").is_err());
     assert_eq!(Variant::from_name("alt").unwrap(), Variant::Alt);
     for v in Variant::ALL {
@@ -407,7 +407,7 @@ fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
     let s = sequence(&mesh, 6, 0.7);
     let frame = |k: usize| flat(&s.drive.skinned.narrow(1, k, 1).unwrap());
     for variant in Variant::ALL {
-        let mut params = Params::new(&cpu(), 9);
+        let mut params = ParamStore::new(&cpu(), 9);
         // A skip (Eq. 10) between the two 4-channel cells; weights trained a little so the
         // output cell is not near zero.
         // Fitted units, so the runtime's standardisation and output unit are exercised.
@@ -415,7 +415,7 @@ fn the_runtime_rolls_out_what_the_candle_model_rolls_out() {
         let net = AltConvNet::new(&mut params, variant, &[4, 6, 4])
             .unwrap()
             .with_scaling(scaling);
-        let mut config = AltConvTrainingConfig::new(variant);
+        let mut config = AltConvTrainingSettings::new(variant);
         config.steps = 5;
         config.batch = 1;
         config.epochs = 3;
@@ -500,7 +500,7 @@ fn scheduled_sampling_spans_teacher_forcing_to_roll_out_and_the_curriculum_grows
     let adj = NormalizedAdjacency::new(&mesh).unwrap();
     let s = lagging_sequence(&mesh, 9, 0.3, 0.5);
     let seqs = std::slice::from_ref(&s);
-    let mut params = Params::new(&cpu(), 5);
+    let mut params = ParamStore::new(&cpu(), 5);
     let net = AltConvNet::new(&mut params, Variant::NpDy, &[4, 4]).unwrap();
     let steps = 8;
     let training = |recipe: Recipe| AltConvTraining {
@@ -589,7 +589,7 @@ fn scheduled_sampling_spans_teacher_forcing_to_roll_out_and_the_curriculum_grows
     assert!((ramp.sampling_probability(4) - 0.2).abs() < 1e-15);
     assert_eq!(ramp.sampling_probability(9), 0.4);
     // Out-of-range options are refused by name.
-    let mut config = AltConvTrainingConfig::new(Variant::Alt);
+    let mut config = AltConvTrainingSettings::new(Variant::Alt);
     config.recipe.sampling_max = 1.5;
     assert!(
         config
@@ -625,7 +625,7 @@ fn fused_matches_autograd(hidden: &[usize], forced: &[bool], seed: u64) {
     let batch = SequenceTensors::batch(&[&a, &b]).unwrap();
     let workspace = FusedWorkspace::new();
     for variant in Variant::ALL {
-        let mut params = Params::new(&cpu(), seed);
+        let mut params = ParamStore::new(&cpu(), seed);
         let scaling = Scaling::fit(&[a.clone(), b.clone()], variant, steps).unwrap();
         let net = AltConvNet::new(&mut params, variant, hidden)
             .unwrap()
@@ -694,14 +694,14 @@ fn training_with_either_path_reaches_the_same_losses() {
     ];
     for variant in [Variant::Alt, Variant::CpY] {
         let run = |kernels: weft_nn::altconv::Kernels| {
-            let mut config = AltConvTrainingConfig::new(variant);
+            let mut config = AltConvTrainingSettings::new(variant);
             config.hidden = vec![6, 8, 6];
             config.steps = 8;
             config.batch = 1;
             config.epochs = 20;
             config.kernels = kernels;
             config.adam.learning_rate = 1e-2;
-            let mut params = Params::new(&cpu(), 4);
+            let mut params = ParamStore::new(&cpu(), 4);
             let net = AltConvNet::new(&mut params, variant, &config.hidden).unwrap();
             fit(&net, &params, &adj, &seqs, &config)
         };

@@ -10,8 +10,8 @@ use candle_core::{Device, Tensor};
 use nalgebra::Vector3;
 use weft_acap::{Feature, FeatureNormalization, PoissonPseudoInverse};
 
+use super::model::{LatentSimulator, MeshAutoencoder};
 use crate::convert;
-use crate::embed::{LatentSimulator, MeshAutoencoder};
 use crate::error::{Error, Result};
 
 /// Where one roll-out frame's time went.

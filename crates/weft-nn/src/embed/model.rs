@@ -15,27 +15,25 @@ use std::sync::Arc;
 
 use candle_core::Tensor;
 
+use super::fused::{DecoderOp, EncoderOp, conv_parameters};
 use crate::Kernels;
 use crate::error::{Error, Result};
-use crate::fused_autoencoder::{DecoderOp, EncoderOp, conv_parameters};
 use crate::graph::MeshGraph;
 use crate::layers::{Dense, GraphConv, leaky_relu};
-use crate::params::Params;
-
-/// Channels of an ACAP feature.
-pub const FEATURE_CHANNELS: usize = 9;
+use crate::ops::FEATURE_CHANNELS;
+use crate::params::ParamStore;
 
 /// Shape of the autoencoder.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
-pub struct AutoencoderConfig {
+pub struct AutoencoderSettings {
     /// Graph convolutions on each side, `L`.
     pub conv_layers: usize,
     /// Latent dimension (Tan et al.: 128).
     pub latent: usize,
 }
 
-impl Default for AutoencoderConfig {
+impl Default for AutoencoderSettings {
     fn default() -> Self {
         Self {
             conv_layers: 2,
@@ -47,7 +45,7 @@ impl Default for AutoencoderConfig {
 /// The graph-CNN mesh autoencoder.
 #[derive(Debug, Clone)]
 pub struct MeshAutoencoder {
-    config: AutoencoderConfig,
+    config: AutoencoderSettings,
     num_vertices: usize,
     graph: Arc<MeshGraph>,
     /// The fused encoder and decoder ops, or candle's autograd through the layers.
@@ -59,7 +57,7 @@ pub struct MeshAutoencoder {
 }
 
 impl MeshAutoencoder {
-    pub fn new(params: &mut Params, graph: Arc<MeshGraph>, config: AutoencoderConfig) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, graph: Arc<MeshGraph>, config: AutoencoderSettings) -> Result<Self> {
         if config.conv_layers == 0 || config.latent == 0 {
             return Err(Error::InvalidParameter {
                 name: "autoencoder config",
@@ -103,7 +101,7 @@ impl MeshAutoencoder {
         })
     }
 
-    pub fn config(&self) -> &AutoencoderConfig {
+    pub fn config(&self) -> &AutoencoderSettings {
         &self.config
     }
 
@@ -208,7 +206,7 @@ impl MeshAutoencoder {
 
 /// Shape of the latent simulator.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LatentSimulatorConfig {
+pub struct LatentSimulatorSettings {
     pub latent: usize,
     /// Scalars of the control `q_m` (3 per grasped vertex).
     pub controls: usize,
@@ -218,12 +216,12 @@ pub struct LatentSimulatorConfig {
 /// `MLP(z_{m−2}, z_{m−1}, q_m) = z_m` (Tan et al. Eq. 7).
 #[derive(Debug, Clone)]
 pub struct LatentSimulator {
-    config: LatentSimulatorConfig,
+    config: LatentSimulatorSettings,
     layers: Vec<Dense>,
 }
 
 impl LatentSimulator {
-    pub fn new(params: &mut Params, config: LatentSimulatorConfig) -> Result<Self> {
+    pub fn new(params: &mut ParamStore, config: LatentSimulatorSettings) -> Result<Self> {
         if config.latent == 0 || config.hidden.contains(&0) {
             return Err(Error::InvalidParameter {
                 name: "latent simulator config",
@@ -242,7 +240,7 @@ impl LatentSimulator {
         Ok(Self { config, layers })
     }
 
-    pub fn config(&self) -> &LatentSimulatorConfig {
+    pub fn config(&self) -> &LatentSimulatorSettings {
         &self.config
     }
 

@@ -18,15 +18,15 @@ use nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, Feature, FeatureNormalization, PoissonPseudoInverse};
 use weft_sim::{ClothSimulation, ImplicitEuler};
 
+use super::model::{AutoencoderSettings, LatentSimulator, LatentSimulatorSettings, MeshAutoencoder};
 use crate::adam::AdamSettings;
-use crate::embed::{AutoencoderConfig, LatentSimulator, LatentSimulatorConfig, MeshAutoencoder};
 use crate::error::{Error, Result};
 use crate::graph::MeshGraph;
 use crate::ops::{AcapInverse, LPhys};
-use crate::params::Params;
+use crate::params::ParamStore;
 use weft_data::{ClothDataset, is_train_frame, is_validation_frame};
 
-/// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "[46] +
+/// Loss weights (Tan et al. Table I: λ_recon = λ_vert = 1, λ_ephys 0.1–1; the "\[46\] +
 /// L_vert" baseline sets λ_ephys = 0).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -53,8 +53,8 @@ impl Default for LossWeights {
 /// Everything that shapes a training run; stored with the model.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct EmbedTrainingConfig {
-    pub autoencoder: AutoencoderConfig,
+pub struct EmbedTrainingSettings {
+    pub autoencoder: AutoencoderSettings,
     pub latent_hidden: Vec<usize>,
     pub weights: LossWeights,
     pub adam: AdamSettings,
@@ -88,7 +88,7 @@ pub struct EmbedTrainingConfig {
     /// size (the moments are empty), and at 10⁻³ stage 3's first epoch raised the
     /// validation loss 4–8-fold (docs/EMBEDDING.md). Only stage 3 reads it: a model
     /// trained under another value keeps stages 1 and 2
-    /// ([`EmbedTrainingConfig::stages_continuing_as`]). Not written when `None`, so a
+    /// ([`EmbedTrainingSettings::stages_continuing_as`]). Not written when `None`, so a
     /// stored configuration from before the field reads as the same.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fine_tune_learning_rate: Option<f64>,
@@ -117,9 +117,9 @@ pub enum PhysScale {
     Curvature,
 }
 
-impl EmbedTrainingConfig {
+impl EmbedTrainingSettings {
     /// λ_ephys after `progress` and the `fraction` of the current epoch done: ramped over
-    /// the first [`EmbedTrainingConfig::ephys_warmup`] epochs of stage 1, constant after.
+    /// the first [`EmbedTrainingSettings::ephys_warmup`] epochs of stage 1, constant after.
     pub fn ephys_weight(&self, progress: Progress, fraction: f64) -> f64 {
         if progress.stage != 1 || self.ephys_warmup == 0 {
             return self.weights.ephys;
@@ -129,7 +129,7 @@ impl EmbedTrainingConfig {
     }
 
     /// Whether a model trained under `self` is the one `other` would train: the same
-    /// configuration, with [`EmbedTrainingConfig::phys_scale`] ignored when both physics
+    /// configuration, with [`EmbedTrainingSettings::phys_scale`] ignored when both physics
     /// weights are zero (the `no-pb` baseline never evaluates `L_phys`).
     pub fn trains_like(&self, other: &Self) -> bool {
         let other = &Self {
@@ -148,7 +148,7 @@ impl EmbedTrainingConfig {
     }
 }
 
-impl EmbedTrainingConfig {
+impl EmbedTrainingSettings {
     /// Checks every field before any work: a typed error naming the first bad one.
     pub fn validate(&self) -> Result<()> {
         use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_adam, check_count, invalid};
@@ -193,7 +193,7 @@ impl EmbedTrainingConfig {
     /// Whether a model trained under `self` can be continued under `other`: it
     /// [trains like](Self::trains_like) `other` but for the stages' epoch counts and the
     /// early-stopping patience, within what every stage's trainer accepts
-    /// ([`crate::trainer::TrainerConfig::continues_as`]: the patience may only grow).
+    /// ([`crate::trainer::TrainerSettings::continues_as`]: the patience may only grow).
     pub fn continues_as(&self, other: &Self) -> bool {
         let mut same = Self {
             epochs: other.epochs,
@@ -205,7 +205,7 @@ impl EmbedTrainingConfig {
 
     /// How many leading stages of a model trained under `self` continue under `other`:
     /// 3 when it [continues as](Self::continues_as) `other`; 2 when they differ only in
-    /// what stage 3 alone reads ([`EmbedTrainingConfig::fine_tune_learning_rate`]), stage 3
+    /// what stage 3 alone reads ([`EmbedTrainingSettings::fine_tune_learning_rate`]), stage 3
     /// then training afresh from stage 2's weights; 0 otherwise.
     pub fn stages_continuing_as(&self, other: &Self) -> u8 {
         if self.continues_as(other) {
@@ -218,8 +218,8 @@ impl EmbedTrainingConfig {
         if but_stage_3.continues_as(other) { 2 } else { 0 }
     }
 
-    /// Adam's settings in `stage`: [`EmbedTrainingConfig::adam`], with stage 3's learning
-    /// rate [`EmbedTrainingConfig::fine_tune_learning_rate`] when set.
+    /// Adam's settings in `stage`: [`EmbedTrainingSettings::adam`], with stage 3's learning
+    /// rate [`EmbedTrainingSettings::fine_tune_learning_rate`] when set.
     pub fn stage_adam(&self, stage: u8) -> AdamSettings {
         match (stage, self.fine_tune_learning_rate) {
             (3, Some(learning_rate)) => AdamSettings {
@@ -230,8 +230,8 @@ impl EmbedTrainingConfig {
         }
     }
 
-    pub fn trainer(&self, stage: u8) -> crate::trainer::TrainerConfig {
-        crate::trainer::TrainerConfig {
+    pub fn trainer(&self, stage: u8) -> crate::trainer::TrainerSettings {
+        crate::trainer::TrainerSettings {
             epochs: self.epochs[stage as usize - 1],
             batch: self.batch,
             seed: self.seed,
@@ -260,10 +260,10 @@ impl PhysScale {
 /// [`Schedule::warmup_steps`]: crate::trainer::Schedule::warmup_steps
 pub const WARMUP_STEPS: usize = 50;
 
-impl Default for EmbedTrainingConfig {
+impl Default for EmbedTrainingSettings {
     fn default() -> Self {
         Self {
-            autoencoder: AutoencoderConfig::default(),
+            autoencoder: AutoencoderSettings::default(),
             latent_hidden: vec![256, 256],
             weights: LossWeights::default(),
             adam: AdamSettings::default(),
@@ -509,25 +509,25 @@ impl EmbedData {
 /// The embedding's two networks with their parameters and optimisers.
 #[derive(Debug)]
 pub struct EmbedModel {
-    pub config: EmbedTrainingConfig,
-    pub autoencoder_params: Params,
+    pub config: EmbedTrainingSettings,
+    pub autoencoder_params: ParamStore,
     pub autoencoder: MeshAutoencoder,
-    pub simulator_params: Params,
+    pub simulator_params: ParamStore,
     pub simulator: LatentSimulator,
 }
 
 impl EmbedModel {
     /// The two networks, initialised from `config.seed`, on the CPU.
-    pub fn new(config: EmbedTrainingConfig, data: &EmbedData) -> Result<Self> {
+    pub fn new(config: EmbedTrainingSettings, data: &EmbedData) -> Result<Self> {
         let device = &Device::Cpu;
         let graph = Arc::new(MeshGraph::new(&data.dataset.rest, device)?);
-        let mut autoencoder_params = Params::new(device, config.seed);
+        let mut autoencoder_params = ParamStore::new(device, config.seed);
         let autoencoder =
             MeshAutoencoder::new(&mut autoencoder_params, graph, config.autoencoder)?.with_kernels(config.kernels);
-        let mut simulator_params = Params::new(device, config.seed ^ 0x5151_5151);
+        let mut simulator_params = ParamStore::new(device, config.seed ^ 0x5151_5151);
         let simulator = LatentSimulator::new(
             &mut simulator_params,
-            LatentSimulatorConfig {
+            LatentSimulatorSettings {
                 latent: config.autoencoder.latent,
                 controls: 3 * data.dataset.grasp.len(),
                 hidden: config.latent_hidden.clone(),
@@ -552,7 +552,7 @@ impl EmbedModel {
             path: path.display().to_string(),
             source,
         })?;
-        let config: EmbedTrainingConfig = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
+        let config: EmbedTrainingSettings = serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
             path: path.display().to_string(),
             reason: e.to_string(),
         })?;
@@ -629,7 +629,7 @@ impl EmbedModel {
     /// The losses of `stage` (1, 2 or 3) on the windows `batch` (frames `m`), as a graph
     /// whose `total` can be differentiated, plus their values.
     /// The losses of `stage` on `batch`, with λ_ephys = `ephys` (see
-    /// [`EmbedTrainingConfig::ephys_weight`]); the other weights are the configuration's.
+    /// [`EmbedTrainingSettings::ephys_weight`]); the other weights are the configuration's.
     pub fn losses(&self, data: &EmbedData, batch: &[FrameRef], stage: u8, ephys: f64) -> Result<(Tensor, LossTerms)> {
         self.losses_with(data, batch, stage, ephys, None)
     }
@@ -930,18 +930,18 @@ pub fn stage_dir(dir: &std::path::Path, stage: u8) -> std::path::PathBuf {
 
 /// Whether stage `stage` of the model in `dir` is complete under `config` (all its epochs
 /// trained, or stopped by `config`'s early stopping).
-pub fn stage_done(dir: &std::path::Path, stage: u8, config: &crate::trainer::TrainerConfig) -> bool {
+pub fn stage_done(dir: &std::path::Path, stage: u8, config: &crate::trainer::TrainerSettings) -> bool {
     crate::trainer::TrainingState::read(&stage_dir(dir, stage)).is_ok_and(|s| s.finished_under(config))
 }
 
 /// Whether training the model in `dir` on under `config` gives exactly the model a fresh
 /// directory would: it was trained under a configuration whose leading stages
-/// [continue](EmbedTrainingConfig::stages_continuing_as) under `config` (the others are
+/// [continue](EmbedTrainingSettings::stages_continuing_as) under `config` (the others are
 /// trained afresh by [`train_model`]), none of those stages has trained more epochs than
 /// `config` allows it, and each of them that trained still has its weights. `false` when
 /// `dir` holds no model.
-pub fn continues_exactly(dir: &std::path::Path, config: &EmbedTrainingConfig) -> bool {
-    let Ok(have) = crate::checkpoint::read_json::<EmbedTrainingConfig>(&dir.join("config.json")) else {
+pub fn continues_exactly(dir: &std::path::Path, config: &EmbedTrainingSettings) -> bool {
+    let Ok(have) = crate::checkpoint::read_json::<EmbedTrainingSettings>(&dir.join("config.json")) else {
         return false;
     };
     let kept = have.stages_continuing_as(config);
@@ -1015,7 +1015,7 @@ pub fn train_stages(
 /// Checks the stages asked for, reading `dir` only: each of 1, 2, 3, in increasing order,
 /// and every earlier stage the configuration trains (epochs > 0) already trained in `dir`
 /// — a later stage would otherwise start from untrained weights.
-fn check_stages(dir: &std::path::Path, config: &EmbedTrainingConfig, stages: &[u8]) -> Result<()> {
+fn check_stages(dir: &std::path::Path, config: &EmbedTrainingSettings, stages: &[u8]) -> Result<()> {
     if let Some(&s) = stages.iter().find(|s| !(1..=3).contains(*s)) {
         return Err(crate::trainer::invalid("stages", s, "must be 1, 2 or 3"));
     }
@@ -1041,13 +1041,13 @@ fn check_stages(dir: &std::path::Path, config: &EmbedTrainingConfig, stages: &[u
 /// `config.json`, `normalization.json` (the ACAP feature normalisation fitted on the
 /// training frames) and one trainer run per stage ([`train_stages`]). A directory trained
 /// under another configuration is an error (only the epoch counts may change, and the
-/// early-stopping patience grow: [`EmbedTrainingConfig::continues_as`]), except that a
+/// early-stopping patience grow: [`EmbedTrainingSettings::continues_as`]), except that a
 /// model trained under another stage-3 learning rate keeps stages 1 and 2 and has its
-/// stage 3 discarded ([`EmbedTrainingConfig::stages_continuing_as`]).
+/// stage 3 discarded ([`EmbedTrainingSettings::stages_continuing_as`]).
 pub fn train_model(
     dir: &std::path::Path,
     data: &EmbedData,
-    config: &EmbedTrainingConfig,
+    config: &EmbedTrainingSettings,
     stages: &[u8],
     observer: &mut dyn crate::trainer::Observer,
 ) -> Result<(EmbedModel, Vec<(u8, crate::trainer::TrainingState)>)> {
@@ -1061,9 +1061,9 @@ pub fn train_model(
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     let config_path = dir.join("config.json");
     if config_path.exists() {
-        let stored: EmbedTrainingConfig = crate::checkpoint::read_json(&config_path)?;
+        let stored: EmbedTrainingSettings = crate::checkpoint::read_json(&config_path)?;
         // The error names the fields that forbid continuing, not the epochs that may differ.
-        let shown = EmbedTrainingConfig {
+        let shown = EmbedTrainingSettings {
             epochs: config.epochs,
             kernels: config.kernels,
             ..stored.clone()

@@ -12,19 +12,21 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 use weft_proj::{InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings};
 
+use super::model::{
+    DrapeModel, DrapeNet, DrapeNetSettings, DrapeTensors, Mu, Postprocess, loss, predict_each_keyed, sqrtmse_maxdist_mm,
+};
 use crate::adam::AdamSettings;
-use crate::drape::{DrapeModel, DrapeNet, DrapeNetConfig, DrapeTensors, DrapeTraining, Mu, Postprocess};
 use crate::error::{Error, Result};
 use crate::ops::{InextensibilityProjection, QuasistaticProjection};
-use crate::params::Params;
-use crate::trainer::{Observer, Schedule, Trainer, TrainerConfig, TrainingState};
+use crate::params::ParamStore;
+use crate::trainer::{Observer, Schedule, Trainer, TrainerSettings, TrainingState};
 
 /// Everything that decides a trained model but its number of epochs. Omitted fields in a
 /// configuration file keep the standard evaluation's values ([`Default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct DrapeTrainingConfig {
-    pub net: DrapeNetConfig,
+pub struct DrapeTrainingSettings {
+    pub net: DrapeNetSettings,
     /// Epochs of `network-only`.
     pub pretrain_epochs: usize,
     /// Epochs of each `trained-*` model after it.
@@ -41,11 +43,11 @@ pub struct DrapeTrainingConfig {
     pub schedule: Schedule,
 }
 
-impl Default for DrapeTrainingConfig {
+impl Default for DrapeTrainingSettings {
     /// The standard evaluation's configuration.
     fn default() -> Self {
         Self {
-            net: DrapeNetConfig::default(),
+            net: DrapeNetSettings::default(),
             pretrain_epochs: 200,
             // Five: in the first standard run (10 epochs, docs/DRAPE.md) the fixed-layer
             // models kept epochs 1, 1 and 2, and the whole evaluation must fit one
@@ -67,7 +69,7 @@ impl Default for DrapeTrainingConfig {
     }
 }
 
-impl DrapeTrainingConfig {
+impl DrapeTrainingSettings {
     /// Checks every field before any work: a typed error naming the first bad one.
     pub fn validate(&self) -> Result<()> {
         use crate::trainer::{MAX_BATCH, MAX_EPOCHS, check_count, check_learning_rate, invalid};
@@ -136,7 +138,7 @@ pub struct Layers {
 }
 
 impl Layers {
-    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingConfig) -> Result<Self> {
+    pub fn new(sleeve: &weft_mesh::TriMesh, config: &DrapeTrainingSettings) -> Result<Self> {
         Ok(Self {
             socp: Arc::new(InextensibilityLayer::new(
                 sleeve,
@@ -170,7 +172,7 @@ impl Layers {
     }
 
     /// The postprocess of `layer` (a learned μ created in `mu_params`, `v` vertices).
-    pub fn postprocess(&self, layer: Layer, mu_params: &mut Params, v: usize) -> Result<Postprocess> {
+    pub fn postprocess(&self, layer: Layer, mu_params: &mut ParamStore, v: usize) -> Result<Postprocess> {
         Ok(match layer {
             Layer::None => Postprocess::None,
             Layer::Socp => self.inextensibility(),
@@ -225,7 +227,7 @@ pub fn best_net_dir(dir: &Path) -> std::path::PathBuf {
 /// its epoch counts, the layer and the starting weights (by content, so a retrained
 /// `network-only` retrains the models started from it, and another path to the same
 /// model does not).
-fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> Result<serde_json::Value> {
+fn stamp(config: &DrapeTrainingSettings, layer: Layer, init: Option<&Path>) -> Result<serde_json::Value> {
     let mut config = serde_json::to_value(config).expect("plain data");
     if let Some(c) = config.as_object_mut() {
         c.remove("pretrain_epochs");
@@ -244,7 +246,7 @@ fn stamp(config: &DrapeTrainingConfig, layer: Layer, init: Option<&Path>) -> Res
 pub fn fit(
     dir: &Path,
     plan: &Plan<'_>,
-    config: &DrapeTrainingConfig,
+    config: &DrapeTrainingSettings,
     layers: &Layers,
     train: &DrapeTensors,
     validation: &DrapeTensors,
@@ -287,9 +289,9 @@ pub fn fit(
     let text = serde_json::to_string_pretty(&stamp).expect("plain data");
     std::fs::write(&stamp_path, text).map_err(|e| io(&stamp_path, e))?;
     let device = candle_core::Device::Cpu;
-    let mut net_params = Params::new(&device, config.seed);
+    let mut net_params = ParamStore::new(&device, config.seed);
     let net = DrapeNet::new(&mut net_params, &config.net, v)?;
-    let mut mu_params = Params::new(&device, config.seed + 1);
+    let mut mu_params = ParamStore::new(&device, config.seed + 1);
     let post = layers.postprocess(plan.layer, &mut mu_params, v)?;
     let learned = matches!(plan.layer, Layer::LearnedMu { .. });
     let net_adam = AdamSettings {
@@ -306,7 +308,7 @@ pub fn fit(
     let model = DrapeModel { net, post };
     let trainer = Trainer::new(
         format!("drape/{}", plan.name),
-        TrainerConfig {
+        TrainerSettings {
             epochs: plan.epochs,
             batch: config.batch,
             seed: config.seed,
@@ -329,26 +331,186 @@ pub fn fit(
 /// A trained drape model from its directory (written by [`fit`]): the network and its
 /// layer at the best validation weights, rebuilt on `sleeve` from the stored stamp.
 /// Returns the model, its layer and its training configuration.
-pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingConfig)> {
+pub fn load_model(dir: &Path, sleeve: &weft_mesh::TriMesh) -> Result<(DrapeModel, Layer, DrapeTrainingSettings)> {
     crate::checkpoint::check_model_kind(dir, "drape")?;
     let stamp: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
     let bad = |reason: String| Error::Checkpoint {
         path: dir.join("config.json").display().to_string(),
         reason,
     };
-    let config: DrapeTrainingConfig =
+    let config: DrapeTrainingSettings =
         serde_json::from_value(stamp["config"].clone()).map_err(|e| bad(format!("config: {e}")))?;
     let layer: Layer = serde_json::from_value(stamp["layer"].clone()).map_err(|e| bad(format!("layer: {e}")))?;
     let layers = Layers::new(sleeve, &config)?;
     let v = sleeve.num_vertices();
     let device = candle_core::Device::Cpu;
-    let mut net_params = Params::new(&device, config.seed);
+    let mut net_params = ParamStore::new(&device, config.seed);
     let net = DrapeNet::new(&mut net_params, &config.net, v)?;
-    let mut mu_params = Params::new(&device, config.seed + 1);
+    let mut mu_params = ParamStore::new(&device, config.seed + 1);
     let post = layers.postprocess(layer, &mut mu_params, v)?;
     crate::checkpoint::load_params(&best_net_dir(dir), &net_params)?;
     if matches!(layer, Layer::LearnedMu { .. }) {
         crate::checkpoint::load_params(&dir.join("best").join("mu"), &mu_params)?;
     }
     Ok((DrapeModel { net, post }, layer, config))
+}
+
+/// Mean and standard deviation over an epoch's batches of one gradient (per batch, mm²
+/// per unit of the parameter).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GradientStats {
+    pub mean: f64,
+    pub sd: f64,
+    pub batches: usize,
+}
+
+impl GradientStats {
+    /// Mean and sample standard deviation of `values` (`None` when empty).
+    pub fn of(values: &[f64]) -> Option<Self> {
+        let n = values.len();
+        if n == 0 {
+            return None;
+        }
+        let mean = values.iter().sum::<f64>() / n as f64;
+        let var = values.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n.max(2) - 1) as f64;
+        Some(Self {
+            mean,
+            sd: var.sqrt(),
+            batches: n,
+        })
+    }
+}
+
+/// A drape model trained through [`crate::trainer::Trainer`]: the network (group `net`)
+/// and, with a learned μ, `log μ` (group `mu`, its own learning rate).
+///
+/// The layers warm-start every training example from its solution of the previous epoch
+/// (keys: the examples' indices in `train`) and every validation example likewise (keys
+/// after the training ones). A batch whose postprocess fails (a saddle equilibrium, a
+/// collapsed spring, a solve that did not converge) is skipped. The validation score is
+/// the mean SqrtMSE (mm) over the validation examples the postprocess succeeds on.
+/// Warm starts make a resumed run equal to an uninterrupted one only to the layers'
+/// solver tolerance (the network alone resumes bit for bit).
+#[derive(Debug)]
+pub struct DrapeTraining<'a> {
+    pub model: &'a DrapeModel,
+    pub net_params: &'a ParamStore,
+    pub net_adam: crate::adam::AdamSettings,
+    /// A learned μ's parameters and Adam settings.
+    pub mu: Option<(&'a ParamStore, crate::adam::AdamSettings)>,
+    pub train: &'a DrapeTensors,
+    pub validation: &'a DrapeTensors,
+    /// Examples per layer call in the validation pass.
+    pub batch: usize,
+    mu_grads: Vec<f64>,
+}
+
+impl<'a> DrapeTraining<'a> {
+    pub fn new(
+        model: &'a DrapeModel,
+        net: (&'a ParamStore, crate::adam::AdamSettings),
+        mu: Option<(&'a ParamStore, crate::adam::AdamSettings)>,
+        train: &'a DrapeTensors,
+        validation: &'a DrapeTensors,
+        batch: usize,
+    ) -> Self {
+        Self {
+            model,
+            net_params: net.0,
+            net_adam: net.1,
+            mu,
+            train,
+            validation,
+            batch,
+            mu_grads: Vec::new(),
+        }
+    }
+}
+
+impl crate::trainer::Trainable for DrapeTraining<'_> {
+    fn groups(&self) -> Vec<crate::trainer::Group<'_>> {
+        let mut g = vec![crate::trainer::Group {
+            name: "net",
+            params: self.net_params,
+            adam: self.net_adam,
+        }];
+        if let Some((params, adam)) = self.mu {
+            g.push(crate::trainer::Group {
+                name: "mu",
+                params,
+                adam,
+            });
+        }
+        g
+    }
+
+    fn num_examples(&self) -> usize {
+        self.train.len()
+    }
+
+    fn batch_loss(&mut self, batch: &[usize], _at: crate::trainer::BatchAt) -> Result<crate::trainer::BatchLoss> {
+        let b = self.train.select(batch)?;
+        match self
+            .model
+            .predict_keyed(&b.pose, &b.guess, Some(batch))
+            .and_then(|r| loss(&r, &b.truth))
+        {
+            Ok(loss) => Ok(crate::trainer::BatchLoss::Loss { loss, terms: vec![] }),
+            Err(e) => Ok(crate::trainer::BatchLoss::Skipped { reason: e.to_string() }),
+        }
+    }
+
+    fn after_backward(&mut self, grads: &candle_core::backprop::GradStore) -> Result<()> {
+        if let Postprocess::Quasistatic {
+            mu: Mu::Learned(log_mu),
+            ..
+        } = &self.model.post
+        {
+            if let Some(g) = grads.get(log_mu) {
+                self.mu_grads.push(f64::from(g.mean_all()?.to_scalar::<f32>()?));
+            }
+        }
+        Ok(())
+    }
+
+    fn validation_score(&mut self) -> Result<f64> {
+        let pred = predict_each_keyed(self.model, self.validation, self.batch, self.train.len())?;
+        let truth = self.validation.truths()?;
+        let (mut sum, mut n) = (0.0, 0);
+        for (p, t) in pred.iter().zip(&truth) {
+            if let Ok(p) = p {
+                sum += sqrtmse_maxdist_mm(p, t)?.0;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return Err(Error::InvalidParameter {
+                name: "validation split",
+                value: format!("{} examples", self.validation.len()),
+                reason: "the postprocess failed on every validation example (or there are none)",
+            });
+        }
+        Ok(sum / n as f64)
+    }
+
+    /// A learned μ after the epoch (its mean over vertices) and how the per-batch
+    /// gradient of the loss in `log μ` varied over the epoch: Adam moves `log μ` by about
+    /// `lr · mean / sd` per step, so a ratio near zero is why a learned μ drifts slowly
+    /// (docs/DRAPE.md).
+    fn epoch_extra(&mut self) -> Result<std::collections::BTreeMap<String, f64>> {
+        let mut extra = std::collections::BTreeMap::new();
+        if let Some(mu) = self.model.learned_mu()? {
+            extra.insert("mu".into(), mu.iter().sum::<f64>() / mu.len().max(1) as f64);
+        }
+        if let Some(g) = GradientStats::of(&std::mem::take(&mut self.mu_grads)) {
+            extra.insert("mu_gradient_mean".into(), g.mean);
+            extra.insert("mu_gradient_sd".into(), g.sd);
+        }
+        Ok(extra)
+    }
+
+    /// Epoch `e` is ordered by SplitMix64(`seed · 1000 + e`), as before the trainer.
+    fn shuffle_seed(&self, seed: u64, epoch: usize) -> u64 {
+        seed.wrapping_mul(1000).wrapping_add(epoch as u64)
+    }
 }

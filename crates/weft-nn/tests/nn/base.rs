@@ -1,4 +1,4 @@
-//! Integration tests of weft-nn: layers against per-vertex loops, custom ops against
+//! Layers against per-vertex loops, custom ops against
 //! finite differences of the f64 physics, the stop-gradient of Eq. 9–10, checkpoint round
 //! trips, and a training smoke test on the quick sheet.
 
@@ -8,11 +8,11 @@ use candle_core::{DType, Device, Tensor, Var};
 use nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, FeatureNormalization, PoissonPseudoInverse};
 use weft_nn::adam::{Adam, AdamSettings};
-use weft_nn::embed::{AutoencoderConfig, MeshAutoencoder};
+use weft_nn::embed::{AutoencoderSettings, MeshAutoencoder};
 use weft_nn::graph::MeshGraph;
 use weft_nn::layers::GraphConv;
 use weft_nn::ops::{AcapInverse, LPhys};
-use weft_nn::params::Params;
+use weft_nn::params::ParamStore;
 use weft_nn::{Error, checkpoint};
 use weft_sim::{ClothScene, ClothSimulation};
 use weft_testkit::{TestRng, max_norm_rel_error};
@@ -32,7 +32,7 @@ fn graph_conv_matches_a_per_vertex_loop_and_its_weights_do_not_depend_on_the_mes
     let mut counts = Vec::new();
     for mesh in [&small, &big] {
         let graph = Arc::new(MeshGraph::new(mesh, &cpu()).unwrap());
-        let mut params = Params::new(&cpu(), 5);
+        let mut params = ParamStore::new(&cpu(), 5);
         let conv = GraphConv::new(&mut params, "c", graph, 3, 2).unwrap();
         counts.push(params.num_parameters());
         let v = mesh.num_vertices();
@@ -218,13 +218,13 @@ fn l_phys_op_matches_weft_sim_and_stops_the_gradient_into_previous_frames() {
 #[test]
 fn checkpoint_round_trip_resumes_training_bit_for_bit() {
     let sheet = weft_mesh::generators::sheet(4, 1.0).unwrap();
-    let config = AutoencoderConfig {
+    let config = AutoencoderSettings {
         conv_layers: 1,
         latent: 4,
     };
     let build = |seed| {
         let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
-        let mut params = Params::new(&cpu(), seed);
+        let mut params = ParamStore::new(&cpu(), seed);
         let model = MeshAutoencoder::new(&mut params, graph, config).unwrap();
         let adam = Adam::new(&params, AdamSettings::default()).unwrap();
         (params, model, adam)
@@ -232,7 +232,7 @@ fn checkpoint_round_trip_resumes_training_bit_for_bit() {
     let mut rng = TestRng::new(4);
     let x: Vec<f32> = (0..2 * 16 * 9).map(|_| rng.uniform(-0.9, 0.9) as f32).collect();
     let x = Tensor::from_vec(x, (2, 16, 9), &cpu()).unwrap();
-    let train = |params: &Params, model: &MeshAutoencoder, adam: &mut Adam, steps: usize| {
+    let train = |params: &ParamStore, model: &MeshAutoencoder, adam: &mut Adam, steps: usize| {
         for _ in 0..steps {
             let loss = (model.decode(&model.encode(&x).unwrap()).unwrap() - &x)
                 .unwrap()
@@ -262,11 +262,11 @@ fn checkpoint_round_trip_resumes_training_bit_for_bit() {
     );
     // A checkpoint of another model is a typed error naming the problem.
     let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
-    let mut other = Params::new(&cpu(), 1);
+    let mut other = ParamStore::new(&cpu(), 1);
     MeshAutoencoder::new(
         &mut other,
         graph,
-        AutoencoderConfig {
+        AutoencoderSettings {
             conv_layers: 1,
             latent: 5,
         },
@@ -330,11 +330,11 @@ fn training_the_autoencoder_on_the_quick_sheet_lowers_every_loss() {
         .unwrap();
 
     let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
-    let mut params = Params::new(&cpu(), 11);
+    let mut params = ParamStore::new(&cpu(), 11);
     let model = MeshAutoencoder::new(
         &mut params,
         graph,
-        AutoencoderConfig {
+        AutoencoderSettings {
             conv_layers: 1,
             latent: 16,
         },
@@ -375,16 +375,16 @@ fn training_the_autoencoder_on_the_quick_sheet_lowers_every_loss() {
 
 #[test]
 fn latent_rollout_decodes_like_the_ops_and_feeds_its_codes_back() {
-    use weft_nn::embed::{LatentSimulator, LatentSimulatorConfig};
-    use weft_nn::rollout::LatentRollout;
+    use weft_nn::embed::LatentRollout;
+    use weft_nn::embed::{LatentSimulator, LatentSimulatorSettings};
     let c = acap_case();
     let sheet = weft_mesh::generators::sheet(5, 1.0).unwrap();
     let graph = Arc::new(MeshGraph::new(&sheet, &cpu()).unwrap());
-    let mut params = Params::new(&cpu(), 21);
+    let mut params = ParamStore::new(&cpu(), 21);
     let ae = MeshAutoencoder::new(
         &mut params,
         graph,
-        AutoencoderConfig {
+        AutoencoderSettings {
             conv_layers: 1,
             latent: 6,
         },
@@ -392,7 +392,7 @@ fn latent_rollout_decodes_like_the_ops_and_feeds_its_codes_back() {
     .unwrap();
     let sim = LatentSimulator::new(
         &mut params,
-        LatentSimulatorConfig {
+        LatentSimulatorSettings {
             latent: 6,
             controls: 6,
             hidden: vec![8],
@@ -468,9 +468,9 @@ fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
 
 /// The embedding's default configuration with a one-convolution, 8-wide autoencoder: the
 /// size the quick sheet's tests train and differentiate.
-fn small_embed_config() -> weft_nn::embed_training::EmbedTrainingConfig {
-    weft_nn::embed_training::EmbedTrainingConfig {
-        autoencoder: AutoencoderConfig {
+fn small_embed_config() -> weft_nn::embed::EmbedTrainingSettings {
+    weft_nn::embed::EmbedTrainingSettings {
+        autoencoder: AutoencoderSettings {
             conv_layers: 1,
             latent: 8,
         },
@@ -480,7 +480,7 @@ fn small_embed_config() -> weft_nn::embed_training::EmbedTrainingConfig {
 
 #[test]
 fn latent_inverse_kinematics_lowers_the_potential_and_keeps_the_pins() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, FrameRef};
+    use weft_nn::embed::{EmbedData, EmbedModel, FrameRef};
     use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let model = EmbedModel::new(small_embed_config(), &data).unwrap();
@@ -565,7 +565,7 @@ fn nnwarp_plain_rust_forward_matches_candle_and_pairs_are_frame_consistent() {
     use nalgebra::Rotation3;
     use weft_nn::nnwarp::{NnWarp, Standardization, WarpContext, WarpMlp, hidden_layers};
     use weft_sim::warp::FieldDirection;
-    let mut params = Params::new(&cpu(), 3);
+    let mut params = ParamStore::new(&cpu(), 3);
     let (rows, outs) = random_pairs(17, 40);
     let standardization = Standardization::fit(&rows, &outs).unwrap();
     let mlp = WarpMlp::new(&mut params, &hidden_layers("stvk"), &standardization).unwrap();
@@ -625,7 +625,7 @@ fn the_batched_correction_is_the_node_by_node_network_on_small_and_large_bodies(
     use weft_sim::warp::{FieldDirection, NodalGradients, aligned_kinematics};
     let (rows, outs) = random_pairs(29, 64);
     let standardization = Standardization::fit(&rows, &outs).unwrap();
-    let mut params = Params::new(&cpu(), 5);
+    let mut params = ParamStore::new(&cpu(), 5);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     let node = mlp.to_node_mlp(standardization).unwrap();
     // 225 and 2 511 nodes: the second above the size where the runtime splits the
@@ -671,11 +671,11 @@ fn the_batched_correction_is_the_node_by_node_network_on_small_and_large_bodies(
 
 #[test]
 fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
-    use weft_nn::embed_training::{EmbedTrainingConfig, PhysScale, Progress};
-    let mut c = EmbedTrainingConfig::default();
+    use weft_nn::embed::{EmbedTrainingSettings, PhysScale, Progress};
+    let mut c = EmbedTrainingSettings::default();
     c.weights.ephys = 0.5;
     c.ephys_warmup = 4;
-    let at_with = |c: &EmbedTrainingConfig, stage: u8, epoch: usize, fraction: f64| {
+    let at_with = |c: &EmbedTrainingSettings, stage: u8, epoch: usize, fraction: f64| {
         c.ephys_weight(Progress { stage, epoch }, fraction)
     };
     let at = |stage: u8, epoch: usize, fraction: f64| at_with(&c, stage, epoch, fraction);
@@ -685,25 +685,25 @@ fn ephys_ramps_over_its_warmup_and_legacy_configurations_keep_their_meaning() {
     assert_eq!(at(1, 9, 0.9), 0.5);
     // The ramp is stage 1's: stage 3 fine-tunes at the full weight from its first batch.
     assert_eq!(at(3, 0, 0.0), 0.5);
-    let none = EmbedTrainingConfig {
+    let none = EmbedTrainingSettings {
         ephys_warmup: 0,
         ..c.clone()
     };
     assert_eq!(at_with(&none, 1, 0, 0.0), 0.5);
     // A configuration stored before the fields existed: inertial scale, no ramp.
-    let mut v = serde_json::to_value(EmbedTrainingConfig::default()).unwrap();
+    let mut v = serde_json::to_value(EmbedTrainingSettings::default()).unwrap();
     let o = v.as_object_mut().unwrap();
     o.remove("phys_scale");
     o.remove("ephys_warmup");
     o["schedule"].as_object_mut().unwrap().remove("warmup_steps");
-    let legacy: EmbedTrainingConfig = serde_json::from_value(v).unwrap();
+    let legacy: EmbedTrainingSettings = serde_json::from_value(v).unwrap();
     assert_eq!(legacy.phys_scale, PhysScale::Inertial);
     assert_eq!(legacy.ephys_warmup, 0);
     // Stored before the learning-rate warm-up: none; new configurations ramp.
     assert_eq!(legacy.schedule.warmup_steps, 0);
     assert_eq!(
-        EmbedTrainingConfig::default().schedule.warmup_steps,
-        weft_nn::embed_training::WARMUP_STEPS
+        EmbedTrainingSettings::default().schedule.warmup_steps,
+        weft_nn::embed::WARMUP_STEPS
     );
 }
 
@@ -713,7 +713,7 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
     use weft_sim::warp::{FieldDirection, loads_in_rest_frames};
     let (rows, outs) = random_pairs(5, 30);
     let standardization = Standardization::fit(&rows, &outs).unwrap();
-    let mut params = Params::new(&cpu(), 9);
+    let mut params = ParamStore::new(&cpu(), 9);
     let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
     let node = || mlp.to_node_mlp(standardization.clone()).unwrap();
     let (beam, anchors) = clamped_small_beam();
@@ -789,7 +789,7 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
 #[test]
 fn the_pca_simulator_rolls_out_the_hand_computed_steps() {
     use std::collections::BTreeMap;
-    use weft_nn::embed::{LatentSimulator, LatentSimulatorConfig};
+    use weft_nn::embed::{LatentSimulator, LatentSimulatorSettings};
     use weft_nn::pca::PositionPca;
     use weft_nn::pca_simulator::PcaSimulator;
     let r = std::f64::consts::FRAC_1_SQRT_2;
@@ -800,10 +800,10 @@ fn the_pca_simulator_rolls_out_the_hand_computed_steps() {
     // The basis is d up to its sign.
     let sign = pca.encode(&along(1.0))[0];
     assert!((sign.abs() - 1.0).abs() < 1e-12, "{sign}");
-    let mut params = Params::new(&Device::Cpu, 0);
+    let mut params = ParamStore::new(&Device::Cpu, 0);
     let mlp = LatentSimulator::new(
         &mut params,
-        LatentSimulatorConfig {
+        LatentSimulatorSettings {
             latent: 1,
             controls: 3,
             hidden: vec![],
@@ -850,16 +850,16 @@ fn the_pca_simulator_rolls_out_the_hand_computed_steps() {
 /// the controls.
 #[test]
 fn the_pca_simulator_learns_the_codes_and_rolls_out() {
-    use weft_nn::embed_training::EmbedData;
+    use weft_nn::embed::EmbedData;
     use weft_nn::pca::PositionPca;
-    use weft_nn::pca_simulator::{PcaSimulatorConfig, train};
+    use weft_nn::pca_simulator::{PcaSimulatorSettings, train};
     let data = EmbedData::new(quick_sheet_dataset(34)).unwrap();
     let seq = &data.dataset.sequences[0];
     let frames: Vec<Vec<f64>> = data.train_windows.iter().map(|f| seq.frame(f.frame).to_vec()).collect();
     let pca = PositionPca::fit(&frames, 8).unwrap();
     let dir = std::env::temp_dir().join(format!("weft-pca-sim-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let config = PcaSimulatorConfig {
+    let config = PcaSimulatorSettings {
         hidden: vec![32],
         epochs: 15,
         batch: 4,
@@ -867,7 +867,7 @@ fn the_pca_simulator_learns_the_codes_and_rolls_out() {
             learning_rate: 3e-3,
             ..Default::default()
         },
-        ..PcaSimulatorConfig::default()
+        ..PcaSimulatorSettings::default()
     };
     let sim = train(&dir, &data, pca, &config, &mut weft_nn::trainer::Silent).unwrap();
     let state = weft_nn::trainer::TrainingState::read(&dir).unwrap();
@@ -901,12 +901,12 @@ fn autoencoder_with_random_biases(
     latent: usize,
     param_seed: u64,
     rng_seed: u64,
-) -> (Params, MeshAutoencoder, TestRng, usize) {
+) -> (ParamStore, MeshAutoencoder, TestRng, usize) {
     let mesh = weft_mesh::generators::sheet(n, 1.0).unwrap();
     let v = mesh.num_vertices();
     let graph = Arc::new(MeshGraph::new(&mesh, &cpu()).unwrap());
-    let mut params = Params::new(&cpu(), param_seed);
-    let config = AutoencoderConfig { conv_layers: 2, latent };
+    let mut params = ParamStore::new(&cpu(), param_seed);
+    let config = AutoencoderSettings { conv_layers: 2, latent };
     let autoencoder = MeshAutoencoder::new(&mut params, graph, config).unwrap();
     let mut rng = TestRng::new(rng_seed);
     for (name, var) in params.vars() {
@@ -1099,16 +1099,16 @@ fn warp_dataset_where_more_data_helps() -> weft_data::WarpDataset {
 
 #[test]
 fn an_nnwarp_model_continues_under_a_longer_patience_and_refuses_a_shorter_one() {
-    use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
+    use weft_nn::nnwarp::{WarpTrainingSettings, train_model};
     let data = warp_dataset_where_more_data_helps().with_training_prefix(1);
     let dir = std::env::temp_dir().join(format!("weft-nnwarp-patience-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let with = |epochs: usize, patience: usize| {
-        let mut c = WarpTrainingConfig {
+        let mut c = WarpTrainingSettings {
             hidden: vec![8],
             batch: 32,
             epochs,
-            ..WarpTrainingConfig::default()
+            ..WarpTrainingSettings::default()
         };
         c.schedule.early_stopping_patience = Some(patience);
         c
@@ -1125,7 +1125,7 @@ fn an_nnwarp_model_continues_under_a_longer_patience_and_refuses_a_shorter_one()
 
 #[test]
 fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_the_loads() {
-    use weft_nn::nnwarp::{WarpTrainingConfig, collect_pairs, correction_rms, load_model, train_model};
+    use weft_nn::nnwarp::{WarpTrainingSettings, collect_pairs, correction_rms, load_model, train_model};
     let full = warp_dataset_where_more_data_helps();
     let (vx, vy) = collect_pairs(&full, "validation").unwrap();
     let mut rms = Vec::new();
@@ -1133,7 +1133,7 @@ fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_t
     for k in [1, 5] {
         let dir = std::env::temp_dir().join(format!("weft-nnwarp-size-{k}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let config = WarpTrainingConfig {
+        let config = WarpTrainingSettings {
             hidden: vec![16, 16],
             batch: 32,
             epochs: 150,
@@ -1141,7 +1141,7 @@ fn nnwarp_trained_on_more_sequences_scores_better_on_validation_where_few_miss_t
                 learning_rate: 3e-3,
                 ..AdamSettings::default()
             },
-            ..WarpTrainingConfig::default()
+            ..WarpTrainingSettings::default()
         };
         let subset = full.with_training_prefix(k);
         assert_eq!(subset.training_count(), k);
@@ -1199,10 +1199,10 @@ fn the_published_nnwarp_models_load_and_correct_nothing_at_rest() {
 /// the uncached computation's (`EmbedModel::losses`), on windows taken out of order.
 #[test]
 fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_gradients() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingConfig};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedStage, EmbedTrainingSettings};
     use weft_nn::trainer::{BatchAt, BatchLoss, Trainable};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
-    let config = EmbedTrainingConfig {
+    let config = EmbedTrainingSettings {
         latent_hidden: vec![16],
         ..small_embed_config()
     };
@@ -1274,7 +1274,7 @@ fn stage_two_with_the_frozen_autoencoder_cached_has_the_uncached_losses_and_grad
 
 #[test]
 fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_refused() {
-    use weft_nn::embed_training::{EmbedData, EmbedModel, EmbedTrainingConfig, train_stages};
+    use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingSettings, train_stages};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
     let config = small_embed_config();
     let model = EmbedModel::new(config.clone(), &data).unwrap();
@@ -1287,19 +1287,19 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
     assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
     // The command line's path refuses it before writing anything, so a retry is not
     // blocked by a half-made model directory.
-    let e = weft_nn::embed_training::train_model(&dir, &data, &config, &[2, 3], silent).unwrap_err();
+    let e = weft_nn::embed::train_model(&dir, &data, &config, &[2, 3], silent).unwrap_err();
     assert!(matches!(e, Error::MissingStage { stage: 1, .. }), "{e}");
     assert!(!dir.exists(), "a refused request writes nothing");
     for stages in [&[3, 1][..], &[1, 1], &[2, 1, 3], &[4]] {
         let e = train_stages(&dir, &model, &data, stages, "t", silent).unwrap_err();
         assert!(
-            matches!(&e, Error::InvalidConfig { field, .. } if field == "stages"),
+            matches!(&e, Error::InvalidSettings { field, .. } if field == "stages"),
             "{stages:?}: {e}"
         );
     }
     // A stage the configuration skips (0 epochs) is not needed before a later one.
     let skip_one = EmbedModel::new(
-        EmbedTrainingConfig {
+        EmbedTrainingSettings {
             epochs: [0, 0, 0],
             ..config
         },
@@ -1317,7 +1317,7 @@ fn a_later_embedding_stage_without_its_earlier_one_or_stages_out_of_order_are_re
 
 /// Every stage of the embeddings in `a` and `b` trained the same epochs, bit for bit.
 fn assert_same_stage_histories(a: &std::path::Path, b: &std::path::Path) {
-    use weft_nn::embed_training::stage_dir;
+    use weft_nn::embed::stage_dir;
     for stage in 1..=3u8 {
         let history = |dir: &std::path::Path| -> Vec<(u64, u64)> {
             weft_nn::trainer::TrainingState::read(&stage_dir(dir, stage))
@@ -1333,13 +1333,13 @@ fn assert_same_stage_histories(a: &std::path::Path, b: &std::path::Path) {
 
 #[test]
 fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_trains() {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingSettings, train_model};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
-    let short = EmbedTrainingConfig {
+    let short = EmbedTrainingSettings {
         epochs: [1, 1, 1],
         ..small_embed_config()
     };
-    let long = EmbedTrainingConfig {
+    let long = EmbedTrainingSettings {
         epochs: [2, 1, 1],
         ..short.clone()
     };
@@ -1349,8 +1349,8 @@ fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_tra
     let silent = &mut weft_nn::trainer::Silent;
     train_model(&fresh, &data, &long, &[1, 2, 3], silent).unwrap();
     train_model(&extended, &data, &short, &[1, 2, 3], silent).unwrap();
-    assert!(weft_nn::embed_training::continues_exactly(&extended, &long));
-    assert!(!weft_nn::embed_training::continues_exactly(&fresh, &short));
+    assert!(weft_nn::embed::continues_exactly(&extended, &long));
+    assert!(!weft_nn::embed::continues_exactly(&fresh, &short));
     train_model(&extended, &data, &long, &[1, 2, 3], silent).unwrap();
     // Stages 2 and 3 started from stage 1's one-epoch weights; they are trained again from
     // its two-epoch ones, so every stage matches the fresh run's.
@@ -1360,20 +1360,20 @@ fn an_embedding_trained_on_with_more_stage_1_epochs_is_the_model_a_fresh_run_tra
 
 #[test]
 fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_trains_stage_3_afresh() {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, continues_exactly, stage_dir, train_model};
+    use weft_nn::embed::{EmbedData, EmbedTrainingSettings, continues_exactly, stage_dir, train_model};
     let data = EmbedData::new(quick_sheet_dataset(20)).unwrap();
-    let before = EmbedTrainingConfig {
+    let before = EmbedTrainingSettings {
         epochs: [1, 1, 2],
         ..small_embed_config()
     };
-    let after = EmbedTrainingConfig {
+    let after = EmbedTrainingSettings {
         fine_tune_learning_rate: Some(1e-4),
         ..before.clone()
     };
     assert_eq!(before.stages_continuing_as(&after), 2);
     assert_eq!(after.stages_continuing_as(&before), 2);
     assert_eq!(after.stages_continuing_as(&after), 3);
-    let reseeded = EmbedTrainingConfig {
+    let reseeded = EmbedTrainingSettings {
         seed: 7,
         ..after.clone()
     };
@@ -1382,7 +1382,7 @@ fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_tra
     assert_eq!(after.stage_adam(3).learning_rate, 1e-4);
     assert_eq!(after.stage_adam(2), before.adam);
     assert!(
-        EmbedTrainingConfig {
+        EmbedTrainingSettings {
             fine_tune_learning_rate: Some(-1.0),
             ..after.clone()
         }
@@ -1414,10 +1414,10 @@ fn an_embedding_under_another_stage_3_learning_rate_keeps_stages_1_and_2_and_tra
 
 #[test]
 fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_depth() {
-    use weft_nn::embed_training::EmbedTrainingConfig;
-    let c: EmbedTrainingConfig =
+    use weft_nn::embed::EmbedTrainingSettings;
+    let c: EmbedTrainingSettings =
         serde_json::from_str(r#"{"adam": {"learning_rate": 2e-4}, "autoencoder": {"latent": 64}}"#).unwrap();
-    let d = EmbedTrainingConfig::default();
+    let d = EmbedTrainingSettings::default();
     assert_eq!(
         c.adam,
         AdamSettings {
@@ -1427,14 +1427,14 @@ fn a_partial_configuration_keeps_the_defaults_of_the_fields_it_omits_at_every_de
     );
     assert_eq!(
         c.autoencoder,
-        AutoencoderConfig {
+        AutoencoderSettings {
             latent: 64,
             ..d.autoencoder
         }
     );
     assert_eq!(c.epochs, d.epochs);
     // A full configuration reads back as written.
-    let round: EmbedTrainingConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+    let round: EmbedTrainingSettings = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
     assert_eq!(round, c);
 }
 

@@ -1,0 +1,20 @@
+//! NNWarp (Luo et al.): the node-wise correction MLP that turns a linear FEM displacement
+//! into the nonlinear material's.
+//!
+//! - `model`: the per-node inputs ([`WarpContext`], [`NodeInputs`]), their
+//!   standardisation and the network in candle ([`WarpMlp`]);
+//! - `runtime`: the same weights outside candle ([`NodeMlp`]), the correction of a linear
+//!   solution ([`NnWarp`]) and the corrected linear simulation ([`NnWarpSimulation`]);
+//! - `training`: the training pairs of a dataset, [`WarpTrainingSettings`] and
+//!   [`train_model`].
+//!
+//! Everything public is re-exported here: `weft_nn::nnwarp::X` is the one path of every
+//! item.
+
+mod model;
+mod runtime;
+mod training;
+
+pub use model::*;
+pub use runtime::*;
+pub use training::*;

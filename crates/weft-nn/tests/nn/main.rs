@@ -1,0 +1,14 @@
+//! The integration tests of weft-nn, one binary (one link) for the crate.
+//!
+//! - `base`: layers against per-vertex loops, custom ops against finite differences of
+//!   the f64 physics, the stop-gradient of Eq. 9–10, checkpoint round trips, the
+//!   embedding's and NNWarp's training;
+//! - `altconv`: Alt-ConvLSTM and its ConvLSTM baselines — the fused kernels and the
+//!   runtime against the autograd reference;
+//! - `drape`: Geng et al.'s pose → cloth training with the projection layers;
+//! - `projection_ops`: the projection layers as candle ops against finite differences.
+
+mod altconv;
+mod base;
+mod drape;
+mod projection_ops;
