@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use weft_data::ClothDataset;
+use weft_nn::embed::LatentRollout;
 use weft_nn::embed::{EmbedData, EmbedModel, EmbedTrainingSettings, FrameRef};
 use weft_nn::ik::{IkSettings, decode_pinned, full_space_ik, latent_ik};
 use weft_nn::metrics::{RmsAccumulator, StedParams, ndcg_curve, sted};
 use weft_nn::pca::PositionPca;
 use weft_nn::pca_simulator::{PcaSimulator, PcaSimulatorSettings};
-use weft_nn::embed::LatentRollout;
 use weft_sim::ForceResidual;
 
 use super::data::{validation_frames, windows, write_predictions};

@@ -831,9 +831,8 @@ mod tests {
         };
         let (source, study) = (root.join("source"), root.join("study"));
         scored_model(&ctx, &data, &config, &source, role).unwrap();
-        let state = |dir: &Path, stage: u8| {
-            std::fs::read(weft_nn::embed::stage_dir(dir, stage).join("training.json")).unwrap()
-        };
+        let state =
+            |dir: &Path, stage: u8| std::fs::read(weft_nn::embed::stage_dir(dir, stage).join("training.json")).unwrap();
         let source_stage_3 = state(&source, 3);
         share_stages(&source, &study, 2).unwrap();
         assert!(!weft_nn::embed::stage_dir(&study, 3).exists());
