@@ -1,17 +1,16 @@
 //! `cargo xtask acap`: ACAP features of meshes to `.npy`, and back to OBJ meshes.
 //!
-//! The work is weft-acap's (`AcapFeatures`, `PoissonPseudoInverse`); this module reads
-//! and writes files and shows progress.
+//! The work is weft-acap's (`AcapFeatures`, `PoissonPseudoInverse`) and the array files
+//! weft-data's (`weft_data::arrays`); this module wires them together and shows progress.
 
 use std::fs;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
-use npyz::WriterBuilder;
 use weft_acap::nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, Feature, PoissonPseudoInverse};
+use weft_data::arrays::{read_npy, read_safetensors_frames, safetensors_metadata, write_npy};
 use weft_mesh::TriMesh;
 
 /// ACAP features (Tan et al. §III-A) and their inverse (§IV-A, Eq. 6).
@@ -102,13 +101,7 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
     let path = dir.join("frames.safetensors");
     let frames = read_safetensors_frames(&path, rest.num_vertices())?;
     let pins: Vec<usize> = if pins.is_empty() {
-        let bytes = fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
-            .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
-        let text = meta
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get("grasp_vertices").cloned())
+        let text = safetensors_metadata(&path, "grasp_vertices")?
             .context("no --pin given and no grasp_vertices in the frames' metadata")?;
         serde_json::from_str(&text).with_context(|| format!("grasp_vertices metadata {text:?}"))?
     } else {
@@ -379,184 +372,4 @@ fn parse_pin_positions(text: &str) -> Result<Vec<Vector3<f64>>> {
             Ok(Vector3::new(c[0], c[1], c[2]))
         })
         .collect()
-}
-
-fn read_safetensors_frames(path: &Path, nv: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
-    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    parse_safetensors_frames(&bytes, nv).with_context(|| format!("in {}", path.display()))
-}
-
-/// The `positions` tensor (f64, `[frames, nv, 3]`) of safetensors bytes.
-fn parse_safetensors_frames(bytes: &[u8], nv: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
-    ensure!(nv > 0, "the rest mesh has no vertex");
-    let tensors = safetensors::SafeTensors::deserialize(bytes).map_err(|e| anyhow::anyhow!("not safetensors: {e}"))?;
-    let t = tensors
-        .tensor("positions")
-        .map_err(|e| anyhow::anyhow!("no tensor `positions`: {e}"))?;
-    ensure!(
-        t.dtype() == safetensors::Dtype::F64,
-        "`positions` must be f64, is {:?}",
-        t.dtype()
-    );
-    let shape = t.shape();
-    ensure!(
-        shape.len() == 3 && shape[1] == nv && shape[2] == 3,
-        "`positions` has shape {shape:?}, expected [frames, {nv}, 3]"
-    );
-    let values: Vec<f64> = t
-        .data()
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes(b.try_into().expect("chunks of 8")))
-        .collect();
-    Ok(values
-        .chunks_exact(3 * nv)
-        .map(|f| f.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect())
-        .collect())
-}
-
-fn read_npy(path: &Path) -> Result<(Vec<u64>, Vec<f64>)> {
-    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    parse_npy(&bytes).with_context(|| format!("in {}", path.display()))
-}
-
-/// The shape and values of an `.npy` array of float64, or of float32 (as numpy users often
-/// save features), widened to f64 exactly. The element count the header claims is checked
-/// against the bytes present before anything is allocated for it.
-fn parse_npy(bytes: &[u8]) -> Result<(Vec<u64>, Vec<f64>)> {
-    let npy = npyz::NpyFile::new(bytes).context("not an .npy file")?;
-    let shape = npy.shape().to_vec();
-    let dtype = npy.dtype();
-    let width = match &dtype {
-        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && matches!(t.size_field(), 4 | 8) => {
-            t.size_field()
-        }
-        other => bail!("expected float64 or float32 values, found dtype {}", other.descr()),
-    };
-    let count = shape
-        .iter()
-        .try_fold(1u64, |a, &d| a.checked_mul(d))
-        .context("the header's shape overflows")?;
-    ensure!(
-        count.checked_mul(width).is_some_and(|b| b <= bytes.len() as u64),
-        "the header claims {count} values ({shape:?}) of {width} bytes but the file has {} bytes",
-        bytes.len()
-    );
-    let values = if width == 8 {
-        npy.into_vec::<f64>().context("reading float64 values")?
-    } else {
-        npy.into_vec::<f32>()
-            .context("reading float32 values")?
-            .into_iter()
-            .map(f64::from)
-            .collect()
-    };
-    Ok((shape, values))
-}
-
-fn write_npy(path: &Path, shape: &[u64], values: impl IntoIterator<Item = f64>) -> Result<()> {
-    let file = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut writer = npyz::WriteOptions::<f64>::new()
-        .default_dtype()
-        .shape(shape)
-        .writer(BufWriter::new(file))
-        .begin_nd()
-        .with_context(|| format!("writing {}", path.display()))?;
-    writer
-        .extend(values)
-        .with_context(|| format!("writing {}", path.display()))?;
-    writer.finish().with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use proptest::prelude::*;
-
-    fn npy_bytes(shape: &[u64], values: &[f64]) -> Vec<u8> {
-        let mut out = Vec::new();
-        let mut w = npyz::WriteOptions::<f64>::new()
-            .default_dtype()
-            .shape(shape)
-            .writer(&mut out)
-            .begin_nd()
-            .unwrap();
-        w.extend(values.iter().copied()).unwrap();
-        w.finish().unwrap();
-        out
-    }
-
-    #[test]
-    fn npy_of_float32_is_widened_and_other_dtypes_are_named() {
-        let mut bytes = Vec::new();
-        let mut w = npyz::WriteOptions::<f32>::new()
-            .default_dtype()
-            .shape(&[2, 2])
-            .writer(&mut bytes)
-            .begin_nd()
-            .unwrap();
-        w.extend([0.1f32, -2.5, 3.0, 1e-7]).unwrap();
-        w.finish().unwrap();
-        let (shape, values) = parse_npy(&bytes).unwrap();
-        assert_eq!(shape, vec![2, 2]);
-        assert_eq!(values, vec![f64::from(0.1f32), -2.5, 3.0, f64::from(1e-7f32)]);
-        let mut ints = Vec::new();
-        let mut w = npyz::WriteOptions::<i32>::new()
-            .default_dtype()
-            .shape(&[3])
-            .writer(&mut ints)
-            .begin_nd()
-            .unwrap();
-        w.extend([1, 2, 3]).unwrap();
-        w.finish().unwrap();
-        let err = format!("{:#}", parse_npy(&ints).unwrap_err());
-        assert!(
-            err.contains("expected float64 or float32 values, found dtype '<i4'"),
-            "{err}"
-        );
-    }
-
-    #[test]
-    fn npy_round_trips_and_a_lying_header_is_a_typed_error() {
-        let values: Vec<f64> = (0..18).map(|i| i as f64 * 0.5).collect();
-        let bytes = npy_bytes(&[2, 3, 3], &values);
-        assert_eq!(parse_npy(&bytes).unwrap(), (vec![2, 3, 3], values));
-        // Regression: the header's shape was trusted, so a file claiming 10^15 values
-        // allocated for them before reading.
-        let (old, lying): (&[u8], &[u8]) = (b"(2, 3, 3, )", b"(999999999999999, 3, 3, )");
-        let at = bytes.windows(old.len()).position(|w| w == old).unwrap();
-        let mut lied = bytes.clone();
-        lied.splice(at..at + old.len(), lying.iter().copied());
-        // Keep the header's length: take the extra characters out of its space padding.
-        let newline = lied.iter().position(|&b| b == b'\n').unwrap();
-        lied.drain(newline - (lying.len() - old.len())..newline);
-        assert_eq!(lied.len(), bytes.len());
-        let err = format!("{:#}", parse_npy(&lied).unwrap_err());
-        assert!(err.contains("claims"), "{err}");
-    }
-
-    proptest! {
-            #[test]
-        fn npy_and_safetensors_readers_never_panic(
-            random in prop::collection::vec(any::<u8>(), 0..300),
-            flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..8),
-            cut in any::<prop::sample::Index>(),
-        ) {
-            let _ = parse_npy(&random);
-            let _ = parse_safetensors_frames(&random, 2);
-            let mut npy = npy_bytes(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
-            let arrays = [weft_data::files::Array::f64("positions", vec![1, 2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])];
-            let mut st = weft_data::files::safetensors_bytes(&arrays, Default::default()).unwrap();
-            for (i, b) in &flips {
-                let k = i.index(npy.len());
-                npy[k] ^= b;
-                let k = i.index(st.len());
-                st[k] ^= b;
-            }
-            let _ = parse_npy(&npy);
-            let _ = parse_safetensors_frames(&st, 2);
-            let _ = parse_npy(&npy[..cut.index(npy.len())]);
-            let _ = parse_safetensors_frames(&st[..cut.index(st.len())], 2);
-        }
-    }
 }

@@ -71,7 +71,7 @@ impl GenerateArgs {
             resume: self.resume,
             seed: self.seed,
             quiet: self.quiet,
-            code_version: crate::code_version(),
+            code_version: crate::version::code_version(),
         }
     }
 
