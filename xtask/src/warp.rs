@@ -5,15 +5,17 @@
 //! a static scene), each node's load rotated back to its rest orientation first, and every
 //! frame corrected node by node by the trained network (`weft_nn::nnwarp::NnWarpSimulation`).
 //! With `--reference` the scene also runs as it is written (full nonlinear FEM), and each
-//! frame's VTK carries the per-node error against it.
+//! frame's VTK carries the per-node error against it. The loop is weft-nn's
+//! (`weft_nn::nnwarp_reference::run_against_reference`); this module writes its frames.
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args;
 use nalgebra::Vector3;
-use weft_nn::nnwarp::{NnWarpSimulation, load_model, rel_error};
+use weft_mesh::TetMesh;
+use weft_nn::nnwarp::{NnWarpSimulation, load_model};
+use weft_nn::nnwarp_reference::{FrameView, ReferenceTwins, run_against_reference};
 use weft_sim::{AnyScene, VolumeSimulation};
 
 use weft_data::files::write_json;
@@ -77,68 +79,38 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         );
     }
     // The reference twin builds the body, anchors and loads once; the linear twin shares them.
-    let reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
+    let mut reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
     let mut runtime = NnWarpSimulation::new(&reference_sim, mlp)?;
     let mesh = reference_sim.mesh().clone();
-    let mut reference = if args.reference { Some(reference_sim) } else { None };
+    let twins = args.reference.then(|| ReferenceTwins {
+        reference: &mut reference_sim,
+        others: Vec::new(),
+    });
     let rest = mesh.flat_positions();
-    let n = rest.len();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
-    let mut frames = Vec::new();
-    let (mut solve_seconds, mut warp_seconds, mut reference_seconds) = (0.0, 0.0, 0.0);
-    for k in 1..=scene.frames {
-        let frame = runtime.step()?;
-        solve_seconds += frame.solve_seconds;
-        warp_seconds += frame.warp_seconds;
-        let (u, u_lin) = (frame.warped, frame.linear);
-        let mut record = serde_json::json!({ "frame": k });
-        let mut error: Option<Vec<f64>> = None;
-        if let Some(sim) = &mut reference {
-            let t = Instant::now();
-            let x = sim.step().with_context(|| format!("reference frame {k}"))?.positions;
-            reference_seconds += t.elapsed().as_secs_f64();
-            let u_ref: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
-            record["rel_error_nnwarp"] = rel_error(&u, &u_ref).into();
-            record["rel_error_linear_solve"] = rel_error(&u_lin, &u_ref).into();
-            error = Some(
-                (0..n / 3)
-                    .map(|i| {
-                        Vector3::new(
-                            u[3 * i] - u_ref[3 * i],
-                            u[3 * i + 1] - u_ref[3 * i + 1],
-                            u[3 * i + 2] - u_ref[3 * i + 2],
-                        )
-                        .norm()
-                    })
-                    .collect(),
-            );
+    let report = run_against_reference(&mut runtime, twins, scene.frames, |f| {
+        if f.frame % args.every == 0 || f.frame == scene.frames {
+            write_frame(&args.out, f, &rest, &mesh)?;
         }
-        frames.push(record);
-        if k % args.every == 0 || k == scene.frames {
-            let positions: Vec<Vector3<f64>> = (0..n / 3)
-                .map(|i| {
-                    Vector3::new(
-                        rest[3 * i] + u[3 * i],
-                        rest[3 * i + 1] + u[3 * i + 1],
-                        rest[3 * i + 2] + u[3 * i + 2],
-                    )
-                })
-                .collect();
-            let mut fields: Vec<weft_mesh::io::PointField<'_>> =
-                vec![("displacement", 3, &u[..]), ("linear_displacement", 3, &u_lin[..])];
-            if let Some(e) = &error {
-                fields.push(("error", 1, &e[..]));
+        anyhow::Ok(())
+    })
+    .context("running NNWarp against the full FEM reference")?;
+    let frames: Vec<_> = report
+        .frames
+        .iter()
+        .map(|f| {
+            let mut record = serde_json::json!({ "frame": f.frame });
+            if let (Some(nnwarp), Some(linear)) = (f.nnwarp, f.linear_solve) {
+                record["rel_error_nnwarp"] = nnwarp.into();
+                record["rel_error_linear_solve"] = linear.into();
             }
-            weft_mesh::io::write_vtk_tets(
-                &args.out.join(format!("frame-{k:04}.vtk")),
-                &positions,
-                mesh.tets(),
-                &fields,
-            )?;
-        }
-    }
+            record
+        })
+        .collect();
     let frames_run = scene.frames.max(1) as f64;
+    let (solve_seconds, warp_seconds) = (report.solve_seconds(), report.warp_seconds());
+    let reference_seconds = report.reference_seconds();
     let summary = serde_json::json!({
         "scene": scene.name,
         "model": args.model.display().to_string(),
@@ -150,7 +122,7 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         "factorization_seconds": runtime.linear().factorization_seconds(),
         "solve_seconds_per_frame": solve_seconds / frames_run,
         "nnwarp_seconds_per_frame": warp_seconds / frames_run,
-        "reference_seconds_per_frame": if args.reference { Some(reference_seconds / frames_run) } else { None },
+        "reference_seconds_per_frame": reference_seconds.map(|s| s / frames_run),
     });
     write_json(&args.out.join("summary.json"), &summary)?;
     eprintln!(
@@ -159,12 +131,32 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         scene.frames,
         1e3 * solve_seconds / frames_run,
         1e3 * warp_seconds / frames_run,
-        if args.reference {
-            format!(", full FEM {:.1} ms per frame", 1e3 * reference_seconds / frames_run)
-        } else {
-            String::new()
-        },
+        reference_seconds.map_or(String::new(), |s| format!(", full FEM {:.1} ms per frame", 1e3 * s / frames_run)),
         args.out.display()
     );
+    Ok(())
+}
+
+/// Writes one frame's VTK: the warped body with NNWarp's and the linear solve's
+/// displacements, and with a reference the per-node distance to it.
+fn write_frame(out: &Path, f: &FrameView<'_>, rest: &[f64], mesh: &TetMesh) -> anyhow::Result<()> {
+    let (u, u_lin) = (&f.runtime.warped, &f.runtime.linear);
+    let node = |v: &[f64], i: usize| Vector3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+    let nodes = rest.len() / 3;
+    let error: Option<Vec<f64>> = f
+        .reference
+        .map(|u_ref| (0..nodes).map(|i| (node(u, i) - node(u_ref, i)).norm()).collect());
+    let positions: Vec<Vector3<f64>> = (0..nodes).map(|i| node(rest, i) + node(u, i)).collect();
+    let mut fields: Vec<weft_mesh::io::PointField<'_>> =
+        vec![("displacement", 3, &u[..]), ("linear_displacement", 3, &u_lin[..])];
+    if let Some(e) = &error {
+        fields.push(("error", 1, &e[..]));
+    }
+    weft_mesh::io::write_vtk_tets(
+        &out.join(format!("frame-{:04}.vtk", f.frame)),
+        &positions,
+        mesh.tets(),
+        &fields,
+    )?;
     Ok(())
 }

@@ -16,6 +16,8 @@
 //!   same potential minimised over every vertex;
 //! - [`nnwarp`]: NNWarp's node-wise correction MLP — training pairs from registered
 //!   sequences, training in candle, and a runtime over the trained weights outside it;
+//! - [`nnwarp_reference`]: NNWarp's runtime run frame by frame against the full FEM it
+//!   stands in for (per-frame errors and timings);
 //! - [`drape`]: Geng et al.'s pose → cloth network with the projection layers inside
 //!   training (a fixed, learned global or learned per-vertex μ);
 //! - [`altconv`]: Alt-ConvLSTM and its graph ConvLSTM baselines for soft-tissue dynamics —
@@ -71,6 +73,7 @@ pub mod ik;
 pub mod layers;
 pub mod metrics;
 pub mod nnwarp;
+pub mod nnwarp_reference;
 pub mod ops;
 pub mod params;
 pub mod pca;

@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use weft_sim::VolumeSimulation;
 
-use crate::error::Result;
+use crate::error::Error;
 use crate::nnwarp::{NnWarpFrame, NnWarpSimulation, rel_error};
 
 /// The simulations stepped beside NNWarp's runtime.
@@ -90,14 +90,16 @@ impl ReferenceReport {
 
 /// Steps `runtime` and, with `twins`, the reference and the others beside it for `frames`
 /// frames; `on_frame` sees each frame's displacements. Returns every frame's errors against
-/// the reference (summed in frame order by the caller, e.g. for a mean over the frames) and
-/// timings.
-pub fn run_against_reference(
+/// the reference and timings, in frame order.
+///
+/// The error type is the caller's (anything weft-nn's [`Error`] converts into), so that
+/// `on_frame` can fail with its own errors (writing a file, say) without a wrapper.
+pub fn run_against_reference<E: From<Error>>(
     runtime: &mut NnWarpSimulation,
     mut twins: Option<ReferenceTwins<'_>>,
     frames: usize,
-    mut on_frame: impl FnMut(&FrameView<'_>) -> Result<()>,
-) -> Result<ReferenceReport> {
+    mut on_frame: impl FnMut(&FrameView<'_>) -> std::result::Result<(), E>,
+) -> std::result::Result<ReferenceReport, E> {
     // Displacements are positions minus each simulation's own rest positions.
     let rests: Option<(Vec<f64>, Vec<Vec<f64>>)> = twins.as_ref().map(|t| {
         (
@@ -123,10 +125,10 @@ pub fn run_against_reference(
         let (mut reference, mut others) = (None, Vec::new());
         if let (Some(t), Some((rest, other_rests))) = (&mut twins, &rests) {
             let start = Instant::now();
-            let truth = displacement(&t.reference.step()?.positions, rest);
+            let truth = displacement(&t.reference.step().map_err(Error::from)?.positions, rest);
             errors.reference_seconds = Some(start.elapsed().as_secs_f64());
             for (sim, rest) in t.others.iter_mut().zip(other_rests) {
-                others.push(displacement(&sim.step()?.positions, rest));
+                others.push(displacement(&sim.step().map_err(Error::from)?.positions, rest));
             }
             errors.nnwarp = Some(rel_error(&step.warped, &truth));
             errors.linear_solve = Some(rel_error(&step.linear, &truth));
@@ -186,7 +188,7 @@ mod tests {
                 others: vec![&mut linear],
             }),
             3,
-            |f| {
+            |f| -> Result<(), Error> {
                 let truth = f.reference.expect("a reference");
                 seen.push((
                     rel_error(&f.runtime.warped, truth),
@@ -208,7 +210,7 @@ mod tests {
         let (full, _, _) = beam();
         let mut alone = NnWarpSimulation::new(&full, mlp).unwrap();
         let mut warped = Vec::new();
-        let report = run_against_reference(&mut alone, None, 3, |f| {
+        let report = run_against_reference(&mut alone, None, 3, |f| -> Result<(), Error> {
             assert!(f.reference.is_none() && f.others.is_empty());
             warped.push(f.runtime.warped.clone());
             Ok(())
