@@ -11,6 +11,7 @@ mod acap;
 mod dataset;
 mod evaluate;
 mod mesh;
+mod progress;
 mod project;
 mod score;
 mod simulate;

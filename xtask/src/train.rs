@@ -11,8 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
-use weft_experiments::evaluate::nnwarp::WarpMaterial;
-use weft_experiments::progress::TrainProgress;
+use crate::progress::TrainProgress;
 
 const EMBED_CONFIG: &str = "\
 Configuration file (--config, JSON; omitted fields keep their defaults):
@@ -202,10 +201,9 @@ pub struct NnwarpArgs {
     /// An `nnwarp` dataset directory written by `cargo xtask dataset nnwarp`.
     #[arg(long)]
     pub data: PathBuf,
-    /// The material whose registered shapes the network learns: co-rotational, stvk or
-    /// neo-hookean.
-    #[arg(long)]
-    pub material: WarpMaterial,
+    /// The material whose registered shapes the network learns.
+    #[arg(long, value_parser = warp_materials())]
+    pub material: String,
     /// Where the model is written.
     #[arg(long)]
     pub out: PathBuf,
@@ -231,6 +229,14 @@ pub struct EmbedArgs {
     pub common: Common,
 }
 
+/// The materials an NNWarp network is trained for, by their dataset keys.
+fn warp_materials() -> clap::builder::PossibleValuesParser {
+    use weft_sim::energies::Material;
+    [Material::CoRotational, Material::StVK, Material::NeoHookean]
+        .map(weft_data::nnwarp::material_key)
+        .into()
+}
+
 /// Reads a JSON configuration file, or the default.
 fn read_config<T: serde::de::DeserializeOwned + Default>(path: Option<&Path>) -> anyhow::Result<T> {
     match path {
@@ -239,6 +245,35 @@ fn read_config<T: serde::de::DeserializeOwned + Default>(path: Option<&Path>) ->
                 .with_context(|| format!("parsing the configuration {}", p.display()))
         }
         None => Ok(T::default()),
+    }
+}
+
+/// Whether the configuration file at `path` (if any) sets `field` itself.
+fn sets_field(path: Option<&Path>, field: &str) -> anyhow::Result<bool> {
+    let Some(path) = path else { return Ok(false) };
+    let value: serde_json::Value = read_config(Some(path))?;
+    Ok(value.get(field).is_some())
+}
+
+/// Shortens the default teacher-forced window to what `dataset`'s training and validation
+/// sequences hold (a `--size quick` dataset's hold 9 frames, the default window needs 21),
+/// saying so; a window the data holds is kept as it is.
+fn fit_steps_to(config: &mut weft_nn::altconv::AltConvTrainingConfig, dataset: &weft_data::LimbDataset, data: &Path) {
+    let shortest = ["train", "validation"]
+        .iter()
+        .flat_map(|split| dataset.split(split))
+        .map(|s| s.skinned.len())
+        .min();
+    if let Some(frames @ 2..) = shortest.filter(|&f| f <= config.steps) {
+        eprintln!(
+            "altconv: {} steps need {} frames and {}'s shortest sequence holds {frames}: training on {} steps \
+             (set `steps` in a --config to choose)",
+            config.steps,
+            config.steps + 1,
+            data.display(),
+            frames - 1
+        );
+        config.steps = frames - 1;
     }
 }
 
@@ -279,7 +314,8 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Layers, Plan, fit};
+    use weft_nn::drape_run::DrapeRun;
+    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Plan};
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
     let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
@@ -312,40 +348,32 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         config.pretrain_epochs
     };
     check_out(&args.out, c.resume)?;
-    let dataset =
-        weft_data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
-    let device = weft_nn::Device::Cpu;
-    let split = |name: &str| {
-        weft_nn::drape::DrapeTensors::of_split(&dataset, name, &device)
-            .with_context(|| format!("the {name} split of {}", args.data.display()))
-    };
-    let (mut train, validation, test) = (split("train")?, split("validation")?, split("test")?);
+    let mut run = DrapeRun::load(&args.data, &config).with_context(|| format!("loading {}", args.data.display()))?;
     if let Some(n) = args.train_examples {
         anyhow::ensure!(
-            n > 0 && n <= train.len(),
+            n > 0 && n <= run.train.len(),
             "--train-examples {n}: {} has {} training examples",
             args.data.display(),
-            train.len()
+            run.train.len()
         );
-        train = train.select(&(0..n).collect::<Vec<_>>())?;
+        run.keep_training_prefix(n)?;
     }
     anyhow::ensure!(
-        !train.is_empty() && !validation.is_empty(),
+        !run.train.is_empty() && !run.validation.is_empty(),
         "{} needs training and validation examples (it has {} and {})",
         args.data.display(),
-        train.len(),
-        validation.len()
+        run.train.len(),
+        run.validation.len()
     );
-    let v = dataset.sleeve.num_vertices();
-    let layers = Layers::new(&dataset.sleeve, &config)?;
     let name = args
         .out
         .file_name()
         .map_or("model".into(), |n| n.to_string_lossy().into_owned());
     eprintln!(
-        "drape/{name}: {layer}, {} training and {} validation examples on {v} vertices, {epochs} epochs",
-        train.len(),
-        validation.len()
+        "drape/{name}: {layer}, {} training and {} validation examples on {} vertices, {epochs} epochs",
+        run.train.len(),
+        run.validation.len(),
+        run.num_vertices()
     );
     let plan = Plan {
         name: &name,
@@ -355,30 +383,47 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         retrain_on_mismatch: false,
     };
     let mut progress = TrainProgress::new(c.quiet, &format!("drape/{name}"))?;
-    let fitted = fit(
-        &args.out,
-        &plan,
-        &config,
-        &layers,
-        &train,
-        &validation,
-        v,
-        &mut progress,
-    )?;
+    let fitted = run.fit(&args.out, &plan, &config, &mut progress)?;
     drop(progress);
-    weft_experiments::evaluate::drape::summarize_trained(
-        &args.out,
-        &name,
-        &fitted,
-        &layers,
-        &config,
-        &validation,
-        &test,
-        &dataset.sleeve,
-        &args.scan_mu,
-    )?;
+    let summary = run.summarize(&args.out, &fitted, &config, &args.scan_mu)?;
+    print_drape_summary(&name, &summary);
     eprintln!("model → {}", args.out.display());
     Ok(())
+}
+
+/// The lines `train drape` prints of its kept model (the same figures are in `scores.json`
+/// and `mu-scan.json`).
+fn print_drape_summary(name: &str, summary: &weft_nn::drape_run::DrapeSummary) {
+    let (skipped, first) = &summary.skipped;
+    if *skipped > 0 {
+        eprintln!(
+            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
+            first.clone().unwrap_or_default()
+        );
+    }
+    for (split, s) in &summary.scores {
+        eprintln!(
+            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
+            summary.kept_epoch, s.sqrtmse, s.maxdist, s.failed
+        );
+    }
+    if let Some(h) = &summary.second_half {
+        eprintln!(
+            "drape/{name}: epochs {}-{}: validation SqrtMSE {:.4} ± {:.4} mm{}",
+            h.first,
+            h.last,
+            h.validation_mean,
+            h.validation_sd,
+            h.mu_gradient_signal
+                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
+        );
+    }
+    for (m, s) in &summary.mu_scan {
+        eprintln!(
+            "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {:.5} mm² ({} examples failed)",
+            s.sqrtmse, s.loss_mm2, s.failed
+        );
+    }
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
@@ -447,6 +492,10 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
     check_out(&args.out, c.resume)?;
     let dataset =
         weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+    if !sets_field(c.config.as_deref(), "steps")? {
+        fit_steps_to(&mut config, &dataset, &args.data);
+        config.validate()?;
+    }
     eprintln!(
         "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices",
         variant.name(),
@@ -465,7 +514,15 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         trained.state.epochs_done,
         1e3 * trained.state.best_validation
     );
-    weft_experiments::evaluate::altconv::summarize_trained(&args.out, &dataset, &trained)?;
+    if let Some(summary) = weft_nn::altconv_summary::validation_rollout(&args.out, &dataset, &trained)? {
+        for (name, mm) in &summary.errors_mm {
+            eprintln!(
+                "altconv/{}: {name} roll-out error over steps 1-{} of the validation sequences: {mm:.3} mm",
+                variant.name(),
+                summary.steps
+            );
+        }
+    }
     eprintln!("model → {}", args.out.display());
     Ok(())
 }
@@ -474,7 +531,7 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
     let c = &args.common;
     let mut config: WarpTrainingConfig = read_config(c.config.as_deref())?;
-    let material = args.material.key();
+    let material = args.material.as_str();
     if !config.material.is_empty() && config.material != material {
         bail!(
             "the configuration names material {:?} but --material is {material}",

@@ -57,6 +57,9 @@ pub enum Error {
     /// Reading a dataset failed (a missing or changed file, a bad array).
     #[error(transparent)]
     Data(#[from] weft_data::Error),
+    /// A projection layer failed on every example scored (the first failure).
+    #[error("the postprocess failed on every example: {first}")]
+    PostprocessFailed { first: String },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

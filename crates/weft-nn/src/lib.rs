@@ -20,10 +20,14 @@
 //!   stands in for (per-frame errors and timings);
 //! - [`drape`]: Geng et al.'s pose → cloth network with the projection layers inside
 //!   training (a fixed, learned global or learned per-vertex μ);
+//! - [`drape_run`]: one drape model trained on a dataset directory, scored on its
+//!   validation and test splits and summarised (what `cargo xtask train drape` runs);
 //! - [`altconv`]: Alt-ConvLSTM and its graph ConvLSTM baselines for soft-tissue dynamics —
 //!   the cells on the Kipf–Welling normalised adjacency
 //!   ([`graph::NormalizedAdjacency`]), teacher-forced training, and a roll-out runtime
 //!   outside candle; [`fast`] holds the f32 activations both runtimes share;
+//! - [`altconv_summary`]: a trained model's validation roll-out beside skinning (what
+//!   `cargo xtask train altconv` reports);
 //! - [`trainer`]: the one training loop every model runs through — epochs, batches, Adam
 //!   per parameter group, learning-rate schedules, gradient clipping, model selection and
 //!   early stopping on the validation split only, a checkpoint each epoch and
@@ -59,9 +63,11 @@
 
 pub mod adam;
 pub mod altconv;
+pub mod altconv_summary;
 pub mod checkpoint;
 pub mod convert;
 pub mod drape;
+pub mod drape_run;
 pub mod drape_training;
 pub mod embed;
 pub mod embed_training;
