@@ -131,7 +131,10 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         scene.frames,
         1e3 * solve_seconds / frames_run,
         1e3 * warp_seconds / frames_run,
-        reference_seconds.map_or(String::new(), |s| format!(", full FEM {:.1} ms per frame", 1e3 * s / frames_run)),
+        reference_seconds.map_or(String::new(), |s| format!(
+            ", full FEM {:.1} ms per frame",
+            1e3 * s / frames_run
+        )),
         args.out.display()
     );
     Ok(())

@@ -183,7 +183,10 @@ mod tests {
         lied.drain(newline - (lying.len() - old.len())..newline);
         assert_eq!(lied.len(), bytes.len());
         let err = parse_npy(&lied).unwrap_err();
-        assert!(matches!(err, Error::Invalid(_)) && err.to_string().contains("claims"), "{err}");
+        assert!(
+            matches!(err, Error::Invalid(_)) && err.to_string().contains("claims"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -202,7 +202,10 @@ mod tests {
         assert_eq!(report.frames.len(), 3);
         for (k, (f, s)) in report.frames.iter().zip(&seen).enumerate() {
             assert_eq!(f.frame, k + 1);
-            assert_eq!((f.nnwarp, f.linear_solve, f.others.clone()), (Some(s.0), Some(s.1), vec![s.2]));
+            assert_eq!(
+                (f.nnwarp, f.linear_solve, f.others.clone()),
+                (Some(s.0), Some(s.1), vec![s.2])
+            );
             assert!(f.others[0] > 0.0, "linear FEM differs from neo-Hookean under gravity");
         }
         assert!(report.reference_seconds().is_some());
