@@ -10,7 +10,10 @@ use anyhow::{Context, Result, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use weft_acap::nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, Feature, PoissonPseudoInverse};
-use weft_data::arrays::{read_npy, read_safetensors_frames, safetensors_metadata, write_npy};
+use weft_data::arrays::{
+    pin_file, read_features, read_pin_positions, read_pin_record, read_safetensors_frames, safetensors_metadata,
+    write_features,
+};
 use weft_mesh::TriMesh;
 
 /// ACAP features (Tan et al. §III-A) and their inverse (§IV-A, Eq. 6).
@@ -138,21 +141,6 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
     Ok(())
 }
 
-#[derive(Debug, serde::Serialize, serde::Deserialize)]
-struct PinSidecar {
-    /// Vertex indices of the pins, in the order of F.pins.npy's second axis.
-    pins: Vec<usize>,
-    frames: usize,
-}
-
-fn sidecar(features: &Path, ext: &str) -> PathBuf {
-    let stem = features
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    features.with_file_name(format!("{stem}.pins.{ext}"))
-}
-
 fn rest_mesh(path: &Path) -> Result<TriMesh> {
     let file = if path.is_dir() {
         path.join("rest.obj")
@@ -211,36 +199,10 @@ fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequ
     }
     bar.finish();
 
-    write_npy(
-        out,
-        &[frames.len() as u64, nv as u64, 9],
-        features.iter().flatten().flatten().copied(),
-    )?;
-    if !pins.is_empty() {
-        let values = frames
-            .iter()
-            .flat_map(|p| pins.iter().flat_map(move |&i| [p[i].x, p[i].y, p[i].z]));
-        write_npy(
-            &sidecar(out, "npy"),
-            &[frames.len() as u64, pins.len() as u64, 3],
-            values,
-        )?;
-        let json = serde_json::to_string_pretty(&PinSidecar {
-            pins: pins.to_vec(),
-            frames: frames.len(),
-        })?;
-        fs::write(sidecar(out, "json"), json).with_context(|| format!("writing {}", sidecar(out, "json").display()))?;
-    } else {
-        // Pin files of an earlier encode into the same name would otherwise be read by
-        // `acap decode` as this encode's pins.
-        for ext in ["npy", "json"] {
-            let stale = sidecar(out, ext);
-            if stale.exists() {
-                fs::remove_file(&stale)
-                    .with_context(|| format!("removing the earlier pin file {}", stale.display()))?;
-            }
-        }
-    }
+    let positions = frames
+        .iter()
+        .flat_map(|p| pins.iter().flat_map(move |&i| [p[i].x, p[i].y, p[i].z]));
+    write_features(out, &features, pins, positions)?;
     outln!(
         "wrote {} frames × {} vertices × 9 features to {}",
         frames.len(),
@@ -259,32 +221,9 @@ fn decode(
 ) -> Result<()> {
     let rest = rest_mesh(rest_path)?;
     let nv = rest.num_vertices();
-    let (shape, values) = read_npy(features_path)?;
-    let frames = match shape.as_slice() {
-        [v, 9] => {
-            ensure!(*v as usize == nv, "features have {v} vertices, the rest mesh {nv}");
-            1
-        }
-        [f, v, 9] => {
-            ensure!(*v as usize == nv, "features have {v} vertices, the rest mesh {nv}");
-            *f as usize
-        }
-        other => bail!("features must have shape [frames, vertices, 9] or [vertices, 9], got {other:?}"),
-    };
-    let features: Vec<Vec<Feature>> = values
-        .chunks_exact(9 * nv)
-        .map(|frame| {
-            frame
-                .chunks_exact(9)
-                .map(|c| c.try_into().expect("chunks of 9"))
-                .collect()
-        })
-        .collect();
-
-    let recorded: Option<PinSidecar> = match fs::read_to_string(sidecar(features_path, "json")) {
-        Ok(text) => Some(serde_json::from_str(&text).context("parsing the pin sidecar JSON")?),
-        Err(_) => None,
-    };
+    let features = read_features(features_path, nv)?;
+    let frames = features.len();
+    let recorded = read_pin_record(features_path)?;
     let pins: Vec<usize> = if !pins.is_empty() {
         pins.to_vec()
     } else if let Some(r) = &recorded {
@@ -292,7 +231,7 @@ fn decode(
     } else {
         bail!(
             "no --pin given and no {} from `acap encode`",
-            sidecar(features_path, "json").display()
+            pin_file(features_path, "json").display()
         )
     };
     let per_frame_pins: Vec<Vec<Vector3<f64>>> = match pin_positions {
@@ -310,7 +249,7 @@ fn decode(
             let r = recorded.as_ref().with_context(|| {
                 format!(
                     "no --pin-positions given and no {}",
-                    sidecar(features_path, "json").display()
+                    pin_file(features_path, "json").display()
                 )
             })?;
             ensure!(
@@ -318,16 +257,7 @@ fn decode(
                 "--pin {pins:?} differs from the pins {:?} recorded at encode time",
                 r.pins
             );
-            let (pshape, pvals) = read_npy(&sidecar(features_path, "npy"))?;
-            ensure!(
-                pshape == [frames as u64, pins.len() as u64, 3],
-                "pin positions have shape {pshape:?}, expected [{frames}, {}, 3]",
-                pins.len()
-            );
-            pvals
-                .chunks_exact(3 * pins.len())
-                .map(|f| f.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect())
-                .collect()
+            read_pin_positions(features_path, frames, pins.len())?
         }
     };
 

@@ -128,6 +128,121 @@ pub fn safetensors_metadata(path: &Path, key: &str) -> Result<Option<String>> {
     Ok(header.metadata().as_ref().and_then(|m| m.get(key).cloned()))
 }
 
+/// The pins `cargo xtask acap encode` records beside a features file `F.npy`: their vertex
+/// indices in `F.pins.json` (this), their positions per frame in `F.pins.npy`
+/// (`[frames, pins, 3]`, f64), so that decoding can place them where the input had them.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct PinRecord {
+    /// Vertex indices of the pins, in the order of `F.pins.npy`'s second axis.
+    pub pins: Vec<usize>,
+    pub frames: usize,
+}
+
+/// `F.pins.<ext>` beside the features file `F.npy`.
+pub fn pin_file(features: &Path, ext: &str) -> std::path::PathBuf {
+    let stem = features
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    features.with_file_name(format!("{stem}.pins.{ext}"))
+}
+
+/// Writes ACAP features (`[frames, vertices, 9]`, f64, frame by frame) to `out`, and beside
+/// it the pins' record and per-frame positions ([`PinRecord`]); with no pins, removes pin
+/// files an earlier write left under the same name, which would otherwise be read as this
+/// one's.
+pub fn write_features(
+    out: &Path,
+    features: &[Vec<[f64; 9]>],
+    pins: &[usize],
+    pin_positions: impl IntoIterator<Item = f64>,
+) -> Result<()> {
+    let frames = features.len();
+    let nv = features.first().map_or(0, Vec::len);
+    ensure!(
+        features.iter().all(|f| f.len() == nv),
+        "every frame's features must cover the same vertices"
+    );
+    write_npy(
+        out,
+        &[frames as u64, nv as u64, 9],
+        features.iter().flatten().flatten().copied(),
+    )?;
+    if pins.is_empty() {
+        for ext in ["npy", "json"] {
+            let stale = pin_file(out, ext);
+            if stale.exists() {
+                std::fs::remove_file(&stale).map_err(|e| Error::io(&stale, e))?;
+            }
+        }
+        return Ok(());
+    }
+    write_npy(
+        &pin_file(out, "npy"),
+        &[frames as u64, pins.len() as u64, 3],
+        pin_positions,
+    )?;
+    let record = PinRecord {
+        pins: pins.to_vec(),
+        frames,
+    };
+    crate::files::write_text(&pin_file(out, "json"), &serde_json::to_string_pretty(&record)?)
+}
+
+/// The ACAP features in `path` (`[frames, nv, 9]`, or `[nv, 9]` for one frame; f32 is
+/// widened), per frame and vertex.
+pub fn read_features(path: &Path, nv: usize) -> Result<Vec<Vec<[f64; 9]>>> {
+    let (shape, values) = read_npy(path)?;
+    let (frames, v) = match shape.as_slice() {
+        [v, 9] => (1, *v),
+        [f, v, 9] => (*f, *v),
+        other => {
+            return Err(Error::Invalid(format!(
+                "features must have shape [frames, vertices, 9] or [vertices, 9], got {other:?}"
+            )));
+        }
+    };
+    ensure!(v as usize == nv, "features have {v} vertices, the rest mesh {nv}");
+    let features: Vec<Vec<[f64; 9]>> = values
+        .chunks_exact(9 * nv.max(1))
+        .map(|frame| {
+            frame
+                .chunks_exact(9)
+                .map(|c| c.try_into().expect("chunks of 9"))
+                .collect()
+        })
+        .collect();
+    ensure!(
+        features.len() == frames as usize,
+        "features hold {} frames, their header {frames}",
+        features.len()
+    );
+    Ok(features)
+}
+
+/// The [`PinRecord`] beside the features file `features`, if there is one.
+pub fn read_pin_record(features: &Path) -> Result<Option<PinRecord>> {
+    match std::fs::read_to_string(pin_file(features, "json")) {
+        Ok(text) => Ok(Some(
+            serde_json::from_str(&text).context("parsing the pin sidecar JSON")?,
+        )),
+        Err(_) => Ok(None),
+    }
+}
+
+/// The per-frame positions of `pins` pins recorded beside the features file `features`.
+pub fn read_pin_positions(features: &Path, frames: usize, pins: usize) -> Result<Vec<Vec<Vector3<f64>>>> {
+    let (shape, values) = read_npy(&pin_file(features, "npy"))?;
+    ensure!(
+        shape == [frames as u64, pins as u64, 3],
+        "pin positions have shape {shape:?}, expected [{frames}, {pins}, 3]"
+    );
+    Ok(values
+        .chunks_exact(3 * pins.max(1))
+        .map(|f| f.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect())
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,6 +302,44 @@ mod tests {
             matches!(err, Error::Invalid(_)) && err.to_string().contains("claims"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn features_and_their_pins_round_trip_and_stale_pins_are_removed() {
+        let dir = std::env::temp_dir().join(format!("weft-arrays-features-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let out = dir.join("f.npy");
+        let features: Vec<Vec<[f64; 9]>> = (0..3)
+            .map(|k| {
+                (0..2)
+                    .map(|v| std::array::from_fn(|i| (9 * (2 * k + v) + i) as f64))
+                    .collect()
+            })
+            .collect();
+        let positions: Vec<f64> = (0..3 * 3).map(|i| i as f64 * 0.1).collect();
+        write_features(&out, &features, &[4], positions.iter().copied()).unwrap();
+        assert_eq!(read_features(&out, 2).unwrap(), features);
+        assert!(
+            read_features(&out, 3)
+                .unwrap_err()
+                .to_string()
+                .contains("the rest mesh 3")
+        );
+        let record = read_pin_record(&out).unwrap().unwrap();
+        assert_eq!(
+            record,
+            PinRecord {
+                pins: vec![4],
+                frames: 3
+            }
+        );
+        let read = read_pin_positions(&out, 3, 1).unwrap();
+        assert_eq!(read[2][0], Vector3::new(positions[6], positions[7], positions[8]));
+        write_features(&out, &features[..1], &[], []).unwrap();
+        assert_eq!(read_pin_record(&out).unwrap(), None);
+        assert!(!pin_file(&out, "npy").exists());
+        assert_eq!(read_features(&out, 2).unwrap(), features[..1]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

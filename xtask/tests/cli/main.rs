@@ -1,6 +1,7 @@
 //! xtask's command line end to end, as one test binary (one link for the crate): each
 //! module drives the built `xtask` binary through one command family.
 
+mod acap;
 mod dataset;
 mod newcomer;
 mod pipes;
