@@ -11,7 +11,6 @@ mod acap;
 mod dataset;
 mod evaluate;
 mod mesh;
-mod progress;
 mod project;
 mod score;
 mod simulate;

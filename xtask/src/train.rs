@@ -6,93 +6,34 @@
 //! split (normalisation, scaling, standardisation) and the trainer's run: `training.json`,
 //! `train.log`, `best/` and `last/` checkpoints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
-use crate::progress::TrainProgress;
-
-const EMBED_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults):
-  autoencoder      {\"conv_layers\": 2, \"latent\": 128}: graph convolutions (1-16), latent width
-  latent_hidden    [256, 256]: hidden widths of the latent simulator (1-65536 each)
-  weights          {\"recon\": 1, \"vert\": 1, \"ephys\": 0.5, \"sim\": 1, \"mphys\": 0.5} (>= 0)
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  batch            8 windows per step
-  epochs           [30, 30, 10]: epochs of stages 1, 2, 3 (0 skips a stage)
-  seed             0
-  phys_scale       \"curvature\" | \"inertial\": how L_phys is scaled against L_vert
-  ephys_warmup     0: stage-1 epochs over which lambda_ephys ramps from 0
-  schedule         {\"decay\": {\"kind\": \"constant\"}, \"warmup_epochs\": 0,
-                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
-                   decay kinds: constant | exponential {per_epoch} | reduce-on-plateau {factor, patience}
-  fine_tune_learning_rate  null: stage 3's Adam learning rate (null: adam.learning_rate);
-                   a model continued under another value keeps stages 1 and 2 and retrains stage 3
-Validation: the last two training frames of every 17 (frames 10 and 11 mod 17).";
-
-const NNWARP_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
-  hidden           []: hidden widths (empty: the paper's, 2 x 16, 3 x 16 for StVK; 1-4096 each)
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  batch            1024 node pairs per step
-  epochs           10
-  seed             0
-  schedule         as for every model: decay (constant | exponential | reduce-on-plateau),
-                   warmup_epochs, clip_grad_norm, early_stopping_patience
-Validation: the pairs of the dataset's validation sequences.";
-
-const ALTCONV_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
-  hidden           [32, 64, 128, 64, 32]: cell widths (1-4096 each, at most 64 cells)
-  steps            20 teacher-forced steps per sequence (sequences need steps + 1 frames)
-  epochs           60
-  batch            2 sequences per step
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  seed             0
-  schedule         {\"decay\": {\"kind\": \"exponential\", \"per_epoch\": 0.995}, \"warmup_epochs\": 0,
-                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
-  recipe           {\"sampling_max\": 0, \"sampling_epochs\": [0, 0], \"curriculum_start\": 0,
-                    \"curriculum_epochs\": 0, \"validation_rollout\": false}: scheduled sampling
-                   (feed the model's own previous prediction back with a probability rising to
-                   sampling_max over those epochs), a window growing from curriculum_start steps
-                   to steps, and validation scored as a roll-out; off by default
-Validation: Eq. 12 on the dataset's validation sequences over `steps` steps, teacher-forced
-(or rolled out with recipe.validation_rollout); the best epoch's weights are kept.";
-
-const DRAPE_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep the standard evaluation's values,
-unknown ones are refused):
-  net              {\"hidden\": [64, 256], \"offset_scale\": 0.01}
-  pretrain_epochs  200 (network-only)      finetune_epochs  5 (with --init)
-  batch            16                      learning_rate    1e-3
-  mu_learning_rate 0.1 (Adam on log mu)    epsilon          0.1 (inextensibility bound)
-  quasistatic      the quasistatic layer's spring stiffnesses
-  seed             1
-  schedule         decay (constant | exponential | reduce-on-plateau), warmup_epochs,
-                   clip_grad_norm, early_stopping_patience
-Validation: mean SqrtMSE over the dataset's validation examples.";
+use weft_nn::progress::TrainProgress;
+use weft_nn::train_setup::{Overrides, fit_altconv_steps, read_config, refuse_overwrite, sets_field};
 
 #[derive(Subcommand)]
 pub enum TrainCommand {
     /// Tan et al.'s mesh embedding and latent simulator, in three stages (§VI-A).
-    #[command(after_help = EMBED_CONFIG)]
+    #[command(after_help = weft_nn::config_help::EMBED)]
     Embed(EmbedArgs),
     /// NNWarp's node-wise correction MLP for one material, on the `nnwarp` dataset (§5).
-    #[command(after_help = NNWARP_CONFIG)]
+    #[command(after_help = weft_nn::config_help::NNWARP)]
     Nnwarp(NnwarpArgs),
     /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
-    #[command(after_help = ALTCONV_CONFIG)]
+    #[command(after_help = weft_nn::config_help::ALTCONV)]
     Altconv(AltconvArgs),
     /// Geng et al.'s pose → cloth network on a drape dataset (`drape` or `drape-loose`), alone or trained through
     /// the inextensibility or the quasistatic layer (fixed or learned μ).
-    #[command(after_help = DRAPE_CONFIG)]
+    #[command(after_help = weft_nn::config_help::DRAPE)]
     Drape(DrapeArgs),
 }
 
 /// Flags every `train` command takes.
 #[derive(Args, Clone, Default)]
-pub struct Common {
+pub struct TrainArgs {
     /// Training configuration (JSON; the fields are listed below).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -176,7 +117,7 @@ pub struct DrapeArgs {
     #[arg(long)]
     pub train_examples: Option<usize>,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -193,7 +134,7 @@ pub struct AltconvArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -208,7 +149,7 @@ pub struct NnwarpArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -226,7 +167,7 @@ pub struct EmbedArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 /// The materials an NNWarp network is trained for, by their dataset keys.
@@ -237,71 +178,14 @@ fn warp_materials() -> clap::builder::PossibleValuesParser {
         .into()
 }
 
-/// Reads a JSON configuration file, or the default.
-fn read_config<T: serde::de::DeserializeOwned + Default>(path: Option<&Path>) -> anyhow::Result<T> {
-    match path {
-        Some(p) => {
-            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("parsing the configuration {}", p.display()))
-        }
-        None => Ok(T::default()),
-    }
-}
-
-/// Whether the configuration file at `path` (if any) sets `field` itself.
-fn sets_field(path: Option<&Path>, field: &str) -> anyhow::Result<bool> {
-    let Some(path) = path else { return Ok(false) };
-    let value: serde_json::Value = read_config(Some(path))?;
-    Ok(value.get(field).is_some())
-}
-
-/// Shortens the default teacher-forced window to what `dataset`'s training and validation
-/// sequences hold (a `--size quick` dataset's hold 9 frames, the default window needs 21),
-/// saying so; a window the data holds is kept as it is.
-fn fit_steps_to(config: &mut weft_nn::altconv::AltConvTrainingConfig, dataset: &weft_data::LimbDataset, data: &Path) {
-    let shortest = ["train", "validation"]
-        .iter()
-        .flat_map(|split| dataset.split(split))
-        .map(|s| s.skinned.len())
-        .min();
-    if let Some(frames @ 2..) = shortest.filter(|&f| f <= config.steps) {
-        eprintln!(
-            "altconv: {} steps need {} frames and {}'s shortest sequence holds {frames}: training on {} steps \
-             (set `steps` in a --config to choose)",
-            config.steps,
-            config.steps + 1,
-            data.display(),
-            frames - 1
-        );
-        config.steps = frames - 1;
-    }
-}
-
-impl Common {
-    /// Applies `--seed`, `--lr` and `--epochs` to a configuration's fields.
-    fn apply(&self, seed: &mut u64, lr: &mut f64, epochs: &mut [usize]) {
-        if let Some(s) = self.seed {
-            *seed = s;
-        }
-        if let Some(l) = self.lr {
-            *lr = l;
-        }
-        if let Some(e) = self.epochs {
-            epochs.iter_mut().for_each(|x| *x = e);
+impl TrainArgs {
+    fn overrides(&self) -> Overrides {
+        Overrides {
+            seed: self.seed,
+            learning_rate: self.lr,
+            epochs: self.epochs,
         }
     }
-}
-
-/// Refuses to overwrite a model unless asked to continue it.
-fn check_out(out: &Path, resume: bool) -> anyhow::Result<()> {
-    let holds = out.join("config.json").exists() || out.join("training.json").exists();
-    if holds && !resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            out.display()
-        );
-    }
-    Ok(())
 }
 
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
@@ -319,7 +203,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
     let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
-    c.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
+    c.overrides().apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
     [config.pretrain_epochs, config.finetune_epochs] = epochs;
     config.validate()?;
     if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
@@ -347,7 +231,7 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     } else {
         config.pretrain_epochs
     };
-    check_out(&args.out, c.resume)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let mut run = DrapeRun::load(&args.data, &config).with_context(|| format!("loading {}", args.data.display()))?;
     if let Some(n) = args.train_examples {
         anyhow::ensure!(
@@ -386,44 +270,11 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     let fitted = run.fit(&args.out, &plan, &config, &mut progress)?;
     drop(progress);
     let summary = run.summarize(&args.out, &fitted, &config, &args.scan_mu)?;
-    print_drape_summary(&name, &summary);
+    for line in summary.lines(&name) {
+        eprintln!("{line}");
+    }
     eprintln!("model → {}", args.out.display());
     Ok(())
-}
-
-/// The lines `train drape` prints of its kept model (the same figures are in `scores.json`
-/// and `mu-scan.json`).
-fn print_drape_summary(name: &str, summary: &weft_nn::drape_run::DrapeSummary) {
-    let (skipped, first) = &summary.skipped;
-    if *skipped > 0 {
-        eprintln!(
-            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
-            first.clone().unwrap_or_default()
-        );
-    }
-    for (split, s) in &summary.scores {
-        eprintln!(
-            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
-            summary.kept_epoch, s.sqrtmse, s.maxdist, s.failed
-        );
-    }
-    if let Some(h) = &summary.second_half {
-        eprintln!(
-            "drape/{name}: epochs {}-{}: validation SqrtMSE {:.4} ± {:.4} mm{}",
-            h.first,
-            h.last,
-            h.validation_mean,
-            h.validation_sd,
-            h.mu_gradient_signal
-                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
-        );
-    }
-    for (m, s) in &summary.mu_scan {
-        eprintln!(
-            "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {:.5} mm² ({} examples failed)",
-            s.sqrtmse, s.loss_mm2, s.failed
-        );
-    }
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
@@ -434,7 +285,7 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
         config.weights.ephys = 0.0;
         config.weights.mphys = 0.0;
     }
-    c.apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
+    c.overrides().apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
     if c.autograd {
         config.kernels = weft_nn::Kernels::Autograd;
     }
@@ -442,7 +293,7 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
     if let Some(&s) = args.stages.iter().find(|s| !(1..=3).contains(*s)) {
         bail!("stage {s} does not exist (stages are 1, 2 and 3)");
     }
-    check_out(&args.out, c.resume)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let name = dataset.name.clone();
@@ -480,7 +331,7 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         None => AltConvTrainingConfig::new(variant),
     };
     config.variant = variant;
-    c.apply(
+    c.overrides().apply(
         &mut config.seed,
         &mut config.adam.learning_rate,
         std::slice::from_mut(&mut config.epochs),
@@ -489,11 +340,21 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         config.kernels = weft_nn::altconv::Kernels::Autograd;
     }
     config.validate()?;
-    check_out(&args.out, c.resume)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     if !sets_field(c.config.as_deref(), "steps")? {
-        fit_steps_to(&mut config, &dataset, &args.data);
+        if let Some(fit) = fit_altconv_steps(&mut config, &dataset) {
+            eprintln!(
+                "altconv: {} steps need {} frames and {}'s shortest sequence holds {}: training on {} steps \
+                 (set `steps` in a --config to choose)",
+                fit.asked,
+                fit.asked + 1,
+                args.data.display(),
+                fit.frames,
+                fit.frames - 1
+            );
+        }
         config.validate()?;
     }
     eprintln!(
@@ -538,13 +399,13 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
             config.material
         );
     }
-    c.apply(
+    c.overrides().apply(
         &mut config.seed,
         &mut config.adam.learning_rate,
         std::slice::from_mut(&mut config.epochs),
     );
     config.validate()?;
-    check_out(&args.out, c.resume)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset = weft_data::WarpDataset::load(&args.data, material)
         .with_context(|| format!("loading {}", args.data.display()))?;
     let mut progress = TrainProgress::new(c.quiet, &format!("nnwarp/{material}"))?;
@@ -556,24 +417,4 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     );
     eprintln!("model → {}", args.out.display());
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    /// `train embed --help` lists every field a configuration file may set (the kernels
-    /// are the `--autograd` flag's).
-    #[test]
-    fn the_embed_configuration_help_names_every_field() {
-        let config = weft_nn::embed_training::EmbedTrainingConfig {
-            fine_tune_learning_rate: Some(1e-4),
-            ..Default::default()
-        };
-        let fields = serde_json::to_value(&config).unwrap();
-        for key in fields.as_object().unwrap().keys().filter(|k| *k != "kernels") {
-            assert!(
-                super::EMBED_CONFIG.contains(&format!("  {key} ")),
-                "{key} is not in the help"
-            );
-        }
-    }
 }

@@ -296,3 +296,42 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     weft_data::files::write_text(path, &text)?;
     Ok(())
 }
+
+impl DrapeSummary {
+    /// The lines `train drape` prints of its kept model, each starting `drape/{name}:` (the
+    /// same figures are in `scores.json` and `mu-scan.json`).
+    pub fn lines(&self, name: &str) -> Vec<String> {
+        let mut lines = Vec::new();
+        let (skipped, first) = &self.skipped;
+        if *skipped > 0 {
+            lines.push(format!(
+                "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
+                first.clone().unwrap_or_default()
+            ));
+        }
+        for (split, s) in &self.scores {
+            lines.push(format!(
+                "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
+                self.kept_epoch, s.sqrtmse, s.maxdist, s.failed
+            ));
+        }
+        if let Some(h) = &self.second_half {
+            lines.push(format!(
+                "drape/{name}: epochs {}-{}: validation SqrtMSE {:.4} ± {:.4} mm{}",
+                h.first,
+                h.last,
+                h.validation_mean,
+                h.validation_sd,
+                h.mu_gradient_signal
+                    .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
+            ));
+        }
+        for (m, s) in &self.mu_scan {
+            lines.push(format!(
+                "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {:.5} mm² ({} examples failed)",
+                s.sqrtmse, s.loss_mm2, s.failed
+            ));
+        }
+        lines
+    }
+}

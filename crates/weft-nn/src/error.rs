@@ -60,6 +60,12 @@ pub enum Error {
     /// A projection layer failed on every example scored (the first failure).
     #[error("the postprocess failed on every example: {first}")]
     PostprocessFailed { first: String },
+    /// A training configuration file does not parse (or names an unknown field).
+    #[error("parsing the configuration {path}: {reason}")]
+    ConfigFile { path: String, reason: String },
+    /// A training run would overwrite a model it was not asked to continue.
+    #[error("{dir} already holds a model; pass --resume to continue it or choose another --out")]
+    ModelExists { dir: String },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

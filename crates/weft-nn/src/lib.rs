@@ -65,6 +65,7 @@ pub mod adam;
 pub mod altconv;
 pub mod altconv_summary;
 pub mod checkpoint;
+pub mod config_help;
 pub mod convert;
 pub mod drape;
 pub mod drape_run;
@@ -84,7 +85,9 @@ pub mod ops;
 pub mod params;
 pub mod pca;
 pub mod pca_simulator;
+pub mod progress;
 pub mod rollout;
+pub mod train_setup;
 pub mod trainer;
 
 pub use candle_core::Device;

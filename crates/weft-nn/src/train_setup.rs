@@ -1,0 +1,141 @@
+//! What a training command settles before it trains, from its files and flags: the JSON
+//! configuration (or the default), the overrides every command takes (seed, learning rate,
+//! epochs), the refusal to overwrite a model, and altconv's default window fitted to the
+//! sequences of the data. It neither trains (the `train_model` functions and
+//! [`crate::drape_run`] do) nor prints.
+
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+
+use crate::{Error, Result};
+
+/// Reads a JSON configuration file, or the default without one.
+pub fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) -> Result<T> {
+    let Some(path) = path else { return Ok(T::default()) };
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| Error::ConfigFile {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })
+}
+
+/// Whether the configuration file at `path` (if any) sets `field` itself.
+pub fn sets_field(path: Option<&Path>, field: &str) -> Result<bool> {
+    let Some(path) = path else { return Ok(false) };
+    let value: serde_json::Value = read_config(Some(path))?;
+    Ok(value.get(field).is_some())
+}
+
+/// The values every training command may set over its configuration's.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Overrides {
+    pub seed: Option<u64>,
+    pub learning_rate: Option<f64>,
+    /// Of every stage (or the one count) the configuration has.
+    pub epochs: Option<usize>,
+}
+
+impl Overrides {
+    /// Writes the overrides given into a configuration's fields.
+    pub fn apply(&self, seed: &mut u64, learning_rate: &mut f64, epochs: &mut [usize]) {
+        if let Some(s) = self.seed {
+            *seed = s;
+        }
+        if let Some(l) = self.learning_rate {
+            *learning_rate = l;
+        }
+        if let Some(e) = self.epochs {
+            epochs.iter_mut().for_each(|x| *x = e);
+        }
+    }
+}
+
+/// Refuses to overwrite the model in `out` unless asked to continue it.
+pub fn refuse_overwrite(out: &Path, resume: bool) -> Result<()> {
+    let holds = out.join("config.json").exists() || out.join("training.json").exists();
+    if holds && !resume {
+        return Err(Error::ModelExists {
+            dir: out.display().to_string(),
+        });
+    }
+    Ok(())
+}
+
+/// A teacher-forced window shortened to what the data holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StepsFit {
+    /// The steps asked for (they need one frame more).
+    pub asked: usize,
+    /// The frames of the shortest training or validation sequence; training runs
+    /// `frames - 1` steps.
+    pub frames: usize,
+}
+
+/// Shortens the teacher-forced window of `config` to what `dataset`'s training and
+/// validation sequences hold (a `--size quick` dataset's hold 9 frames, the default window
+/// needs 21) and says by how much; a window the data holds is kept as it is (`None`).
+pub fn fit_altconv_steps(
+    config: &mut crate::altconv::AltConvTrainingConfig,
+    dataset: &weft_data::LimbDataset,
+) -> Option<StepsFit> {
+    let shortest = ["train", "validation"]
+        .iter()
+        .flat_map(|split| dataset.split(split))
+        .map(|s| s.skinned.len())
+        .min();
+    let frames = shortest.filter(|&f| f >= 2 && f <= config.steps)?;
+    let fit = StepsFit {
+        asked: config.steps,
+        frames,
+    };
+    config.steps = frames - 1;
+    Some(fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overrides_replace_only_what_they_give() {
+        let (mut seed, mut lr, mut epochs) = (1, 1e-3, [30, 30, 10]);
+        Overrides::default().apply(&mut seed, &mut lr, &mut epochs);
+        assert_eq!((seed, lr, epochs), (1, 1e-3, [30, 30, 10]));
+        let o = Overrides {
+            seed: Some(7),
+            learning_rate: None,
+            epochs: Some(2),
+        };
+        o.apply(&mut seed, &mut lr, &mut epochs);
+        assert_eq!((seed, lr, epochs), (7, 1e-3, [2, 2, 2]));
+    }
+
+    #[test]
+    fn configuration_files_are_read_checked_and_defaulted() {
+        let dir = std::env::temp_dir().join(format!("weft-nn-train-setup-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.json");
+        std::fs::write(&good, r#"{"steps": 4}"#).unwrap();
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, "{").unwrap();
+        let v: serde_json::Value = read_config(Some(&good)).unwrap();
+        assert_eq!(v["steps"], 4);
+        assert!(sets_field(Some(&good), "steps").unwrap());
+        assert!(!sets_field(Some(&good), "epochs").unwrap() && !sets_field(None, "steps").unwrap());
+        assert!(matches!(read_config::<serde_json::Value>(Some(&bad)), Err(Error::ConfigFile { .. })));
+        assert!(matches!(
+            read_config::<serde_json::Value>(Some(&dir.join("missing.json"))),
+            Err(Error::Io { .. })
+        ));
+        assert_eq!(read_config::<u32>(None).unwrap(), 0);
+        refuse_overwrite(&dir, false).unwrap();
+        std::fs::write(dir.join("config.json"), "{}").unwrap();
+        assert!(matches!(refuse_overwrite(&dir, false), Err(Error::ModelExists { .. })));
+        refuse_overwrite(&dir, true).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
