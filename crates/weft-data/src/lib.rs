@@ -44,6 +44,7 @@ pub mod generate;
 pub mod nnwarp;
 pub mod read;
 pub mod record;
+pub mod simulate;
 pub mod spec;
 
 pub use error::{Context, Error, Result};
