@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use weft_acap::nalgebra::Vector3;
-use weft_acap::{AcapFeatures, AcapSettings, Feature, PoissonPseudoInverse};
+use weft_acap::{AcapFeatures, AcapSettings, PoissonPseudoInverse};
 use weft_data::arrays::{
     pin_file, read_features, read_pin_positions, read_pin_record, read_safetensors_frames, safetensors_metadata,
     write_features,
@@ -111,32 +111,15 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
         pins.to_vec()
     };
     let features = AcapFeatures::new(&rest, AcapSettings::default())?;
-    let inverse = PoissonPseudoInverse::new(&features, &pins)?;
     let bar = progress(frames.len() as u64, "round trip");
-    let mut per_frame = Vec::with_capacity(frames.len());
-    for p in &frames {
-        let f = features.encode(p)?;
-        let pin_positions: Vec<_> = pins.iter().map(|&i| p[i]).collect();
-        let back = inverse.decode(&f, &pin_positions)?;
-        let e = weft_acap::ReconstructionError::between(p, &back)?;
-        per_frame.push((e.max_relative(), e.rms_relative()));
-        bar.inc(1);
-    }
+    let round_trip = weft_acap::frames::round_trip(&features, &frames, &pins, || bar.inc(1))?;
     bar.finish_and_clear();
-    let worst_max = per_frame.iter().map(|e| e.0).fold(0.0, f64::max);
-    let worst_rms = per_frame.iter().map(|e| e.1).fold(0.0, f64::max);
-    let mean_rms = per_frame.iter().map(|e| e.1).sum::<f64>() / per_frame.len().max(1) as f64;
-    let report = serde_json::json!({
-        "sim": dir,
-        "vertices": rest.num_vertices(),
-        "frames": frames.len(),
-        "pins": pins,
-        "units": "fractions of the frame's bounding-box diagonal",
-        "worst_max_error": worst_max,
-        "worst_rms_error": worst_rms,
-        "mean_rms_error": mean_rms,
-        "per_frame_max_rms": per_frame,
-    });
+    let mut report = serde_json::to_value(round_trip)?;
+    report["sim"] = serde_json::to_value(dir)?;
+    report["vertices"] = rest.num_vertices().into();
+    report["frames"] = frames.len().into();
+    report["pins"] = serde_json::to_value(&pins)?;
+    report["units"] = "fractions of the frame's bounding-box diagonal".into();
     outln!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }
@@ -179,24 +162,7 @@ fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequ
 
     let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
     let bar = progress(frames.len() as u64, "encoding");
-    let mut features: Vec<Vec<Feature>> = Vec::with_capacity(frames.len());
-    if sequence {
-        for (k, p) in frames.iter().enumerate() {
-            let (f, _) = acap
-                .encode_with_report(p, features.last().map(Vec::as_slice))
-                .with_context(|| format!("encoding frame {k}"))?;
-            features.push(f);
-            bar.inc(1);
-        }
-    } else {
-        for (c, chunk) in frames.chunks(64).enumerate() {
-            let f = acap
-                .encode_batch(chunk)
-                .with_context(|| format!("encoding frames {}..", 64 * c))?;
-            features.extend(f);
-            bar.inc(chunk.len() as u64);
-        }
-    }
+    let features = weft_acap::frames::encode_frames(&acap, &frames, sequence, |n| bar.inc(n))?;
     bar.finish();
 
     let positions = frames
