@@ -8,14 +8,13 @@
 //! frame's VTK carries the per-node error against it. The loop is weft-nn's
 //! (`weft_nn::nnwarp_reference::run_against_reference`); this module writes its frames.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nalgebra::Vector3;
-use weft_mesh::TetMesh;
 use weft_nn::nnwarp::{NnWarpSimulation, load_model};
-use weft_nn::nnwarp_reference::{FrameView, ReferenceTwins, run_against_reference};
+use weft_nn::nnwarp_reference::{ReferenceTwins, run_against_reference};
+use weft_nn::nnwarp_run::{WarpRunSetup, WarpRunSummary, write_frame_vtk};
 use weft_sim::{AnyScene, VolumeSimulation};
 
 use weft_data::files::write_json;
@@ -91,39 +90,23 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     let report = run_against_reference(&mut runtime, twins, scene.frames, |f| {
         if f.frame % args.every == 0 || f.frame == scene.frames {
-            write_frame(&args.out, f, &rest, &mesh)?;
+            write_frame_vtk(&args.out, f, &rest, &mesh)?;
         }
         anyhow::Ok(())
     })
     .context("running NNWarp against the full FEM reference")?;
-    let frames: Vec<_> = report
-        .frames
-        .iter()
-        .map(|f| {
-            let mut record = serde_json::json!({ "frame": f.frame });
-            if let (Some(nnwarp), Some(linear)) = (f.nnwarp, f.linear_solve) {
-                record["rel_error_nnwarp"] = nnwarp.into();
-                record["rel_error_linear_solve"] = linear.into();
-            }
-            record
-        })
-        .collect();
+    let setup = WarpRunSetup {
+        scene: &scene.name,
+        model: &args.model,
+        material: &config.material,
+        reference_material: scene.material.name(),
+        mesh: &mesh,
+        factorization_seconds: runtime.linear().factorization_seconds(),
+    };
+    let summary = WarpRunSummary::new(&setup, &report, scene.frames);
     let frames_run = scene.frames.max(1) as f64;
     let (solve_seconds, warp_seconds) = (report.solve_seconds(), report.warp_seconds());
     let reference_seconds = report.reference_seconds();
-    let summary = serde_json::json!({
-        "scene": scene.name,
-        "model": args.model.display().to_string(),
-        "material": config.material,
-        "reference_material": scene.material.name(),
-        "nodes": mesh.num_vertices(),
-        "tets": mesh.num_tets(),
-        "frames": frames,
-        "factorization_seconds": runtime.linear().factorization_seconds(),
-        "solve_seconds_per_frame": solve_seconds / frames_run,
-        "nnwarp_seconds_per_frame": warp_seconds / frames_run,
-        "reference_seconds_per_frame": reference_seconds.map(|s| s / frames_run),
-    });
     write_json(&args.out.join("summary.json"), &summary)?;
     eprintln!(
         "{}: {} frames, linear solve {:.2} ms + NNWarp {:.2} ms per frame{} → {}",
@@ -137,29 +120,5 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         )),
         args.out.display()
     );
-    Ok(())
-}
-
-/// Writes one frame's VTK: the warped body with NNWarp's and the linear solve's
-/// displacements, and with a reference the per-node distance to it.
-fn write_frame(out: &Path, f: &FrameView<'_>, rest: &[f64], mesh: &TetMesh) -> anyhow::Result<()> {
-    let (u, u_lin) = (&f.runtime.warped, &f.runtime.linear);
-    let node = |v: &[f64], i: usize| Vector3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
-    let nodes = rest.len() / 3;
-    let error: Option<Vec<f64>> = f
-        .reference
-        .map(|u_ref| (0..nodes).map(|i| (node(u, i) - node(u_ref, i)).norm()).collect());
-    let positions: Vec<Vector3<f64>> = (0..nodes).map(|i| node(rest, i) + node(u, i)).collect();
-    let mut fields: Vec<weft_mesh::io::PointField<'_>> =
-        vec![("displacement", 3, &u[..]), ("linear_displacement", 3, &u_lin[..])];
-    if let Some(e) = &error {
-        fields.push(("error", 1, &e[..]));
-    }
-    weft_mesh::io::write_vtk_tets(
-        &out.join(format!("frame-{:04}.vtk", f.frame)),
-        &positions,
-        mesh.tets(),
-        &fields,
-    )?;
     Ok(())
 }

@@ -15,6 +15,9 @@ pub enum Error {
     /// The physics (L_phys and its gradient) failed.
     #[error(transparent)]
     Sim(#[from] weft_sim::Error),
+    /// Writing a mesh file failed.
+    #[error(transparent)]
+    Mesh(#[from] weft_mesh::Error),
     /// An input has the wrong shape for what it feeds.
     #[error("{what}: expected shape {expected}, got {got}")]
     Shape {

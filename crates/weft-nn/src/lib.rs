@@ -81,6 +81,7 @@ pub mod layers;
 pub mod metrics;
 pub mod nnwarp;
 pub mod nnwarp_reference;
+pub mod nnwarp_run;
 pub mod ops;
 pub mod params;
 pub mod pca;
