@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use weft_mesh::generators::{self, BeamParams};
-use weft_mesh::io::{self, AnyMesh};
 use weft_mesh::info::MeshFileReport;
+use weft_mesh::io::{self, AnyMesh};
 
 #[derive(Subcommand)]
 pub enum MeshCommand {
@@ -152,7 +152,11 @@ fn info(file: &Path) -> anyhow::Result<()> {
     // Through a JSON value, whose keys are sorted, as the report has always been printed.
     outln!("{}", serde_json::to_string_pretty(&serde_json::to_value(&report)?)?);
     if let Some(e) = &report.error {
-        anyhow::bail!("{} is not a valid mesh: {}", file.display(), serde_json::Value::from(e.as_str()));
+        anyhow::bail!(
+            "{} is not a valid mesh: {}",
+            file.display(),
+            serde_json::Value::from(e.as_str())
+        );
     }
     Ok(())
 }

@@ -203,7 +203,8 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     let c = &args.common;
     let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
     let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
-    c.overrides().apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
+    c.overrides()
+        .apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
     [config.pretrain_epochs, config.finetune_epochs] = epochs;
     config.validate()?;
     if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
@@ -285,7 +286,8 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
         config.weights.ephys = 0.0;
         config.weights.mphys = 0.0;
     }
-    c.overrides().apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
+    c.overrides()
+        .apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
     if c.autograd {
         config.kernels = weft_nn::Kernels::Autograd;
     }

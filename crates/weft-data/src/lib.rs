@@ -41,6 +41,7 @@ pub mod drape;
 pub mod error;
 pub mod files;
 pub mod generate;
+pub mod generate_all;
 pub mod nnwarp;
 pub mod read;
 pub mod record;

@@ -56,7 +56,9 @@ impl SceneOverrides {
             (_, None) if budget.is_none() && factorizations.is_none() => {}
             (AnyScene::Cloth(c), hessian) => {
                 if budget == Some(0) {
-                    return invalid("--newton-budget must be at least 1 (omit it to solve every step to the tolerance)");
+                    return invalid(
+                        "--newton-budget must be at least 1 (omit it to solve every step to the tolerance)",
+                    );
                 }
                 if factorizations == Some(0) {
                     return invalid(

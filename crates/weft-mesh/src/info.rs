@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::io::{self, AnyMesh};
-use crate::{Result, TetTopology, TetMesh, Topology, TriMesh};
+use crate::{Result, TetMesh, TetTopology, Topology, TriMesh};
 
 /// A triangle surface's counts and measures.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -79,10 +79,7 @@ mod tests {
         };
         let fields = serde_json::to_value(&config).unwrap();
         for key in fields.as_object().unwrap().keys().filter(|k| *k != "kernels") {
-            assert!(
-                super::EMBED.contains(&format!("  {key} ")),
-                "{key} is not in the help"
-            );
+            assert!(super::EMBED.contains(&format!("  {key} ")), "{key} is not in the help");
         }
     }
 }

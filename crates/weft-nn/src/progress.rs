@@ -128,11 +128,9 @@ mod tests {
     #[test]
     fn the_hook_runs_before_every_batch() {
         static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-        let mut p = TrainProgress::new(true, "m")
-            .unwrap()
-            .before_each_batch(|| {
-                CALLS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-            });
+        let mut p = TrainProgress::new(true, "m").unwrap().before_each_batch(|| {
+            CALLS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        });
         p.start(2);
         p.batch(0, 1.0);
         p.batch(0, 0.5);

@@ -126,7 +126,10 @@ mod tests {
         assert_eq!(v["steps"], 4);
         assert!(sets_field(Some(&good), "steps").unwrap());
         assert!(!sets_field(Some(&good), "epochs").unwrap() && !sets_field(None, "steps").unwrap());
-        assert!(matches!(read_config::<serde_json::Value>(Some(&bad)), Err(Error::ConfigFile { .. })));
+        assert!(matches!(
+            read_config::<serde_json::Value>(Some(&bad)),
+            Err(Error::ConfigFile { .. })
+        ));
         assert!(matches!(
             read_config::<serde_json::Value>(Some(&dir.join("missing.json"))),
             Err(Error::Io { .. })

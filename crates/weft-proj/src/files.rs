@@ -130,7 +130,11 @@ mod tests {
         let pred = TriMesh::new(stretched, rest.faces().to_vec()).unwrap();
         let (_, socp) = project_socp(&rest, &pred, 0.1).unwrap();
         assert!((socp.max_edge_strain_before - 0.3).abs() < 1e-9);
-        assert!(socp.max_edge_strain_after <= 0.1 + 1e-6, "{}", socp.max_edge_strain_after);
+        assert!(
+            socp.max_edge_strain_after <= 0.1 + 1e-6,
+            "{}",
+            socp.max_edge_strain_after
+        );
         let (y, q) = project_quasistatic(&rest, &pred, 0.1).unwrap();
         assert_eq!(y.len(), 3 * rest.num_vertices());
         assert!(q.max_edge_strain_after < q.max_edge_strain_before);
