@@ -6,15 +6,11 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use weft_acap::nalgebra::Vector3;
 use weft_acap::{AcapFeatures, AcapSettings, PoissonPseudoInverse};
-use weft_data::arrays::{
-    pin_file, read_features, read_pin_positions, read_pin_record, read_safetensors_frames, safetensors_metadata,
-    write_features,
-};
-use weft_mesh::TriMesh;
+use weft_data::acap_files::{decode_pins, frames_to_encode, rest_mesh, round_trip_pins};
+use weft_data::arrays::{read_features, read_safetensors_frames, write_features};
 
 /// ACAP features (Tan et al. §III-A) and their inverse (§IV-A, Eq. 6).
 #[derive(Debug, clap::Subcommand)]
@@ -103,13 +99,7 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
     let rest = rest_mesh(dir)?;
     let path = dir.join("frames.safetensors");
     let frames = read_safetensors_frames(&path, rest.num_vertices())?;
-    let pins: Vec<usize> = if pins.is_empty() {
-        let text = safetensors_metadata(&path, "grasp_vertices")?
-            .context("no --pin given and no grasp_vertices in the frames' metadata")?;
-        serde_json::from_str(&text).with_context(|| format!("grasp_vertices metadata {text:?}"))?
-    } else {
-        pins.to_vec()
-    };
+    let pins = round_trip_pins(&path, pins)?;
     let features = AcapFeatures::new(&rest, AcapSettings::default())?;
     let bar = progress(frames.len() as u64, "round trip");
     let round_trip = weft_acap::frames::round_trip(&features, &frames, &pins, || bar.inc(1))?;
@@ -124,42 +114,10 @@ fn roundtrip(dir: &Path, pins: &[usize]) -> Result<()> {
     Ok(())
 }
 
-fn rest_mesh(path: &Path) -> Result<TriMesh> {
-    let file = if path.is_dir() {
-        path.join("rest.obj")
-    } else {
-        path.to_path_buf()
-    };
-    weft_mesh::io::read_obj(&file).with_context(|| format!("reading rest mesh {}", file.display()))
-}
-
 fn encode(rest_path: &Path, meshes: &[PathBuf], out: &Path, pins: &[usize], sequence: bool) -> Result<()> {
     let rest = rest_mesh(rest_path)?;
     let nv = rest.num_vertices();
-    let mut frames: Vec<Vec<Vector3<f64>>> = Vec::new();
-    if rest_path.is_dir() {
-        frames.extend(read_safetensors_frames(&rest_path.join("frames.safetensors"), nv)?);
-    }
-    for m in meshes {
-        let mesh = weft_mesh::io::read_obj(m).with_context(|| format!("reading {}", m.display()))?;
-        ensure!(
-            mesh.faces() == rest.faces(),
-            "{} does not have the rest mesh's connectivity ({} faces vs {})",
-            m.display(),
-            mesh.num_faces(),
-            rest.num_faces()
-        );
-        frames.push(mesh.positions().to_vec());
-    }
-    ensure!(
-        !frames.is_empty(),
-        "nothing to encode: give --mesh files or a simulate directory as --rest"
-    );
-    for (k, &p) in pins.iter().enumerate() {
-        ensure!(p < nv, "pin {p} is out of range for {nv} vertices");
-        ensure!(!pins[..k].contains(&p), "vertex {p} is pinned twice in --pin");
-    }
-
+    let frames = frames_to_encode(rest_path, &rest, meshes, pins)?;
     let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
     let bar = progress(frames.len() as u64, "encoding");
     let features = weft_acap::frames::encode_frames(&acap, &frames, sequence, |n| bar.inc(n))?;
@@ -189,44 +147,7 @@ fn decode(
     let nv = rest.num_vertices();
     let features = read_features(features_path, nv)?;
     let frames = features.len();
-    let recorded = read_pin_record(features_path)?;
-    let pins: Vec<usize> = if !pins.is_empty() {
-        pins.to_vec()
-    } else if let Some(r) = &recorded {
-        r.pins.clone()
-    } else {
-        bail!(
-            "no --pin given and no {} from `acap encode`",
-            pin_file(features_path, "json").display()
-        )
-    };
-    let per_frame_pins: Vec<Vec<Vector3<f64>>> = match pin_positions {
-        Some(text) => {
-            let xyz = parse_pin_positions(text)?;
-            ensure!(
-                xyz.len() == pins.len(),
-                "{} pin positions for {} pins",
-                xyz.len(),
-                pins.len()
-            );
-            vec![xyz; frames]
-        }
-        None => {
-            let r = recorded.as_ref().with_context(|| {
-                format!(
-                    "no --pin-positions given and no {}",
-                    pin_file(features_path, "json").display()
-                )
-            })?;
-            ensure!(
-                r.pins == pins,
-                "--pin {pins:?} differs from the pins {:?} recorded at encode time",
-                r.pins
-            );
-            read_pin_positions(features_path, frames, pins.len())?
-        }
-    };
-
+    let (pins, per_frame_pins) = decode_pins(features_path, frames, pins, pin_positions)?;
     let acap = AcapFeatures::new(&rest, AcapSettings::default()).context("precomputing ACAP on the rest mesh")?;
     let inverse = PoissonPseudoInverse::new(&acap, &pins).context("factorising the pinned Poisson system")?;
     fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
@@ -249,23 +170,4 @@ fn progress(len: u64, what: &'static str) -> ProgressBar {
     }
     bar.set_message(what);
     bar
-}
-
-/// `x,y,z;x,y,z;...` → points.
-fn parse_pin_positions(text: &str) -> Result<Vec<Vector3<f64>>> {
-    text.split(';')
-        .filter(|s| !s.trim().is_empty())
-        .map(|triple| {
-            let c: Vec<f64> = triple
-                .split(',')
-                .map(|v| {
-                    v.trim()
-                        .parse::<f64>()
-                        .with_context(|| format!("bad coordinate {v:?} in {triple:?}"))
-                })
-                .collect::<Result<_>>()?;
-            ensure!(c.len() == 3, "pin position {triple:?} must have 3 coordinates");
-            Ok(Vector3::new(c[0], c[1], c[2]))
-        })
-        .collect()
 }

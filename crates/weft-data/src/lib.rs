@@ -36,6 +36,7 @@
 //! # Ok::<(), weft_data::Error>(())
 //! ```
 
+pub mod acap_files;
 pub mod arrays;
 pub mod drape;
 pub mod error;
