@@ -12,7 +12,10 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
 use weft_nn::progress::TrainProgress;
-use weft_nn::train_setup::{Overrides, fit_altconv_steps, read_config, refuse_overwrite, sets_field};
+use weft_nn::train_setup::{
+    Overrides, altconv_config, drape_config, embed_config, fit_altconv_steps, nnwarp_config, refuse_overwrite,
+    sets_field,
+};
 
 #[derive(Subcommand)]
 pub enum TrainCommand {
@@ -199,14 +202,9 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     use weft_nn::drape_run::DrapeRun;
-    use weft_nn::drape_training::{DrapeTrainingConfig, Layer, Plan};
+    use weft_nn::drape_training::{Layer, Plan};
     let c = &args.common;
-    let mut config: DrapeTrainingConfig = read_config(c.config.as_deref())?;
-    let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
-    c.overrides()
-        .apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
-    [config.pretrain_epochs, config.finetune_epochs] = epochs;
-    config.validate()?;
+    let config = drape_config(c.config.as_deref(), &c.overrides())?;
     if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
         bail!("--mu sets the quasistatic layer's μ; it needs --layer quasistatic");
     }
@@ -279,22 +277,15 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    use weft_nn::embed_training::{EmbedData, EmbedTrainingConfig, train_model};
+    use weft_nn::embed_training::{EmbedData, train_model};
     let c = &args.common;
-    let mut config: EmbedTrainingConfig = read_config(c.config.as_deref())?;
-    if args.no_pb {
-        config.weights.ephys = 0.0;
-        config.weights.mphys = 0.0;
-    }
-    c.overrides()
-        .apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
-    if c.autograd {
-        config.kernels = weft_nn::Kernels::Autograd;
-    }
-    config.validate()?;
-    if let Some(&s) = args.stages.iter().find(|s| !(1..=3).contains(*s)) {
-        bail!("stage {s} does not exist (stages are 1, 2 and 3)");
-    }
+    let config = embed_config(
+        c.config.as_deref(),
+        &c.overrides(),
+        args.no_pb,
+        c.autograd,
+        &args.stages,
+    )?;
     refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
@@ -325,23 +316,10 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
 }
 
 fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{AltConvTrainingConfig, Variant, train_model};
+    use weft_nn::altconv::{Variant, train_model};
     let c = &args.common;
     let variant = Variant::from_name(&args.model)?;
-    let mut config: AltConvTrainingConfig = match &c.config {
-        Some(_) => read_config(c.config.as_deref())?,
-        None => AltConvTrainingConfig::new(variant),
-    };
-    config.variant = variant;
-    c.overrides().apply(
-        &mut config.seed,
-        &mut config.adam.learning_rate,
-        std::slice::from_mut(&mut config.epochs),
-    );
-    if c.autograd {
-        config.kernels = weft_nn::altconv::Kernels::Autograd;
-    }
-    config.validate()?;
+    let mut config = altconv_config(c.config.as_deref(), &c.overrides(), variant, c.autograd)?;
     refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
@@ -391,22 +369,10 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
 }
 
 fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
-    use weft_nn::nnwarp::{WarpTrainingConfig, train_model};
+    use weft_nn::nnwarp::train_model;
     let c = &args.common;
-    let mut config: WarpTrainingConfig = read_config(c.config.as_deref())?;
     let material = args.material.as_str();
-    if !config.material.is_empty() && config.material != material {
-        bail!(
-            "the configuration names material {:?} but --material is {material}",
-            config.material
-        );
-    }
-    c.overrides().apply(
-        &mut config.seed,
-        &mut config.adam.learning_rate,
-        std::slice::from_mut(&mut config.epochs),
-    );
-    config.validate()?;
+    let config = nnwarp_config(c.config.as_deref(), &c.overrides(), material)?;
     refuse_overwrite(&args.out, c.resume)?;
     let dataset = weft_data::WarpDataset::load(&args.data, material)
         .with_context(|| format!("loading {}", args.data.display()))?;

@@ -104,20 +104,16 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         factorization_seconds: runtime.linear().factorization_seconds(),
     };
     let summary = WarpRunSummary::new(&setup, &report, scene.frames);
-    let frames_run = scene.frames.max(1) as f64;
-    let (solve_seconds, warp_seconds) = (report.solve_seconds(), report.warp_seconds());
-    let reference_seconds = report.reference_seconds();
     write_json(&args.out.join("summary.json"), &summary)?;
     eprintln!(
         "{}: {} frames, linear solve {:.2} ms + NNWarp {:.2} ms per frame{} → {}",
         scene.name,
         scene.frames,
-        1e3 * solve_seconds / frames_run,
-        1e3 * warp_seconds / frames_run,
-        reference_seconds.map_or(String::new(), |s| format!(
-            ", full FEM {:.1} ms per frame",
-            1e3 * s / frames_run
-        )),
+        1e3 * summary.solve_seconds_per_frame,
+        1e3 * summary.nnwarp_seconds_per_frame,
+        summary
+            .reference_seconds_per_frame
+            .map_or(String::new(), |s| format!(", full FEM {:.1} ms per frame", 1e3 * s)),
         args.out.display()
     );
     Ok(())

@@ -110,6 +110,8 @@ mod tests {
         }
         let report = round_trip(&acap, &frames, &[0, 4], || {}).unwrap();
         assert_eq!(report.per_frame_max_rms.len(), 3);
-        assert!(report.worst_max_error < 1e-6, "{report:?}");
+        // The rest frame comes back exactly; bent ones within the pseudo-inverse's error.
+        assert!(report.per_frame_max_rms[0].0 < 1e-9, "{report:?}");
+        assert!(report.worst_max_error < 0.05 && report.worst_rms_error <= report.worst_max_error);
     }
 }

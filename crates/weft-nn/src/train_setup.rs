@@ -96,6 +96,96 @@ pub fn fit_altconv_steps(
     Some(fit)
 }
 
+/// The embed configuration at `path` (or the default) under `overrides`: `no_pb` is the
+/// "[46] + L_vert" baseline (λ_ephys = λ_mphys = 0); `autograd` trains through candle's
+/// autograd instead of the fused kernels. Checked, with the `stages` asked for.
+pub fn embed_config(
+    path: Option<&Path>,
+    overrides: &Overrides,
+    no_pb: bool,
+    autograd: bool,
+    stages: &[u8],
+) -> Result<crate::embed_training::EmbedTrainingConfig> {
+    let mut config: crate::embed_training::EmbedTrainingConfig = read_config(path)?;
+    if no_pb {
+        config.weights.ephys = 0.0;
+        config.weights.mphys = 0.0;
+    }
+    overrides.apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
+    if autograd {
+        config.kernels = crate::Kernels::Autograd;
+    }
+    config.validate()?;
+    if let Some(&s) = stages.iter().find(|s| !(1..=3).contains(*s)) {
+        return Err(Error::InvalidParameter {
+            name: "stage",
+            value: s.to_string(),
+            reason: "does not exist (stages are 1, 2 and 3)",
+        });
+    }
+    Ok(config)
+}
+
+/// The configuration of altconv `variant` at `path` (or the variant's default) under
+/// `overrides`, checked.
+pub fn altconv_config(
+    path: Option<&Path>,
+    overrides: &Overrides,
+    variant: crate::altconv::Variant,
+    autograd: bool,
+) -> Result<crate::altconv::AltConvTrainingConfig> {
+    let mut config = match path {
+        Some(_) => read_config(path)?,
+        None => crate::altconv::AltConvTrainingConfig::new(variant),
+    };
+    config.variant = variant;
+    overrides.apply(
+        &mut config.seed,
+        &mut config.adam.learning_rate,
+        std::slice::from_mut(&mut config.epochs),
+    );
+    if autograd {
+        config.kernels = crate::altconv::Kernels::Autograd;
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+/// The NNWarp configuration at `path` (or the default) for `material` under `overrides`,
+/// checked; a configuration naming another material is refused.
+pub fn nnwarp_config(
+    path: Option<&Path>,
+    overrides: &Overrides,
+    material: &str,
+) -> Result<crate::nnwarp::WarpTrainingConfig> {
+    let mut config: crate::nnwarp::WarpTrainingConfig = read_config(path)?;
+    if !config.material.is_empty() && config.material != material {
+        return Err(Error::InvalidConfig {
+            field: "material".into(),
+            value: format!("{:?}", config.material),
+            reason: "differs from --material",
+        });
+    }
+    overrides.apply(
+        &mut config.seed,
+        &mut config.adam.learning_rate,
+        std::slice::from_mut(&mut config.epochs),
+    );
+    config.validate()?;
+    Ok(config)
+}
+
+/// The drape configuration at `path` (or the default) under `overrides` (epochs: of the
+/// pre-training and the fine-tuning), checked.
+pub fn drape_config(path: Option<&Path>, overrides: &Overrides) -> Result<crate::drape_training::DrapeTrainingConfig> {
+    let mut config: crate::drape_training::DrapeTrainingConfig = read_config(path)?;
+    let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
+    overrides.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
+    [config.pretrain_epochs, config.finetune_epochs] = epochs;
+    config.validate()?;
+    Ok(config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,6 +229,18 @@ mod tests {
         std::fs::write(dir.join("config.json"), "{}").unwrap();
         assert!(matches!(refuse_overwrite(&dir, false), Err(Error::ModelExists { .. })));
         refuse_overwrite(&dir, true).unwrap();
+        let o = Overrides {
+            epochs: Some(4),
+            ..Default::default()
+        };
+        assert_eq!(embed_config(None, &o, true, false, &[1, 2]).unwrap().epochs, vec![4; 3]);
+        assert!(embed_config(None, &o, false, false, &[4]).is_err());
+        assert_eq!(drape_config(None, &o).unwrap().finetune_epochs, 4);
+        std::fs::write(&good, r#"{"material": "stvk"}"#).unwrap();
+        assert!(nnwarp_config(Some(&good), &o, "neo-hookean").is_err());
+        assert_eq!(nnwarp_config(Some(&good), &o, "stvk").unwrap().epochs, 4);
+        let alt = crate::altconv::Variant::from_name("alt").unwrap();
+        assert_eq!(altconv_config(None, &o, alt, true).unwrap().epochs, 4);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
