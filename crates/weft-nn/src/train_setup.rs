@@ -233,7 +233,7 @@ mod tests {
             epochs: Some(4),
             ..Default::default()
         };
-        assert_eq!(embed_config(None, &o, true, false, &[1, 2]).unwrap().epochs, vec![4; 3]);
+        assert_eq!(embed_config(None, &o, true, false, &[1, 2]).unwrap().epochs, [4; 3]);
         assert!(embed_config(None, &o, false, false, &[4]).is_err());
         assert_eq!(drape_config(None, &o).unwrap().finetune_epochs, 4);
         std::fs::write(&good, r#"{"material": "stvk"}"#).unwrap();
