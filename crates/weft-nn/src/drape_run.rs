@@ -335,3 +335,38 @@ impl DrapeSummary {
         lines
     }
 }
+
+#[cfg(test)]
+mod summary_tests {
+    use super::*;
+
+    #[test]
+    fn summary_lines_name_the_model_and_leave_out_what_did_not_happen() {
+        let scores = Scores {
+            sqrtmse: 1.0,
+            loss_mm2: 1.0,
+            maxdist: 2.0,
+            compression: 0.0,
+            stretching: 0.0,
+            seconds_per_example: 0.0,
+            failed: 0,
+            first_error: None,
+        };
+        let mut summary = DrapeSummary {
+            skipped: (0, None),
+            kept_epoch: 3,
+            scores: vec![("validation", scores.clone())],
+            second_half: None,
+            mu_scan: Vec::new(),
+        };
+        let lines = summary.lines("m");
+        assert_eq!(lines.len(), 1);
+        assert!(lines[0].starts_with("drape/m: kept epoch 3: validation SqrtMSE 1.0000 mm"));
+        summary.skipped = (2, Some("singular".into()));
+        summary.mu_scan = vec![(0.1, scores)];
+        let lines = summary.lines("m");
+        assert_eq!(lines.len(), 3);
+        assert!(lines[0].contains("2 training batches skipped") && lines[0].ends_with("singular"));
+        assert!(lines[2].starts_with("drape/m: μ = 0.1: validation SqrtMSE"));
+    }
+}

@@ -105,3 +105,54 @@ impl WarpRunSummary {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nnwarp_reference::FrameErrors;
+
+    fn frame(frame: usize, reference: bool) -> FrameErrors {
+        FrameErrors {
+            frame,
+            solve_seconds: 0.5,
+            warp_seconds: 0.25,
+            reference_seconds: reference.then_some(2.0),
+            nnwarp: reference.then_some(0.01),
+            linear_solve: reference.then_some(0.1),
+            others: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_summary_holds_per_frame_times_and_errors_only_with_a_reference() {
+        let mesh = weft_mesh::generators::beam(&weft_mesh::generators::BeamParams {
+            cells: [2, 1, 1],
+            size: [2.0, 1.0, 1.0],
+        })
+        .unwrap();
+        let setup = WarpRunSetup {
+            scene: "beam",
+            model: Path::new("m"),
+            material: "stvk",
+            reference_material: "neo-hookean",
+            mesh: &mesh,
+            factorization_seconds: 1.0,
+        };
+        let with = ReferenceReport {
+            frames: vec![frame(1, true), frame(2, true)],
+        };
+        let s = WarpRunSummary::new(&setup, &with, 2);
+        assert_eq!((s.solve_seconds_per_frame, s.nnwarp_seconds_per_frame), (0.5, 0.25));
+        assert_eq!(s.reference_seconds_per_frame, Some(2.0));
+        assert_eq!(s.frames[1].rel_error_nnwarp, Some(0.01));
+        let json = serde_json::to_value(&s).unwrap();
+        assert_eq!(json["frames"][0]["rel_error_linear_solve"], 0.1);
+        let without = ReferenceReport {
+            frames: vec![frame(1, false)],
+        };
+        let s = WarpRunSummary::new(&setup, &without, 0);
+        assert_eq!(s.reference_seconds_per_frame, None);
+        let json = serde_json::to_value(&s).unwrap();
+        assert_eq!(json["frames"][0], serde_json::json!({ "frame": 1 }));
+    }
+}
