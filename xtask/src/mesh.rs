@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use weft_mesh::generators::{self, BeamParams};
 use weft_mesh::info::MeshFileReport;
-use weft_mesh::io::{self, AnyMesh};
+use weft_mesh::io::AnyMesh;
 
 #[derive(Subcommand)]
 pub enum MeshCommand {
@@ -134,16 +134,9 @@ pub fn run(cmd: MeshCommand) -> anyhow::Result<()> {
         }
         MeshCommand::TBeam { beam, out } => (AnyMesh::Volume(generators::t_beam(&beam.params())?), out),
     };
-    match &mesh {
-        AnyMesh::Surface(m) => io::write_surface(&out.out, m),
-        AnyMesh::Volume(m) => io::write_volume(&out.out, m),
-    }
-    .with_context(|| format!("writing {}", out.out.display()))?;
-    let (v, e) = match &mesh {
-        AnyMesh::Surface(m) => (m.num_vertices(), format!("{} faces", m.num_faces())),
-        AnyMesh::Volume(m) => (m.num_vertices(), format!("{} tetrahedra", m.num_tets())),
-    };
-    eprintln!("wrote {} ({v} vertices, {e})", out.out.display());
+    mesh.write(&out.out)
+        .with_context(|| format!("writing {}", out.out.display()))?;
+    eprintln!("wrote {} ({})", out.out.display(), mesh.counts());
     Ok(())
 }
 

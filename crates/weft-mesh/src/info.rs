@@ -88,6 +88,25 @@ impl MeshInfo {
     }
 }
 
+impl AnyMesh {
+    /// Writes the mesh, the format following the extension (see [`io::write_surface`] and
+    /// [`io::write_volume`]).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        match self {
+            AnyMesh::Surface(m) => io::write_surface(path, m),
+            AnyMesh::Volume(m) => io::write_volume(path, m),
+        }
+    }
+
+    /// Its size in words: `N vertices, M faces` or `N vertices, M tetrahedra`.
+    pub fn counts(&self) -> String {
+        match self {
+            AnyMesh::Surface(m) => format!("{} vertices, {} faces", m.num_vertices(), m.num_faces()),
+            AnyMesh::Volume(m) => format!("{} vertices, {} tetrahedra", m.num_vertices(), m.num_tets()),
+        }
+    }
+}
+
 /// A mesh file's report: valid with its [`MeshInfo`], or invalid with the reader's error.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MeshFileReport {
@@ -136,6 +155,8 @@ mod tests {
             panic!("a beam is a volume")
         };
         assert_eq!((v.vertices, v.tetrahedra, v.boundary_loops), (12, 12, 0));
+        let sheet = AnyMesh::Surface(generators::sheet(3, 1.0).unwrap());
+        assert_eq!(sheet.counts(), "9 vertices, 8 faces");
         assert!((v.volume_m3 - 2.0).abs() < 1e-12);
     }
 
