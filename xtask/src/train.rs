@@ -8,13 +8,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::{Args, Subcommand};
 
 use weft_nn::progress::TrainProgress;
 use weft_nn::train_setup::{
-    Overrides, altconv_config, drape_config, embed_config, fit_altconv_steps, nnwarp_config, refuse_overwrite,
-    sets_field,
+    DrapeLayerKind, Overrides, altconv_config, drape_config, drape_layer, embed_config, fit_altconv_steps,
+    nnwarp_config, refuse_overwrite, sets_field,
 };
 
 #[derive(Subcommand)]
@@ -202,29 +202,16 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
     use weft_nn::drape_run::DrapeRun;
-    use weft_nn::drape_training::{Layer, Plan};
+    use weft_nn::drape_training::Plan;
     let c = &args.common;
     let config = drape_config(c.config.as_deref(), &c.overrides())?;
-    if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
-        bail!("--mu sets the quasistatic layer's μ; it needs --layer quasistatic");
-    }
-    let mu = args.mu.unwrap_or(0.1);
-    if !(mu > 0.0 && mu.is_finite()) {
-        bail!("--mu must be positive and finite, not {mu}");
-    }
-    if let Some(m) = args.scan_mu.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
-        bail!("--scan-mu values must be positive and finite, not {m}");
-    }
-    let layer = match (args.layer, args.learn_mu) {
-        (DrapeLayer::None, None) => Layer::None,
-        (DrapeLayer::Socp, None) => Layer::Socp,
-        (DrapeLayer::Quasistatic, None) => Layer::Quasistatic(mu),
-        (DrapeLayer::Quasistatic, Some(learn)) => Layer::LearnedMu {
-            start: mu,
-            per_vertex: learn == LearnMu::PerVertex,
-        },
-        (_, Some(_)) => bail!("--learn-mu needs --layer quasistatic"),
+    let kind = match args.layer {
+        DrapeLayer::None => DrapeLayerKind::None,
+        DrapeLayer::Socp => DrapeLayerKind::Socp,
+        DrapeLayer::Quasistatic => DrapeLayerKind::Quasistatic,
     };
+    let learn_mu = args.learn_mu.map(|l| l == LearnMu::PerVertex);
+    let layer = drape_layer(kind, args.mu, learn_mu, &args.scan_mu)?;
     let epochs = if args.init.is_some() {
         config.finetune_epochs
     } else {

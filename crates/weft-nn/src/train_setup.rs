@@ -186,9 +186,81 @@ pub fn drape_config(path: Option<&Path>, overrides: &Overrides) -> Result<crate:
     Ok(config)
 }
 
+/// The layer after a drape network, as a command names it (μ comes beside it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DrapeLayerKind {
+    None,
+    Socp,
+    Quasistatic,
+}
+
+/// The layer a drape model trains through: `mu` is the quasistatic layer's μ, or where a
+/// learned μ starts (default 0.1); `learn_mu` learns it (`Some(true)`: one μ per vertex).
+/// Every μ of `scan_mu` must be positive and finite too.
+pub fn drape_layer(
+    kind: DrapeLayerKind,
+    mu: Option<f64>,
+    learn_mu: Option<bool>,
+    scan_mu: &[f64],
+) -> Result<crate::drape_training::Layer> {
+    use crate::drape_training::Layer;
+    let invalid = |name, value: String, reason| Err(Error::InvalidParameter { name, value, reason });
+    let positive = |m: f64| m > 0.0 && m.is_finite();
+    if let (Some(m), false) = (mu, kind == DrapeLayerKind::Quasistatic) {
+        return invalid(
+            "--mu",
+            m.to_string(),
+            "sets the quasistatic layer's μ; it needs --layer quasistatic",
+        );
+    }
+    let mu = mu.unwrap_or(0.1);
+    if !positive(mu) {
+        return invalid("--mu", mu.to_string(), "must be positive and finite");
+    }
+    if let Some(m) = scan_mu.iter().find(|m| !positive(**m)) {
+        return invalid("--scan-mu", m.to_string(), "values must be positive and finite");
+    }
+    Ok(match (kind, learn_mu) {
+        (DrapeLayerKind::None, None) => Layer::None,
+        (DrapeLayerKind::Socp, None) => Layer::Socp,
+        (DrapeLayerKind::Quasistatic, None) => Layer::Quasistatic(mu),
+        (DrapeLayerKind::Quasistatic, Some(per_vertex)) => Layer::LearnedMu { start: mu, per_vertex },
+        (_, Some(per_vertex)) => {
+            let value = if per_vertex { "per-vertex" } else { "global" };
+            return invalid("--learn-mu", value.into(), "needs --layer quasistatic");
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn drape_layers_take_mu_only_where_it_belongs() {
+        use crate::drape_training::Layer;
+        use DrapeLayerKind::*;
+        assert!(matches!(
+            drape_layer(None, Option::None, Option::None, &[]),
+            Ok(Layer::None)
+        ));
+        assert!(
+            matches!(drape_layer(Quasistatic, Some(0.5), Option::None, &[1.0]), Ok(Layer::Quasistatic(m)) if m == 0.5)
+        );
+        assert!(matches!(
+            drape_layer(Quasistatic, Option::None, Some(true), &[]),
+            Ok(Layer::LearnedMu { start, per_vertex: true }) if start == 0.1
+        ));
+        assert!(drape_layer(Socp, Some(0.5), Option::None, &[]).is_err());
+        assert!(drape_layer(Quasistatic, Some(-1.0), Option::None, &[]).is_err());
+        assert!(
+            drape_layer(None, Option::None, Option::None, &[0.0])
+                .unwrap_err()
+                .to_string()
+                .contains("--scan-mu")
+        );
+        assert!(drape_layer(Socp, Option::None, Some(false), &[]).is_err());
+    }
 
     #[test]
     fn overrides_replace_only_what_they_give() {
