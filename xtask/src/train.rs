@@ -312,15 +312,7 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     if !sets_field(c.config.as_deref(), "steps")? {
         if let Some(fit) = fit_altconv_steps(&mut config, &dataset) {
-            eprintln!(
-                "altconv: {} steps need {} frames and {}'s shortest sequence holds {}: training on {} steps \
-                 (set `steps` in a --config to choose)",
-                fit.asked,
-                fit.asked + 1,
-                args.data.display(),
-                fit.frames,
-                fit.frames - 1
-            );
+            eprintln!("{fit}");
         }
         config.validate()?;
     }

@@ -66,13 +66,31 @@ pub fn refuse_overwrite(out: &Path, resume: bool) -> Result<()> {
 }
 
 /// A teacher-forced window shortened to what the data holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StepsFit {
+    /// The dataset's directory.
+    pub data: std::path::PathBuf,
     /// The steps asked for (they need one frame more).
     pub asked: usize,
     /// The frames of the shortest training or validation sequence; training runs
     /// `frames - 1` steps.
     pub frames: usize,
+}
+
+impl std::fmt::Display for StepsFit {
+    /// What a command says when it shortens the window.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "altconv: {} steps need {} frames and {}'s shortest sequence holds {}: training on {} steps (set \
+             `steps` in a --config to choose)",
+            self.asked,
+            self.asked + 1,
+            self.data.display(),
+            self.frames,
+            self.frames - 1
+        )
+    }
 }
 
 /// Shortens the teacher-forced window of `config` to what `dataset`'s training and
@@ -89,6 +107,7 @@ pub fn fit_altconv_steps(
         .min();
     let frames = shortest.filter(|&f| f >= 2 && f <= config.steps)?;
     let fit = StepsFit {
+        data: dataset.dir.clone(),
         asked: config.steps,
         frames,
     };
