@@ -2,9 +2,10 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail, ensure};
+use anyhow::Context;
 use clap::{Args, Subcommand};
-use weft_data::{DatasetSpec, GenerateOptions, Shard, Size, dataset_names};
+use weft_data::generate_all::{default_out, generate_complete, generate_every, size_table, spec_with_counts};
+use weft_data::{DatasetSpec, GenerateOptions, Shard, Size};
 
 #[derive(Args)]
 #[command(args_conflicts_with_subcommands = true)]
@@ -71,91 +72,41 @@ impl GenerateArgs {
             resume: self.resume,
             seed: self.seed,
             quiet: self.quiet,
-            code_version: crate::code_version(),
+            code_version: crate::version::code_version(),
         }
     }
 
-    fn spec(&self, name: &str) -> anyhow::Result<DatasetSpec> {
-        let mut spec = DatasetSpec::new(name, self.size)?;
-        if let Some(n) = self.sequences {
-            ensure!(n > 0, "--sequences must be at least 1");
-            spec.sequences = n;
-        }
-        if let Some(f) = self.frames {
-            ensure!(f > 0, "--frames must be at least 1");
-            spec.frames = f;
-        }
-        Ok(spec)
+    fn spec(&self, name: &str) -> weft_data::Result<DatasetSpec> {
+        spec_with_counts(name, self.size, self.sequences, self.frames)
     }
 }
 
 pub fn run(args: DatasetArgs) -> anyhow::Result<()> {
-    match args.command {
-        Some(DatasetCommand::Merge(m)) => weft_data::merge(&m.out, &m.shards).map(|_| ()).map_err(Into::into),
-        Some(DatasetCommand::List) => list(),
-        None => {
-            let g = args.generate;
-            let name = g
-                .name
-                .clone()
-                .context("name a dataset (or `all`); `cargo xtask dataset list` shows them")?;
-            let options = g.options();
-            if name == "all" {
-                let root = g
-                    .out
-                    .clone()
-                    .unwrap_or_else(|| PathBuf::from(format!("data/{}", g.size.as_str())));
-                // One failing dataset does not stop the others; every failure is reported.
-                let mut failed = Vec::new();
-                for d in dataset_names() {
-                    if let Err(e) = generate(&g.spec(d)?, &root.join(d), &options) {
-                        eprintln!("{d}: {e:#}");
-                        failed.push(d);
-                    }
-                }
-                if !failed.is_empty() {
-                    bail!("{} dataset(s) failed: {}", failed.len(), failed.join(", "));
-                }
-                Ok(())
-            } else {
-                let spec = g.spec(&name)?;
-                let out = g
-                    .out
-                    .clone()
-                    .unwrap_or_else(|| PathBuf::from(format!("data/{name}-{}", g.size.as_str())));
-                generate(&spec, &out, &options)
+    let g = match args.command {
+        Some(DatasetCommand::Merge(m)) => return weft_data::merge(&m.out, &m.shards).map(|_| ()).map_err(Into::into),
+        Some(DatasetCommand::List) => {
+            for line in size_table()? {
+                outln!("{line}");
             }
+            return Ok(());
         }
-    }
-}
-
-/// Generates a dataset; sequences that stopped early (stored up to the failure) make the
-/// command fail after everything else is written.
-fn generate(spec: &DatasetSpec, out: &std::path::Path, options: &GenerateOptions) -> anyhow::Result<()> {
-    let stopped = weft_data::generate(spec, out, options)?.stopped_early();
-    if !stopped.is_empty() {
-        bail!(
-            "{} sequence(s) stopped early (their frames up to the failure are stored): {}",
-            stopped.len(),
-            stopped.join("; ")
-        );
-    }
-    Ok(())
-}
-
-fn list() -> anyhow::Result<()> {
-    outln!("{:<24} {:>22} {:>22} {:>22}", "dataset", "quick", "standard", "paper");
-    for d in dataset_names() {
-        let cell = |s| -> anyhow::Result<String> {
-            let spec = DatasetSpec::new(d, s)?;
-            Ok(format!("{} × {} frames", spec.sequences, spec.frames))
-        };
-        outln!(
-            "{d:<24} {:>22} {:>22} {:>22}",
-            cell(Size::Quick)?,
-            cell(Size::Standard)?,
-            cell(Size::Paper)?
-        );
+        None => args.generate,
+    };
+    let name = g
+        .name
+        .clone()
+        .context("name a dataset (or `all`); `cargo xtask dataset list` shows them")?;
+    let out = g.out.clone().unwrap_or_else(|| default_out(&name, g.size));
+    if name == "all" {
+        // One failing dataset does not stop the others; every failure is reported.
+        generate_every(
+            &out,
+            &g.options(),
+            |d| g.spec(d),
+            |d, e| eprintln!("{d}: {:#}", anyhow::Error::from(e)),
+        )?;
+    } else {
+        generate_complete(&g.spec(&name)?, &out, &g.options())?;
     }
     Ok(())
 }

@@ -93,7 +93,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         options.jobs = jobs;
     }
     options.command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
-    options.code_version = crate::code_version();
+    options.code_version = crate::version::code_version();
     weft_experiments::evaluate::run(&options)?;
     Ok(())
 }

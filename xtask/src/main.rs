@@ -4,14 +4,8 @@
 //! crates do the work, xtask wires them together and handles files, progress and
 //! reports. `cargo xtask <command> --help` documents every option.
 
-/// `println!` for what a command prints as its answer. Rust ignores `SIGPIPE`, so a plain
-/// `println!` panics when the reader has gone (`cargo xtask mesh info F | head -3`); this
-/// ends the process quietly instead, as a Unix tool killed by `SIGPIPE` would.
-macro_rules! outln {
-    ($($arg:tt)*) => {
-        $crate::write_stdout(format_args!($($arg)*))
-    };
-}
+#[macro_use]
+mod out;
 
 mod acap;
 mod dataset;
@@ -22,35 +16,10 @@ mod score;
 mod simulate;
 mod stability;
 mod train;
+mod version;
 mod warp;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
-
-/// Writes one line to standard output (see [`outln`]): a closed pipe ends the process
-/// with status 0, any other write error with status 1 after saying so.
-pub(crate) fn write_stdout(line: std::fmt::Arguments<'_>) {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    let written = out
-        .write_fmt(line)
-        .and_then(|()| out.write_all(b"\n"))
-        .and_then(|()| out.flush());
-    match written {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
-        Err(e) => {
-            eprintln!("error: writing to standard output: {e}");
-            std::process::exit(1);
-        }
-    }
-}
-
-/// The code version recorded in manifests and results: the crate version and, when built
-/// from a git checkout, the commit (with `-dirty` for uncommitted changes). Fixed at build
-/// time by `build.rs`, so it names the code this binary runs.
-pub fn code_version() -> String {
-    env!("WEFT_CODE_VERSION").to_string()
-}
 
 /// Training allocates and frees tensors the size of the embedding's dense layers (tens of
 /// MB) every step; glibc's allocator returns each to the kernel and the next one is

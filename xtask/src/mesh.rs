@@ -4,10 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use serde_json::json;
 use weft_mesh::generators::{self, BeamParams};
-use weft_mesh::io::{self, AnyMesh};
-use weft_mesh::{TetTopology, Topology};
+use weft_mesh::info::MeshFileReport;
+use weft_mesh::io::AnyMesh;
 
 #[derive(Subcommand)]
 pub enum MeshCommand {
@@ -135,59 +134,22 @@ pub fn run(cmd: MeshCommand) -> anyhow::Result<()> {
         }
         MeshCommand::TBeam { beam, out } => (AnyMesh::Volume(generators::t_beam(&beam.params())?), out),
     };
-    match &mesh {
-        AnyMesh::Surface(m) => io::write_surface(&out.out, m),
-        AnyMesh::Volume(m) => io::write_volume(&out.out, m),
-    }
-    .with_context(|| format!("writing {}", out.out.display()))?;
-    let (v, e) = match &mesh {
-        AnyMesh::Surface(m) => (m.num_vertices(), format!("{} faces", m.num_faces())),
-        AnyMesh::Volume(m) => (m.num_vertices(), format!("{} tetrahedra", m.num_tets())),
-    };
-    eprintln!("wrote {} ({v} vertices, {e})", out.out.display());
+    mesh.write(&out.out)
+        .with_context(|| format!("writing {}", out.out.display()))?;
+    eprintln!("wrote {} ({})", out.out.display(), mesh.counts());
     Ok(())
 }
 
 fn info(file: &Path) -> anyhow::Result<()> {
-    let report = match io::read_mesh(file) {
-        Err(e) => json!({ "file": file, "valid": false, "error": e.to_string() }),
-        Ok(AnyMesh::Surface(m)) => {
-            let t = Topology::new(&m);
-            let degenerate = m.check_face_areas(0.0).err().map(|e| e.to_string());
-            json!({
-                "file": file,
-                "valid": true,
-                "kind": "triangle surface",
-                "vertices": m.num_vertices(),
-                "faces": m.num_faces(),
-                "edges": t.edges.len(),
-                "boundary_loops": t.boundary_loops.len(),
-                "euler_characteristic": m.euler_characteristic(),
-                "area_m2": m.area(),
-                "bounding_box_diagonal_m": m.bounding_box_diagonal(),
-                "degenerate_faces": degenerate,
-            })
-        }
-        Ok(AnyMesh::Volume(m)) => {
-            let t = TetTopology::new(&m);
-            let s = m.boundary_surface()?;
-            json!({
-                "file": file,
-                "valid": true,
-                "kind": "tetrahedral volume",
-                "vertices": m.num_vertices(),
-                "tetrahedra": m.num_tets(),
-                "edges": t.edges.len(),
-                "boundary_faces": s.mesh.num_faces(),
-                "boundary_vertices": s.mesh.num_vertices(),
-                "boundary_loops": Topology::new(&s.mesh).boundary_loops.len(),
-                "volume_m3": m.volume(),
-            })
-        }
-    };
-    outln!("{}", serde_json::to_string_pretty(&report)?);
-    if report["valid"] == false {
-        anyhow::bail!("{} is not a valid mesh: {}", file.display(), report["error"]);
+    let report = MeshFileReport::read(file)?;
+    // Through a JSON value, whose keys are sorted, as the report has always been printed.
+    outln!("{}", serde_json::to_string_pretty(&serde_json::to_value(&report)?)?);
+    if let Some(e) = &report.error {
+        anyhow::bail!(
+            "{} is not a valid mesh: {}",
+            file.display(),
+            serde_json::Value::from(e.as_str())
+        );
     }
     Ok(())
 }

@@ -1,17 +1,10 @@
 //! `cargo xtask project socp|quasistatic`: run a projection layer of weft-proj on one
 //! predicted mesh and print a JSON report.
-//!
-//! Needs (xtask/Cargo.toml): weft-mesh, weft-proj, anyhow, clap (derive), serde_json.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use weft_mesh::TriMesh;
-use weft_mesh::io::{self, AnyMesh};
-use weft_proj::{
-    InextensibilityLayer, QuasistaticLayer, QuasistaticParams, SocpSettings, StrainSummary, ZeroLengthScaling,
-    strain_summary,
-};
+use anyhow::Context;
+use weft_proj::files::{project_quasistatic, project_socp, read_rest_and_prediction, write_projected};
 
 /// Project a predicted mesh with Geng et al.'s layers.
 #[derive(Debug, clap::Subcommand)]
@@ -51,105 +44,21 @@ pub enum ProjectCommand {
 }
 
 pub fn run(cmd: ProjectCommand) -> anyhow::Result<()> {
-    match cmd {
+    let report = match cmd {
         ProjectCommand::Socp { rest, pred, eps, out } => {
-            let (rest_mesh, pred_mesh) = read_pair(&rest, &pred)?;
-            let layer = InextensibilityLayer::new(&rest_mesh, eps, SocpSettings::default())
-                .context("building the inextensibility layer")?;
-            let x = pred_mesh.flat_positions();
-            let (solution, report) = layer.forward(&x).context("SOCP projection")?;
-            let before = strain_summary(layer.rest(), &x, 1.0)?;
-            let after = strain_summary(layer.rest(), solution.positions(), 1.0)?;
-            write(&out, solution.positions(), &pred_mesh)?;
-            print_report(
-                "socp",
-                report.time_seconds,
-                report.iterations as usize,
-                &before,
-                &after,
-                serde_json::to_value(&report)?,
-            )
+            let (rest_mesh, pred_mesh) = read_rest_and_prediction(&rest, &pred)?;
+            let (x, report) = project_socp(&rest_mesh, &pred_mesh, eps).context("SOCP projection")?;
+            write_projected(&out, &x, &pred_mesh).with_context(|| format!("writing {}", out.display()))?;
+            serde_json::to_value(report)?
         }
         ProjectCommand::Quasistatic { rest, pred, mu, out } => {
-            let (rest_mesh, pred_mesh) = read_pair(&rest, &pred)?;
-            let layer = QuasistaticLayer::new(&rest_mesh, QuasistaticParams::default())
-                .context("building the quasistatic layer")?;
-            let x = pred_mesh.flat_positions();
-            let (solution, report) = layer
-                .forward(&x, &ZeroLengthScaling::Global(mu))
-                .context("quasistatic projection")?;
-            let before = strain_summary(layer.rest(), &x, 1.0)?;
-            let after = strain_summary(layer.rest(), solution.positions(), 1.0)?;
-            write(&out, solution.positions(), &pred_mesh)?;
-            print_report(
-                "quasistatic",
-                report.time_seconds,
-                report.newton.iterations,
-                &before,
-                &after,
-                serde_json::to_value(report)?,
-            )
-        }
-    }
-}
-
-fn read_pair(rest: &Path, pred: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
-    let surface = |path: &Path, what: &str| -> anyhow::Result<TriMesh> {
-        match io::read_mesh(path).with_context(|| format!("reading {what} {}", path.display()))? {
-            AnyMesh::Surface(m) => Ok(m),
-            AnyMesh::Volume(_) => bail!(
-                "{what} {} is a volume mesh; the projection layers take a cloth surface (.obj)",
-                path.display()
-            ),
+            let (rest_mesh, pred_mesh) = read_rest_and_prediction(&rest, &pred)?;
+            let (x, report) = project_quasistatic(&rest_mesh, &pred_mesh, mu).context("quasistatic projection")?;
+            write_projected(&out, &x, &pred_mesh).with_context(|| format!("writing {}", out.display()))?;
+            serde_json::to_value(report)?
         }
     };
-    let rest_mesh = surface(rest, "rest mesh")?;
-    let pred_mesh = surface(pred, "prediction")?;
-    if rest_mesh.num_vertices() != pred_mesh.num_vertices() {
-        bail!(
-            "{} has {} vertices but {} has {}",
-            pred.display(),
-            pred_mesh.num_vertices(),
-            rest.display(),
-            rest_mesh.num_vertices()
-        );
-    }
-    if rest_mesh.faces() != pred_mesh.faces() {
-        bail!(
-            "{} and {} have different faces; the prediction must share the rest mesh's connectivity",
-            pred.display(),
-            rest.display()
-        );
-    }
-    Ok((rest_mesh, pred_mesh))
-}
-
-fn write(out: &Path, x: &[f64], pred: &TriMesh) -> anyhow::Result<()> {
-    let projected = TriMesh::new(weft_mesh::unflatten(x), pred.faces().to_vec())?;
-    io::write_surface(out, &projected).with_context(|| format!("writing {}", out.display()))
-}
-
-fn print_report(
-    layer: &str,
-    seconds: f64,
-    iterations: usize,
-    before: &StrainSummary,
-    after: &StrainSummary,
-    solver: serde_json::Value,
-) -> anyhow::Result<()> {
-    let report = serde_json::json!({
-        "layer": layer,
-        "solve_time_seconds": seconds,
-        "iterations": iterations,
-        "max_edge_strain_before": before.max_strain,
-        "max_edge_strain_after": after.max_strain,
-        // E = Σ ½ k (l − l̄)² with k = 1 N/m, split by stretched / compressed edges.
-        "stretching_energy_before": before.stretching_energy,
-        "stretching_energy_after": after.stretching_energy,
-        "compression_energy_before": before.compression_energy,
-        "compression_energy_after": after.compression_energy,
-        "solver": solver,
-    });
+    // Through a JSON value, whose keys are sorted, as the report has always been printed.
     outln!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }

@@ -2,14 +2,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::Args;
-use serde::Serialize;
-use weft_sim::AnyScene;
-use weft_sim::scenes::volume::LimbResolution;
-
-use weft_data::files::{progress_bar, write_json, write_safetensors, write_text};
-use weft_data::record::{FrameStats, Recorder, Recording};
+use weft_data::simulate::{SceneOverrides, SimulateStats, simulate_into};
 
 #[derive(Args)]
 pub struct SimulateArgs {
@@ -58,151 +52,27 @@ pub struct SimulateArgs {
     pub newton_factorizations: Option<usize>,
 }
 
-#[derive(Serialize)]
-struct Stats<'a> {
-    scene: &'a str,
-    vertices: usize,
-    frames: usize,
-    total_seconds: f64,
-    mean_ms_per_frame: f64,
-    mean_newton_iterations: f64,
-    error: Option<&'a str>,
-    per_frame: &'a [FrameStats],
-}
-
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     let mut loaded = weft_sim::load(&args.scene, args.quick)?;
     if let Some(f) = args.frames {
         loaded.scene.set_frames(f);
     }
-    match (&mut loaded.scene, args.vertices) {
-        (_, None) => {}
-        (AnyScene::SoftTissue(s), Some(6890)) => s.resolution = LimbResolution::Smpl,
-        (AnyScene::SoftTissue(s), Some(1410)) => s.resolution = LimbResolution::Default,
-        (AnyScene::SoftTissue(_), Some(v)) => {
-            anyhow::bail!("--vertices {v}: the limb comes in 1410 (default) and 6890 (SMPL-size) surface vertices")
-        }
-        _ => anyhow::bail!("--vertices applies to the limb scene only"),
-    }
-    match (&mut loaded.scene, args.globalization.as_deref()) {
-        (_, None) => {}
-        (AnyScene::Cloth(c), Some(g)) => {
-            c.globalization = Some(serde_json::from_value(serde_json::Value::String(g.into()))?);
-        }
-        _ => anyhow::bail!("--globalization applies to cloth scenes only"),
-    }
-    match (
-        &mut loaded.scene,
-        args.hessian.as_deref(),
-        args.newton_budget,
-        args.newton_factorizations,
-    ) {
-        (_, None, None, None) => {}
-        (AnyScene::Cloth(c), hessian, budget, factorizations) => {
-            anyhow::ensure!(
-                budget != Some(0),
-                "--newton-budget must be at least 1 (omit it to solve every step to the tolerance)"
-            );
-            anyhow::ensure!(
-                factorizations != Some(0),
-                "--newton-factorizations must be at least 1 (omit it to factorise at every iteration)"
-            );
-            if let Some(h) = hessian {
-                c.hessian = Some(serde_json::from_value(serde_json::Value::String(h.into()))?);
-            }
-            if budget.is_some() {
-                c.newton_budget = budget;
-            }
-            if factorizations.is_some() {
-                c.newton_factorizations = factorizations;
-            }
-            c.validate()?;
-        }
-        _ => anyhow::bail!("--hessian, --newton-budget and --newton-factorizations apply to cloth scenes only"),
-    }
+    let overrides = SceneOverrides {
+        vertices: args.vertices,
+        globalization: args.globalization,
+        hessian: args.hessian,
+        newton_budget: args.newton_budget,
+        newton_factorizations: args.newton_factorizations,
+    };
+    overrides.apply(&mut loaded.scene)?;
     let out = &args.out;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut recorder = Recorder::new(&loaded)?;
-    let name = loaded.scene.name().to_string();
-    write_text(&out.join("scene.toml"), &loaded.scene.to_toml()?)?;
-
-    // The surface written per frame with --obj, as (faces, surface vertex → recorded vertex).
-    let (faces, surface_vertex, what) = match &recorder {
-        Recorder::Cloth(s) => {
-            let m = s.mesh();
-            weft_mesh::io::write_obj(&out.join("rest.obj"), m.positions(), m.faces())?;
-            let n = m.num_vertices();
-            (m.faces().to_vec(), (0..n).collect::<Vec<_>>(), format!("{n} vertices"))
-        }
-        Recorder::Volume(s) => {
-            let mesh = s.mesh();
-            let surface = mesh.boundary_surface()?;
-            weft_mesh::io::write_tetgen(&out.join("rest.node"), mesh)?;
-            weft_mesh::io::write_obj(
-                &out.join("rest_surface.obj"),
-                surface.mesh.positions(),
-                surface.mesh.faces(),
-            )?;
-            let what = format!("{} nodes / {} tets", mesh.num_vertices(), mesh.num_tets());
-            (surface.mesh.faces().to_vec(), surface.volume_vertex, what)
-        }
-        Recorder::SoftTissue(s) => {
-            let m = &s.surface().mesh;
-            weft_mesh::io::write_obj(&out.join("rest.obj"), m.positions(), m.faces())?;
-            let n = m.num_vertices();
-            (m.faces().to_vec(), (0..n).collect(), format!("{n} surface vertices"))
-        }
-    };
-    if args.obj {
-        std::fs::create_dir_all(out.join("obj"))?;
-    }
-    let bar = progress_bar(args.quiet, loaded.scene.frames() as u64, &name, "frames")?;
-    let rec = recorder.record(&name, loaded.scene.frames(), &bar, |m, r| {
-        if args.obj {
-            let x = r.positions();
-            let p: Vec<_> = surface_vertex
-                .iter()
-                .map(|&v| nalgebra::Vector3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2]))
-                .collect();
-            weft_mesh::io::write_obj(&out.join(format!("obj/frame_{m:05}.obj")), &p, &faces)?;
-        }
-        Ok(())
-    })?;
-    bar.finish_and_clear();
-    if let Recorder::Volume(s) = &recorder {
-        // The last frame with its displacement field, for ParaView.
-        let x = s.positions();
-        let rest = s.mesh().flat_positions();
-        let u: Vec<f64> = x.iter().zip(&rest).map(|(a, b)| a - b).collect();
-        weft_mesh::io::write_vtk_tets(
-            &out.join("final.vtk"),
-            &weft_mesh::unflatten(&x),
-            s.mesh().tets(),
-            &[("displacement", 3, &u)],
-        )?;
-    }
-    write_safetensors(&out.join("frames.safetensors"), &rec.to_arrays(), rec.metadata.clone())?;
-    finish(out, &rec, &what)
-}
-
-/// Writes `stats.json`, reports, and turns an early stop into an error (after the frames
-/// before it were written).
-fn finish(out: &std::path::Path, rec: &Recording, what: &str) -> anyhow::Result<()> {
-    let stats = Stats {
-        scene: &rec.scene,
-        vertices: rec.vertices,
-        frames: rec.per_frame.len(),
-        total_seconds: rec.total_seconds,
-        mean_ms_per_frame: 1e3 * rec.seconds_per_frame(),
-        mean_newton_iterations: rec.mean_newton_iterations(),
-        error: rec.error.as_deref(),
-        per_frame: &rec.per_frame,
-    };
-    write_json(&out.join("stats.json"), &stats)?;
+    let run = simulate_into(&loaded, out, args.obj, args.quiet)?;
+    let (rec, stats) = (&run.recording, SimulateStats::new(&run.recording));
     eprintln!(
-        "{}: {} frames of {what} in {:.1} s ({:.1} ms/frame, {:.2} Newton iterations/frame) → {}",
+        "{}: {} frames of {} in {:.1} s ({:.1} ms/frame, {:.2} Newton iterations/frame) → {}",
         rec.scene,
         stats.frames,
+        run.what,
         rec.total_seconds,
         stats.mean_ms_per_frame,
         stats.mean_newton_iterations,

@@ -6,94 +6,37 @@
 //! split (normalisation, scaling, standardisation) and the trainer's run: `training.json`,
 //! `train.log`, `best/` and `last/` checkpoints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::{Args, Subcommand};
 
-use weft_experiments::evaluate::nnwarp::WarpMaterial;
-use weft_experiments::progress::TrainProgress;
-
-const EMBED_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults):
-  autoencoder      {\"conv_layers\": 2, \"latent\": 128}: graph convolutions (1-16), latent width
-  latent_hidden    [256, 256]: hidden widths of the latent simulator (1-65536 each)
-  weights          {\"recon\": 1, \"vert\": 1, \"ephys\": 0.5, \"sim\": 1, \"mphys\": 0.5} (>= 0)
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  batch            8 windows per step
-  epochs           [30, 30, 10]: epochs of stages 1, 2, 3 (0 skips a stage)
-  seed             0
-  phys_scale       \"curvature\" | \"inertial\": how L_phys is scaled against L_vert
-  ephys_warmup     0: stage-1 epochs over which lambda_ephys ramps from 0
-  schedule         {\"decay\": {\"kind\": \"constant\"}, \"warmup_epochs\": 0,
-                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
-                   decay kinds: constant | exponential {per_epoch} | reduce-on-plateau {factor, patience}
-  fine_tune_learning_rate  null: stage 3's Adam learning rate (null: adam.learning_rate);
-                   a model continued under another value keeps stages 1 and 2 and retrains stage 3
-Validation: the last two training frames of every 17 (frames 10 and 11 mod 17).";
-
-const NNWARP_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
-  hidden           []: hidden widths (empty: the paper's, 2 x 16, 3 x 16 for StVK; 1-4096 each)
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  batch            1024 node pairs per step
-  epochs           10
-  seed             0
-  schedule         as for every model: decay (constant | exponential | reduce-on-plateau),
-                   warmup_epochs, clip_grad_norm, early_stopping_patience
-Validation: the pairs of the dataset's validation sequences.";
-
-const ALTCONV_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
-  hidden           [32, 64, 128, 64, 32]: cell widths (1-4096 each, at most 64 cells)
-  steps            20 teacher-forced steps per sequence (sequences need steps + 1 frames)
-  epochs           60
-  batch            2 sequences per step
-  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
-  seed             0
-  schedule         {\"decay\": {\"kind\": \"exponential\", \"per_epoch\": 0.995}, \"warmup_epochs\": 0,
-                    \"clip_grad_norm\": null, \"early_stopping_patience\": null}
-  recipe           {\"sampling_max\": 0, \"sampling_epochs\": [0, 0], \"curriculum_start\": 0,
-                    \"curriculum_epochs\": 0, \"validation_rollout\": false}: scheduled sampling
-                   (feed the model's own previous prediction back with a probability rising to
-                   sampling_max over those epochs), a window growing from curriculum_start steps
-                   to steps, and validation scored as a roll-out; off by default
-Validation: Eq. 12 on the dataset's validation sequences over `steps` steps, teacher-forced
-(or rolled out with recipe.validation_rollout); the best epoch's weights are kept.";
-
-const DRAPE_CONFIG: &str = "\
-Configuration file (--config, JSON; omitted fields keep the standard evaluation's values,
-unknown ones are refused):
-  net              {\"hidden\": [64, 256], \"offset_scale\": 0.01}
-  pretrain_epochs  200 (network-only)      finetune_epochs  5 (with --init)
-  batch            16                      learning_rate    1e-3
-  mu_learning_rate 0.1 (Adam on log mu)    epsilon          0.1 (inextensibility bound)
-  quasistatic      the quasistatic layer's spring stiffnesses
-  seed             1
-  schedule         decay (constant | exponential | reduce-on-plateau), warmup_epochs,
-                   clip_grad_norm, early_stopping_patience
-Validation: mean SqrtMSE over the dataset's validation examples.";
+use weft_nn::progress::TrainProgress;
+use weft_nn::train_setup::{
+    DrapeLayerKind, Overrides, altconv_config, drape_config, drape_layer, embed_config, fit_altconv_steps,
+    nnwarp_config, refuse_overwrite, sets_field,
+};
 
 #[derive(Subcommand)]
 pub enum TrainCommand {
     /// Tan et al.'s mesh embedding and latent simulator, in three stages (§VI-A).
-    #[command(after_help = EMBED_CONFIG)]
+    #[command(after_help = weft_nn::config_help::EMBED)]
     Embed(EmbedArgs),
     /// NNWarp's node-wise correction MLP for one material, on the `nnwarp` dataset (§5).
-    #[command(after_help = NNWARP_CONFIG)]
+    #[command(after_help = weft_nn::config_help::NNWARP)]
     Nnwarp(NnwarpArgs),
     /// Alt-ConvLSTM or one of its ConvLSTM baselines on the `limb` dataset (seed 001, §5.1).
-    #[command(after_help = ALTCONV_CONFIG)]
+    #[command(after_help = weft_nn::config_help::ALTCONV)]
     Altconv(AltconvArgs),
     /// Geng et al.'s pose → cloth network on a drape dataset (`drape` or `drape-loose`), alone or trained through
     /// the inextensibility or the quasistatic layer (fixed or learned μ).
-    #[command(after_help = DRAPE_CONFIG)]
+    #[command(after_help = weft_nn::config_help::DRAPE)]
     Drape(DrapeArgs),
 }
 
 /// Flags every `train` command takes.
 #[derive(Args, Clone, Default)]
-pub struct Common {
+pub struct TrainArgs {
     /// Training configuration (JSON; the fields are listed below).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -177,7 +120,7 @@ pub struct DrapeArgs {
     #[arg(long)]
     pub train_examples: Option<usize>,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -194,7 +137,7 @@ pub struct AltconvArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -202,15 +145,14 @@ pub struct NnwarpArgs {
     /// An `nnwarp` dataset directory written by `cargo xtask dataset nnwarp`.
     #[arg(long)]
     pub data: PathBuf,
-    /// The material whose registered shapes the network learns: co-rotational, stvk or
-    /// neo-hookean.
-    #[arg(long)]
-    pub material: WarpMaterial,
+    /// The material whose registered shapes the network learns.
+    #[arg(long, value_parser = warp_materials())]
+    pub material: String,
     /// Where the model is written.
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -228,45 +170,25 @@ pub struct EmbedArgs {
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
-    pub common: Common,
+    pub common: TrainArgs,
 }
 
-/// Reads a JSON configuration file, or the default.
-fn read_config<T: serde::de::DeserializeOwned + Default>(path: Option<&Path>) -> anyhow::Result<T> {
-    match path {
-        Some(p) => {
-            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-                .with_context(|| format!("parsing the configuration {}", p.display()))
-        }
-        None => Ok(T::default()),
-    }
+/// The materials an NNWarp network is trained for, by their dataset keys.
+fn warp_materials() -> clap::builder::PossibleValuesParser {
+    use weft_sim::energies::Material;
+    [Material::CoRotational, Material::StVK, Material::NeoHookean]
+        .map(weft_data::nnwarp::material_key)
+        .into()
 }
 
-impl Common {
-    /// Applies `--seed`, `--lr` and `--epochs` to a configuration's fields.
-    fn apply(&self, seed: &mut u64, lr: &mut f64, epochs: &mut [usize]) {
-        if let Some(s) = self.seed {
-            *seed = s;
-        }
-        if let Some(l) = self.lr {
-            *lr = l;
-        }
-        if let Some(e) = self.epochs {
-            epochs.iter_mut().for_each(|x| *x = e);
+impl TrainArgs {
+    fn overrides(&self) -> Overrides {
+        Overrides {
+            seed: self.seed,
+            learning_rate: self.lr,
+            epochs: self.epochs,
         }
     }
-}
-
-/// Refuses to overwrite a model unless asked to continue it.
-fn check_out(out: &Path, resume: bool) -> anyhow::Result<()> {
-    let holds = out.join("config.json").exists() || out.join("training.json").exists();
-    if holds && !resume {
-        bail!(
-            "{} already holds a model; pass --resume to continue it or choose another --out",
-            out.display()
-        );
-    }
-    Ok(())
 }
 
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
@@ -279,73 +201,49 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
 }
 
 fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_nn::drape::{DrapeTrainingSettings, Layer, Layers, Plan, fit};
+    use weft_nn::drape::DrapeRun;
+    use weft_nn::drape::Plan;
     let c = &args.common;
-    let mut config: DrapeTrainingSettings = read_config(c.config.as_deref())?;
-    let mut epochs = [config.pretrain_epochs, config.finetune_epochs];
-    c.apply(&mut config.seed, &mut config.learning_rate, &mut epochs);
-    [config.pretrain_epochs, config.finetune_epochs] = epochs;
-    config.validate()?;
-    if args.mu.is_some() && args.layer != DrapeLayer::Quasistatic {
-        bail!("--mu sets the quasistatic layer's μ; it needs --layer quasistatic");
-    }
-    let mu = args.mu.unwrap_or(0.1);
-    if !(mu > 0.0 && mu.is_finite()) {
-        bail!("--mu must be positive and finite, not {mu}");
-    }
-    if let Some(m) = args.scan_mu.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
-        bail!("--scan-mu values must be positive and finite, not {m}");
-    }
-    let layer = match (args.layer, args.learn_mu) {
-        (DrapeLayer::None, None) => Layer::None,
-        (DrapeLayer::Socp, None) => Layer::Socp,
-        (DrapeLayer::Quasistatic, None) => Layer::Quasistatic(mu),
-        (DrapeLayer::Quasistatic, Some(learn)) => Layer::LearnedMu {
-            start: mu,
-            per_vertex: learn == LearnMu::PerVertex,
-        },
-        (_, Some(_)) => bail!("--learn-mu needs --layer quasistatic"),
+    let config = drape_config(c.config.as_deref(), &c.overrides())?;
+    let kind = match args.layer {
+        DrapeLayer::None => DrapeLayerKind::None,
+        DrapeLayer::Socp => DrapeLayerKind::Socp,
+        DrapeLayer::Quasistatic => DrapeLayerKind::Quasistatic,
     };
+    let learn_mu = args.learn_mu.map(|l| l == LearnMu::PerVertex);
+    let layer = drape_layer(kind, args.mu, learn_mu, &args.scan_mu)?;
     let epochs = if args.init.is_some() {
         config.finetune_epochs
     } else {
         config.pretrain_epochs
     };
-    check_out(&args.out, c.resume)?;
-    let dataset =
-        weft_data::DrapeDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
-    let device = weft_nn::Device::Cpu;
-    let split = |name: &str| {
-        weft_nn::drape::DrapeTensors::of_split(&dataset, name, &device)
-            .with_context(|| format!("the {name} split of {}", args.data.display()))
-    };
-    let (mut train, validation, test) = (split("train")?, split("validation")?, split("test")?);
+    refuse_overwrite(&args.out, c.resume)?;
+    let mut run = DrapeRun::load(&args.data, &config).with_context(|| format!("loading {}", args.data.display()))?;
     if let Some(n) = args.train_examples {
         anyhow::ensure!(
-            n > 0 && n <= train.len(),
+            n > 0 && n <= run.train.len(),
             "--train-examples {n}: {} has {} training examples",
             args.data.display(),
-            train.len()
+            run.train.len()
         );
-        train = train.select(&(0..n).collect::<Vec<_>>())?;
+        run.keep_training_prefix(n)?;
     }
     anyhow::ensure!(
-        !train.is_empty() && !validation.is_empty(),
+        !run.train.is_empty() && !run.validation.is_empty(),
         "{} needs training and validation examples (it has {} and {})",
         args.data.display(),
-        train.len(),
-        validation.len()
+        run.train.len(),
+        run.validation.len()
     );
-    let v = dataset.sleeve.num_vertices();
-    let layers = Layers::new(&dataset.sleeve, &config)?;
     let name = args
         .out
         .file_name()
         .map_or("model".into(), |n| n.to_string_lossy().into_owned());
     eprintln!(
-        "drape/{name}: {layer}, {} training and {} validation examples on {v} vertices, {epochs} epochs",
-        train.len(),
-        validation.len()
+        "drape/{name}: {layer}, {} training and {} validation examples on {} vertices, {epochs} epochs",
+        run.train.len(),
+        run.validation.len(),
+        run.num_vertices()
     );
     let plan = Plan {
         name: &name,
@@ -355,49 +253,27 @@ fn drape(args: DrapeArgs) -> anyhow::Result<()> {
         retrain_on_mismatch: false,
     };
     let mut progress = TrainProgress::new(c.quiet, &format!("drape/{name}"))?;
-    let fitted = fit(
-        &args.out,
-        &plan,
-        &config,
-        &layers,
-        &train,
-        &validation,
-        v,
-        &mut progress,
-    )?;
+    let fitted = run.fit(&args.out, &plan, &config, &mut progress)?;
     drop(progress);
-    weft_experiments::evaluate::drape::summarize_trained(
-        &args.out,
-        &name,
-        &fitted,
-        &layers,
-        &config,
-        &validation,
-        &test,
-        &dataset.sleeve,
-        &args.scan_mu,
-    )?;
+    let summary = run.summarize(&args.out, &fitted, &config, &args.scan_mu)?;
+    for line in summary.lines(&name) {
+        eprintln!("{line}");
+    }
     eprintln!("model → {}", args.out.display());
     Ok(())
 }
 
 fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    use weft_nn::embed::{EmbedData, EmbedTrainingSettings, train_model};
+    use weft_nn::embed::{EmbedData, train_model};
     let c = &args.common;
-    let mut config: EmbedTrainingSettings = read_config(c.config.as_deref())?;
-    if args.no_pb {
-        config.weights.ephys = 0.0;
-        config.weights.mphys = 0.0;
-    }
-    c.apply(&mut config.seed, &mut config.adam.learning_rate, &mut config.epochs);
-    if c.autograd {
-        config.kernels = weft_nn::Kernels::Autograd;
-    }
-    config.validate()?;
-    if let Some(&s) = args.stages.iter().find(|s| !(1..=3).contains(*s)) {
-        bail!("stage {s} does not exist (stages are 1, 2 and 3)");
-    }
-    check_out(&args.out, c.resume)?;
+    let config = embed_config(
+        c.config.as_deref(),
+        &c.overrides(),
+        args.no_pb,
+        c.autograd,
+        &args.stages,
+    )?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
     let name = dataset.name.clone();
@@ -427,26 +303,19 @@ fn embed(args: EmbedArgs) -> anyhow::Result<()> {
 }
 
 fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{AltConvTrainingSettings, Variant, train_model};
+    use weft_nn::altconv::{Variant, train_model};
     let c = &args.common;
     let variant = Variant::from_name(&args.model)?;
-    let mut config: AltConvTrainingSettings = match &c.config {
-        Some(_) => read_config(c.config.as_deref())?,
-        None => AltConvTrainingSettings::new(variant),
-    };
-    config.variant = variant;
-    c.apply(
-        &mut config.seed,
-        &mut config.adam.learning_rate,
-        std::slice::from_mut(&mut config.epochs),
-    );
-    if c.autograd {
-        config.kernels = weft_nn::altconv::Kernels::Autograd;
-    }
-    config.validate()?;
-    check_out(&args.out, c.resume)?;
+    let mut config = altconv_config(c.config.as_deref(), &c.overrides(), variant, c.autograd)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset =
         weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
+    if !sets_field(c.config.as_deref(), "steps")? {
+        if let Some(fit) = fit_altconv_steps(&mut config, &dataset) {
+            eprintln!("{fit}");
+        }
+        config.validate()?;
+    }
     eprintln!(
         "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices",
         variant.name(),
@@ -465,29 +334,25 @@ fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
         trained.state.epochs_done,
         1e3 * trained.state.best_validation
     );
-    weft_experiments::evaluate::altconv::summarize_trained(&args.out, &dataset, &trained)?;
+    if let Some(summary) = weft_nn::altconv::validation_rollout(&args.out, &dataset, &trained)? {
+        for (name, mm) in &summary.errors_mm {
+            eprintln!(
+                "altconv/{}: {name} roll-out error over steps 1-{} of the validation sequences: {mm:.3} mm",
+                variant.name(),
+                summary.steps
+            );
+        }
+    }
     eprintln!("model → {}", args.out.display());
     Ok(())
 }
 
 fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
-    use weft_nn::nnwarp::{WarpTrainingSettings, train_model};
+    use weft_nn::nnwarp::train_model;
     let c = &args.common;
-    let mut config: WarpTrainingSettings = read_config(c.config.as_deref())?;
-    let material = args.material.key();
-    if !config.material.is_empty() && config.material != material {
-        bail!(
-            "the configuration names material {:?} but --material is {material}",
-            config.material
-        );
-    }
-    c.apply(
-        &mut config.seed,
-        &mut config.adam.learning_rate,
-        std::slice::from_mut(&mut config.epochs),
-    );
-    config.validate()?;
-    check_out(&args.out, c.resume)?;
+    let material = args.material.as_str();
+    let config = nnwarp_config(c.config.as_deref(), &c.overrides(), material)?;
+    refuse_overwrite(&args.out, c.resume)?;
     let dataset = weft_data::WarpDataset::load(&args.data, material)
         .with_context(|| format!("loading {}", args.data.display()))?;
     let mut progress = TrainProgress::new(c.quiet, &format!("nnwarp/{material}"))?;
@@ -499,24 +364,4 @@ fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
     );
     eprintln!("model → {}", args.out.display());
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    /// `train embed --help` lists every field a configuration file may set (the kernels
-    /// are the `--autograd` flag's).
-    #[test]
-    fn the_embed_configuration_help_names_every_field() {
-        let config = weft_nn::embed::EmbedTrainingSettings {
-            fine_tune_learning_rate: Some(1e-4),
-            ..Default::default()
-        };
-        let fields = serde_json::to_value(&config).unwrap();
-        for key in fields.as_object().unwrap().keys().filter(|k| *k != "kernels") {
-            assert!(
-                super::EMBED_CONFIG.contains(&format!("  {key} ")),
-                "{key} is not in the help"
-            );
-        }
-    }
 }

@@ -5,15 +5,16 @@
 //! a static scene), each node's load rotated back to its rest orientation first, and every
 //! frame corrected node by node by the trained network (`weft_nn::nnwarp::NnWarpSimulation`).
 //! With `--reference` the scene also runs as it is written (full nonlinear FEM), and each
-//! frame's VTK carries the per-node error against it.
+//! frame's VTK carries the per-node error against it. The loop is weft-nn's
+//! (`weft_nn::nnwarp::run_against_reference`); this module writes its frames.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use nalgebra::Vector3;
-use weft_nn::nnwarp::{NnWarpSimulation, load_model, rel_error};
+use weft_nn::nnwarp::{NnWarpSimulation, load_model};
+use weft_nn::nnwarp::{ReferenceTwins, run_against_reference};
+use weft_nn::nnwarp::{WarpRunSetup, WarpRunSummary, write_frame_vtk};
 use weft_sim::{AnyScene, VolumeSimulation};
 
 use weft_data::files::write_json;
@@ -77,93 +78,42 @@ pub fn run(args: WarpArgs) -> anyhow::Result<()> {
         );
     }
     // The reference twin builds the body, anchors and loads once; the linear twin shares them.
-    let reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
+    let mut reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
     let mut runtime = NnWarpSimulation::new(&reference_sim, mlp)?;
     let mesh = reference_sim.mesh().clone();
-    let mut reference = if args.reference { Some(reference_sim) } else { None };
+    let twins = args.reference.then(|| ReferenceTwins {
+        reference: &mut reference_sim,
+        others: Vec::new(),
+    });
     let rest = mesh.flat_positions();
-    let n = rest.len();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
-    let mut frames = Vec::new();
-    let (mut solve_seconds, mut warp_seconds, mut reference_seconds) = (0.0, 0.0, 0.0);
-    for k in 1..=scene.frames {
-        let frame = runtime.step()?;
-        solve_seconds += frame.solve_seconds;
-        warp_seconds += frame.warp_seconds;
-        let (u, u_lin) = (frame.warped, frame.linear);
-        let mut record = serde_json::json!({ "frame": k });
-        let mut error: Option<Vec<f64>> = None;
-        if let Some(sim) = &mut reference {
-            let t = Instant::now();
-            let x = sim.step().with_context(|| format!("reference frame {k}"))?.positions;
-            reference_seconds += t.elapsed().as_secs_f64();
-            let u_ref: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
-            record["rel_error_nnwarp"] = rel_error(&u, &u_ref).into();
-            record["rel_error_linear_solve"] = rel_error(&u_lin, &u_ref).into();
-            error = Some(
-                (0..n / 3)
-                    .map(|i| {
-                        Vector3::new(
-                            u[3 * i] - u_ref[3 * i],
-                            u[3 * i + 1] - u_ref[3 * i + 1],
-                            u[3 * i + 2] - u_ref[3 * i + 2],
-                        )
-                        .norm()
-                    })
-                    .collect(),
-            );
+    let report = run_against_reference(&mut runtime, twins, scene.frames, |f| {
+        if f.frame % args.every == 0 || f.frame == scene.frames {
+            write_frame_vtk(&args.out, f, &rest, &mesh)?;
         }
-        frames.push(record);
-        if k % args.every == 0 || k == scene.frames {
-            let positions: Vec<Vector3<f64>> = (0..n / 3)
-                .map(|i| {
-                    Vector3::new(
-                        rest[3 * i] + u[3 * i],
-                        rest[3 * i + 1] + u[3 * i + 1],
-                        rest[3 * i + 2] + u[3 * i + 2],
-                    )
-                })
-                .collect();
-            let mut fields: Vec<weft_mesh::io::PointField<'_>> =
-                vec![("displacement", 3, &u[..]), ("linear_displacement", 3, &u_lin[..])];
-            if let Some(e) = &error {
-                fields.push(("error", 1, &e[..]));
-            }
-            weft_mesh::io::write_vtk_tets(
-                &args.out.join(format!("frame-{k:04}.vtk")),
-                &positions,
-                mesh.tets(),
-                &fields,
-            )?;
-        }
-    }
-    let frames_run = scene.frames.max(1) as f64;
-    let summary = serde_json::json!({
-        "scene": scene.name,
-        "model": args.model.display().to_string(),
-        "material": config.material,
-        "reference_material": scene.material.name(),
-        "nodes": mesh.num_vertices(),
-        "tets": mesh.num_tets(),
-        "frames": frames,
-        "factorization_seconds": runtime.linear().factorization_seconds(),
-        "solve_seconds_per_frame": solve_seconds / frames_run,
-        "nnwarp_seconds_per_frame": warp_seconds / frames_run,
-        "reference_seconds_per_frame": if args.reference { Some(reference_seconds / frames_run) } else { None },
-    });
+        anyhow::Ok(())
+    })
+    .context("running NNWarp against the full FEM reference")?;
+    let setup = WarpRunSetup {
+        scene: &scene.name,
+        model: &args.model,
+        material: &config.material,
+        reference_material: scene.material.name(),
+        mesh: &mesh,
+        factorization_seconds: runtime.linear().factorization_seconds(),
+    };
+    let summary = WarpRunSummary::new(&setup, &report, scene.frames);
     write_json(&args.out.join("summary.json"), &summary)?;
     eprintln!(
         "{}: {} frames, linear solve {:.2} ms + NNWarp {:.2} ms per frame{} → {}",
         scene.name,
         scene.frames,
-        1e3 * solve_seconds / frames_run,
-        1e3 * warp_seconds / frames_run,
-        if args.reference {
-            format!(", full FEM {:.1} ms per frame", 1e3 * reference_seconds / frames_run)
-        } else {
-            String::new()
-        },
+        1e3 * summary.solve_seconds_per_frame,
+        1e3 * summary.nnwarp_seconds_per_frame,
+        summary
+            .reference_seconds_per_frame
+            .map_or(String::new(), |s| format!(", full FEM {:.1} ms per frame", 1e3 * s)),
         args.out.display()
     );
     Ok(())

@@ -4,6 +4,13 @@
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
+    /// An error encoding one frame of several (or the chunk of frames from it).
+    #[error("encoding frame {frame}: {source}")]
+    AtFrame {
+        frame: usize,
+        #[source]
+        source: Box<Error>,
+    },
     #[error(
         "rest face {face} has area {area:e}: cotangent weights and normals are undefined on a collapsed rest triangle"
     )]

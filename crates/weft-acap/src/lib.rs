@@ -47,6 +47,7 @@
 mod consistency;
 pub mod error;
 mod features;
+pub mod frames;
 mod inverse;
 mod normalization;
 mod rings;

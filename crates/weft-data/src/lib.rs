@@ -14,6 +14,8 @@
 //!   checksum and every array's shape and finiteness before handing frames on;
 //! - [`record`]: the one frame-recording driver ([`Recorder`]) the generator, the
 //!   `simulate` command and the evaluation step any scene through;
+//! - [`arrays`]: loose `.npy` arrays (read and written) and the frames of a `simulate`
+//!   output's safetensors, read checked;
 //! - [`files`]: atomic file writing (a temporary name renamed into place), deterministic
 //!   safetensors bytes, SHA-256, the progress-bar style.
 //!
@@ -34,13 +36,17 @@
 //! # Ok::<(), weft_data::Error>(())
 //! ```
 
+pub mod acap_files;
+pub mod arrays;
 pub mod drape;
 pub mod error;
 pub mod files;
 pub mod generate;
+pub mod generate_all;
 pub mod nnwarp;
 pub mod read;
 pub mod record;
+pub mod simulate;
 pub mod spec;
 
 pub use error::{Context, Error, Result};

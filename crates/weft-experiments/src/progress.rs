@@ -1,10 +1,5 @@
-//! A training run's progress on the terminal: a bar over its batches and its epoch lines.
-
-use std::sync::OnceLock;
-
-use indicatif::{MultiProgress, ProgressBar};
-
-use weft_data::files::progress_bar;
+//! A training run's progress on the terminal: weft-nn's [`weft_nn::progress::TrainProgress`]
+//! on the stack of bars of models trained at once, held back while a job is timed alone.
 
 /// A training run's progress: a bar over its batches (on a terminal) and its epoch lines
 /// above it — or, off a terminal where indicatif hides the bar, on standard error. With
@@ -14,70 +9,32 @@ use weft_data::files::progress_bar;
 /// have a bar, stacked rather than drawn over each other, and their epoch lines carry the
 /// model's tag.
 #[derive(Debug)]
-pub struct TrainProgress {
-    bar: ProgressBar,
-    quiet: bool,
-    tag: Option<String>,
-}
-
-/// Every training bar of the process, stacked.
-fn bars() -> &'static MultiProgress {
-    static BARS: OnceLock<MultiProgress> = OnceLock::new();
-    BARS.get_or_init(MultiProgress::new)
-}
+pub struct TrainProgress(weft_nn::progress::TrainProgress);
 
 impl TrainProgress {
     pub fn new(quiet: bool, prefix: &str) -> crate::Result<Self> {
-        let bar = progress_bar(quiet, 0, prefix, "batches")?;
-        Ok(Self {
-            // A quiet bar stays hidden: one added to the stack would draw.
-            bar: if quiet { bar } else { bars().add(bar) },
-            quiet,
-            tag: None,
-        })
+        // A job timing something alone holds the next batch back (`timed_alone`).
+        let progress = weft_nn::progress::TrainProgress::stacked(quiet, prefix)?
+            .before_each_batch(crate::evaluate::context::pause_point);
+        Ok(Self(progress))
     }
 
     /// Epoch lines start with `[tag]`, naming the model among others training at once.
-    pub fn tagged(mut self, tag: impl Into<String>) -> Self {
-        self.tag = Some(tag.into());
-        self
+    pub fn tagged(self, tag: impl Into<String>) -> Self {
+        Self(self.0.tagged(tag))
     }
 }
 
 impl weft_nn::trainer::Observer for TrainProgress {
     fn start(&mut self, batches: u64) {
-        self.bar.set_length(batches);
-        self.bar.set_position(0);
+        self.0.start(batches);
     }
 
     fn batch(&mut self, epoch: usize, loss: f64) {
-        // A job timing something alone holds the next batch back (`timed_alone`).
-        crate::evaluate::context::pause_point();
-        self.bar.set_message(format!("epoch {} loss {loss:.3e}", epoch + 1));
-        self.bar.inc(1);
+        self.0.batch(epoch, loss);
     }
 
     fn epoch(&mut self, line: &str) {
-        if self.quiet {
-            return;
-        }
-        let line = match &self.tag {
-            Some(tag) => format!("[{tag}] {line}"),
-            None => line.to_string(),
-        };
-        if self.bar.is_hidden() {
-            eprintln!("{line}");
-        } else {
-            self.bar.println(line);
-        }
-    }
-}
-
-impl Drop for TrainProgress {
-    fn drop(&mut self) {
-        self.bar.finish_and_clear();
-        if !self.quiet {
-            bars().remove(&self.bar);
-        }
+        self.0.epoch(line);
     }
 }

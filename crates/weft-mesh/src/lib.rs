@@ -29,6 +29,7 @@ pub mod error;
 pub mod generators;
 pub mod geodesic;
 pub mod geometry;
+pub mod info;
 pub mod io;
 pub mod limb;
 pub mod tetmesh;

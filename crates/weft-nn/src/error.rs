@@ -16,6 +16,9 @@ pub enum Error {
     /// The physics (L_phys and its gradient) failed.
     #[error(transparent)]
     Sim(#[from] weft_sim::Error),
+    /// Writing a mesh file failed.
+    #[error(transparent)]
+    Mesh(#[from] weft_mesh::Error),
     /// An input has the wrong shape for what it feeds.
     #[error("{what}: expected shape {expected}, got {got}")]
     Shape {
@@ -58,6 +61,15 @@ pub enum Error {
     /// Reading a dataset failed (a missing or changed file, a bad array).
     #[error(transparent)]
     Data(#[from] weft_data::Error),
+    /// A projection layer failed on every example scored (the first failure).
+    #[error("the postprocess failed on every example: {first}")]
+    PostprocessFailed { first: String },
+    /// A training configuration file does not parse (or names an unknown field).
+    #[error("parsing the configuration {path}: {reason}")]
+    ConfigFile { path: String, reason: String },
+    /// A training run would overwrite a model it was not asked to continue.
+    #[error("{dir} already holds a model; pass --resume to continue it or choose another --out")]
+    ModelExists { dir: String },
     #[error("I/O error on {path}: {source}")]
     Io {
         path: String,

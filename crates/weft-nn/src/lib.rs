@@ -75,6 +75,7 @@
 pub mod adam;
 pub mod altconv;
 pub mod checkpoint;
+pub mod config_help;
 pub mod convert;
 pub mod drape;
 pub mod embed;
@@ -89,6 +90,8 @@ pub mod ops;
 pub mod params;
 pub mod pca;
 pub mod pca_simulator;
+pub mod progress;
+pub mod train_setup;
 pub mod trainer;
 
 pub use candle_core::Device;

@@ -6,6 +6,9 @@
 pub enum Error {
     #[error(transparent)]
     Mesh(#[from] weft_mesh::Error),
+    /// A mesh file to project cannot be read or does not fit the rest mesh.
+    #[error("{0}")]
+    MeshFile(String),
     #[error(transparent)]
     Sim(#[from] weft_sim::Error),
     #[error(transparent)]

@@ -41,6 +41,7 @@
 pub mod axial;
 mod batch;
 pub mod error;
+pub mod files;
 mod ipm;
 mod kkt;
 mod krylov;

@@ -52,10 +52,12 @@ mod cell;
 mod fused;
 mod model;
 mod runtime;
+mod summary;
 mod training;
 
 pub use crate::Kernels;
 pub use fused::FusedWorkspace;
 pub use model::*;
 pub use runtime::AltConvRuntime;
+pub use summary::*;
 pub use training::*;

@@ -11,7 +11,9 @@
 //! item.
 
 mod model;
+mod run;
 mod training;
 
 pub use model::*;
+pub use run::*;
 pub use training::*;

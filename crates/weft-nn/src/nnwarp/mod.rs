@@ -12,9 +12,13 @@
 //! item.
 
 mod model;
+mod reference;
+mod run;
 mod runtime;
 mod training;
 
 pub use model::*;
+pub use reference::*;
+pub use run::*;
 pub use runtime::*;
 pub use training::*;
