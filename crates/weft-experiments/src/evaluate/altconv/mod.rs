@@ -31,7 +31,7 @@ use crate::evaluate::context::{EvalContext, generate_dataset_frames, ground_trut
 use crate::records::ExperimentOutput;
 use weft_data::Size;
 
-pub use scoring::{score_model, summarize_trained};
+pub use scoring::score_model;
 
 /// The soft-tissue datasets the experiment runs on: `limb`, whose tissue barely leaves the
 /// skinned surface, and `limb-jiggle`, whose secondary motion is the thing to learn

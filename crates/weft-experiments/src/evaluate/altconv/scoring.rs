@@ -4,7 +4,6 @@
 //! outside the evaluation.
 
 use std::collections::HashMap;
-use std::path::Path;
 
 use weft_data::{LimbDataset, LimbSequence};
 use weft_nn::altconv::{AltConvNet, score_sequence};
@@ -191,43 +190,6 @@ pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
         write_predictions(ctx, method, &dataset, split, horizon, &e.surfaces)?;
     }
     Ok(out)
-}
-
-/// What `cargo xtask train altconv` reports of a model it trained: its roll-out error over
-/// up to 50 steps of the dataset's validation sequences beside skinning alone, printed and
-/// written to `scores.json` in the model directory. Validation, not test: a run made to
-/// choose a recipe must not see the figures the claim is decided on (the evaluation reads
-/// the test split once).
-pub fn summarize_trained(
-    out: &Path,
-    dataset: &LimbDataset,
-    trained: &weft_nn::altconv::TrainedAltConv,
-) -> crate::Result<()> {
-    // Where the model stands on held-out motions: the roll-out against skinning alone.
-    let validation: Vec<_> = dataset.split("validation").collect();
-    if let Some(frames) = validation.iter().map(|s| s.skinned.len()).min() {
-        let horizon = (frames - 1).min(50);
-        let mut scores = serde_json::Map::new();
-        for (name, model) in [("skinning", None), (trained.net.variant().name(), Some(&trained.net))] {
-            let mut sum = (0.0, 0usize);
-            for s in &validation {
-                let e = weft_nn::altconv::score_sequence(model, &trained.adj, s, horizon)?;
-                sum.0 += e.rollout.iter().flatten().sum::<f64>();
-                sum.1 += e.rollout.iter().map(Vec::len).sum::<usize>();
-            }
-            let mm = 1e3 * sum.0 / sum.1.max(1) as f64;
-            eprintln!(
-                "altconv/{}: {name} roll-out error over steps 1-{horizon} of the validation sequences: {mm:.3} mm",
-                trained.net.variant().name()
-            );
-            scores.insert(name.to_string(), serde_json::json!(mm));
-        }
-        weft_data::files::write_text(
-            &out.join("scores.json"),
-            &serde_json::to_string_pretty(&serde_json::json!({ "steps": horizon, "validation_rollout_mm": scores }))?,
-        )?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]

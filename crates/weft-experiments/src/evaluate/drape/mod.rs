@@ -34,7 +34,7 @@ use crate::records::ExperimentOutput;
 use data::GarmentData;
 use weft_data::Size;
 
-pub use scoring::{Scores, score, score_model, summarize_trained};
+pub use scoring::{Scores, score, score_model};
 
 const SPLITS: [&str; 3] = ["train", "validation", "test"];
 /// The fixed μ of Geng et al. Table 3, with their method-name suffixes.

@@ -4,13 +4,12 @@
 //! [`score_model`] for a model trained outside the evaluation.
 
 use std::path::Path;
-use std::time::Instant;
 
 use weft_data::DrapeDataset;
 use weft_data::files::progress_bar;
 use weft_nn::Device;
-use weft_nn::drape::{DrapeModel, DrapeTensors, POSE_ANGLES, predict_each, sqrtmse_maxdist_mm};
-use weft_nn::drape::{DrapeTrainingSettings, Fitted, Layer, Layers};
+use weft_nn::drape::{DrapeModel, DrapeTensors, POSE_ANGLES};
+use weft_nn::drape::{Fitted, Layer};
 use weft_nn::params::ParamStore;
 use weft_proj::RestShape;
 
@@ -146,79 +145,9 @@ pub(super) fn score_methods(
     Ok(table)
 }
 
-/// Per-split scores of one method, over the examples its postprocess succeeded on.
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct Scores {
-    pub sqrtmse: f64,
-    /// The training loss's measure: the mean of the squared per-example SqrtMSE (mm²).
-    pub loss_mm2: f64,
-    pub maxdist: f64,
-    pub compression: f64,
-    pub stretching: f64,
-    pub seconds_per_example: f64,
-    /// Examples the postprocess failed on, and the first failure.
-    pub failed: usize,
-    pub first_error: Option<String>,
-}
-
-/// Scores `model` on `data`; returns the scores and, per scored example, its index in
-/// `data` and its prediction.
-pub fn score(
-    model: &DrapeModel,
-    data: &DrapeTensors,
-    rest: &RestShape,
-    k: f64,
-    batch: usize,
-) -> crate::Result<(Scores, Vec<(usize, Vec<f64>)>)> {
-    let start = Instant::now();
-    let pred = predict_each(model, data, batch)?;
-    let seconds_per_example = start.elapsed().as_secs_f64() / pred.len().max(1) as f64;
-    let truth = data.truths()?;
-    let mut s = Scores {
-        sqrtmse: 0.0,
-        loss_mm2: 0.0,
-        maxdist: 0.0,
-        compression: 0.0,
-        stretching: 0.0,
-        seconds_per_example,
-        failed: 0,
-        first_error: None,
-    };
-    let mut kept = Vec::with_capacity(pred.len());
-    for (i, (p, t)) in pred.into_iter().zip(&truth).enumerate() {
-        let p = match p {
-            Ok(p) => p,
-            Err(e) => {
-                s.failed += 1;
-                s.first_error.get_or_insert(e);
-                continue;
-            }
-        };
-        let (e, m) = sqrtmse_maxdist_mm(&p, t)?;
-        s.sqrtmse += e;
-        s.loss_mm2 += e * e;
-        s.maxdist += m;
-        let (a, b) = (
-            weft_proj::strain_summary(rest, &p, k)?,
-            weft_proj::strain_summary(rest, t, k)?,
-        );
-        s.compression += 1e3 * (a.compression_energy - b.compression_energy).abs();
-        s.stretching += 1e3 * (a.stretching_energy - b.stretching_energy).abs();
-        kept.push((i, p));
-    }
-    crate::error::ensure!(
-        !kept.is_empty(),
-        "the postprocess failed on every example: {}",
-        s.first_error.clone().unwrap_or_default()
-    );
-    let n = kept.len() as f64;
-    s.sqrtmse /= n;
-    s.loss_mm2 /= n;
-    s.maxdist /= n;
-    s.compression /= n;
-    s.stretching /= n;
-    Ok((s, kept))
-}
+/// Per-split scores of one method and the function that computes them: weft-nn's, the
+/// same that `cargo xtask train drape` reports.
+pub use weft_nn::drape::{Scores, score};
 
 /// Scores of a method on a split, cached beside the models: a session that stops while
 /// scoring resumes without re-solving the layers. The key names the model's training
@@ -354,133 +283,4 @@ pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
     }
     write_predictions(ctx, scene, &method, &data, &pred)?;
     Ok(out)
-}
-
-/// What `cargo xtask train drape` reports of a model it trained: batches the layer failed
-/// on, the last epoch, the kept model scored on the validation and test splits with cold
-/// solves as the evaluation scores it (`scores.json`), the second half of training (the
-/// validation error's scatter, the last μ, the strength of μ's gradient against its noise),
-/// and with `scan_mu` the validation loss of the kept network at each fixed μ
-/// (`mu-scan.json`; docs/DRAPE.md, the μ study).
-#[allow(clippy::too_many_arguments)]
-pub fn summarize_trained(
-    out: &Path,
-    name: &str,
-    fitted: &Fitted,
-    layers: &Layers,
-    config: &DrapeTrainingSettings,
-    validation: &DrapeTensors,
-    test: &DrapeTensors,
-    sleeve: &weft_mesh::TriMesh,
-    scan_mu: &[f64],
-) -> crate::Result<()> {
-    let p = &fitted.state;
-    let (skipped, first) = p.skipped();
-    if skipped > 0 {
-        eprintln!(
-            "drape/{name}: {skipped} training batches skipped because the layer failed on them; the first: {}",
-            first.unwrap_or_default()
-        );
-    }
-    // The kept model, scored with cold solves as the evaluation scores it.
-    let rest = RestShape::new(sleeve)?;
-    let k = config.quasistatic.stretch_stiffness;
-    let mut scores = serde_json::Map::new();
-    for (split, data) in [("validation", validation), ("test", test)] {
-        if data.is_empty() {
-            continue;
-        }
-        let (s, _) = score(&fitted.model, data, &rest, k, config.batch)?;
-        eprintln!(
-            "drape/{name}: kept epoch {}: {split} SqrtMSE {:.4} mm, MaxDist {:.4} mm ({} examples failed)",
-            p.best_epoch, s.sqrtmse, s.maxdist, s.failed
-        );
-        scores.insert(
-            split.into(),
-            serde_json::json!({
-                "sqrtmse-mm": s.sqrtmse,
-                "maxdist-mm": s.maxdist,
-                "compression-energy-error": s.compression,
-                "stretching-energy-error": s.stretching,
-                "failed": s.failed,
-            }),
-        );
-    }
-    let mu = fitted
-        .mu
-        .as_ref()
-        .map(|m| m.iter().sum::<f64>() / m.len().max(1) as f64);
-    // Where training settles, over its second half: how much the validation error scatters
-    // from epoch to epoch, where μ ends and how strong μ's gradient is against its noise
-    // (the median over epochs of |mean| / sd of the per-batch gradient).
-    let late = &p.history[p.history.len() / 2..];
-    let (val_mean, val_sd) = crate::records::mean_sd(late.iter().map(|h| h.validation));
-    let mut signal: Vec<f64> = late
-        .iter()
-        .filter_map(|h| Some((*h.extra.get("mu_gradient_mean")?, *h.extra.get("mu_gradient_sd")?)))
-        .filter(|(_, sd)| *sd > 0.0)
-        .map(|(mean, sd)| mean.abs() / sd)
-        .collect();
-    signal.sort_by(f64::total_cmp);
-    let second_half = serde_json::json!({
-        "epochs": [p.history.len() / 2 + 1, p.history.len()],
-        "validation_sqrtmse_mm_mean": val_mean,
-        "validation_sqrtmse_mm_sd": val_sd,
-        "last_mu": late.last().and_then(|h| h.extra.get("mu")),
-        "mu_gradient_mean_over_sd_median": signal.get(signal.len() / 2),
-    });
-    if late.len() > 1 {
-        eprintln!(
-            "drape/{name}: epochs {}-{}: validation SqrtMSE {val_mean:.4} ± {val_sd:.4} mm{}",
-            p.history.len() / 2 + 1,
-            p.history.len(),
-            signal
-                .get(signal.len() / 2)
-                .map_or(String::new(), |s| format!(", μ gradient median |mean|/sd {s:.3}"))
-        );
-    }
-    weft_data::files::write_text(
-        &out.join("scores.json"),
-        &serde_json::to_string_pretty(&serde_json::json!({
-            "kept_epoch": p.best_epoch,
-            "epochs": p.epochs_done,
-            "kept_mu_mean": mu,
-            "second_half": second_half,
-            "scores": scores,
-        }))?,
-    )?;
-    if !scan_mu.is_empty() {
-        // The same cold solves as the scores: the loss (mean squared SqrtMSE, mm²) and the
-        // SqrtMSE of the kept network as μ alone varies.
-        let mut scan = Vec::with_capacity(scan_mu.len());
-        for &m in scan_mu {
-            let (s, _) = score(
-                &layers.at_fixed_mu(&fitted.model.net, m),
-                validation,
-                &rest,
-                k,
-                config.batch,
-            )?;
-            let loss = s.loss_mm2;
-            eprintln!(
-                "drape/{name}: μ = {m}: validation SqrtMSE {:.4} mm, loss {loss:.5} mm² ({} examples failed)",
-                s.sqrtmse, s.failed
-            );
-            scan.push(serde_json::json!({
-                "mu": m,
-                "validation_sqrtmse_mm": s.sqrtmse,
-                "validation_loss_mm2": loss,
-                "failed": s.failed,
-            }));
-        }
-        weft_data::files::write_text(
-            &out.join("mu-scan.json"),
-            &serde_json::to_string_pretty(&serde_json::json!({
-                "kept_epoch": p.best_epoch,
-                "kept_mu_mean": mu,
-                "scan": scan,
-            }))?,
-        )?;
-    }
-    Ok(())
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use nalgebra::Vector3;
-use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, WarpContext, load_model, rel_error};
+use weft_nn::nnwarp::{NnWarp, NnWarpSimulation, ReferenceTwins, WarpContext, load_model, run_against_reference};
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
 use weft_sim::scenes::volume::LimbResolution;
 use weft_sim::warp::FieldDirection;
@@ -224,7 +224,6 @@ pub(super) fn trajectory(
                 .total_cmp(&(mesh.positions()[b] - centre).norm())
         })
         .context("empty mesh")?;
-    let rest = mesh.flat_positions();
     let along = |u: &[f64]| Vector3::new(u[3 * tip], u[3 * tip + 1], u[3 * tip + 2]).dot(&direction);
     let labels = ["full FEM (neo-hookean)", "nnwarp", "linear"];
     let mut series: Vec<Series> = labels
@@ -235,18 +234,23 @@ pub(super) fn trajectory(
             y: vec![0.0],
         })
         .collect();
-    let (mut e_nnwarp, mut e_linear) = (0.0, 0.0);
-    for k in 1..=scene.frames {
-        let truth: Vec<f64> = full.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
-        let lin: Vec<f64> = linear.step()?.positions.iter().zip(&rest).map(|(x, r)| x - r).collect();
-        let warped = runtime.step()?.warped;
-        e_nnwarp += rel_error(&warped, &truth);
-        e_linear += rel_error(&lin, &truth);
-        for (s, u) in series.iter_mut().zip([&truth, &warped, &lin]) {
-            s.x.push(k as f64 * dt);
+    // The runtime against full FEM with the linear solve beside it, frame by frame: the
+    // loop `cargo xtask warp --reference` runs too.
+    let twins = ReferenceTwins {
+        reference: &mut full,
+        others: vec![&mut linear],
+    };
+    let report = run_against_reference(&mut runtime, Some(twins), scene.frames, |f| -> crate::Result<()> {
+        let truth = f.reference.context("a run with a reference has its frames")?;
+        for (s, u) in series.iter_mut().zip([truth, &f.runtime.warped, &f.others[0]]) {
+            s.x.push(f.frame as f64 * dt);
             s.y.push(along(u));
         }
-    }
+        Ok(())
+    })?;
+    let (e_nnwarp, e_linear) = report.frames.iter().fold((0.0, 0.0), |(n, l), f| {
+        (n + f.nnwarp.unwrap_or(f64::NAN), l + f.others[0])
+    });
     let frames = scene.frames.max(1) as f64;
     let note = format!(
         "nnwarp/trajectory at Δt = {dt} s: beam tip node {tip}, {} frames under a field of {acceleration:.3} m/s² \
