@@ -312,3 +312,49 @@ fn read_cached(path: &Path, size: Size) -> crate::Result<Option<ExperimentOutput
         Err(_) => Ok(None),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The published report rebuilt from its own experiment outputs
+    /// (`docs/results/experiments/*.json`) is the committed one: `results.json` byte for
+    /// byte and `tables.md` but for the assembly time in its first paragraph. Restructuring
+    /// the experiments, the records or the report cannot change a published figure without
+    /// failing here.
+    #[test]
+    fn the_published_report_rebuilds_from_its_experiment_outputs_unchanged() {
+        let published = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/results");
+        let outputs: Vec<crate::records::ExperimentOutput> = EXPERIMENTS
+            .iter()
+            .map(|e| {
+                let bytes = std::fs::read(published.join("experiments").join(format!("{e}.json"))).unwrap();
+                serde_json::from_slice(&bytes).unwrap()
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("weft-rebuild-published-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // The renders are the experiments' images, which the page embeds; the peers are
+        // points measured outside the evaluation.
+        for sub in ["peers", "renders"] {
+            if published.join(sub).exists() {
+                crate::files::copy_tree(&published.join(sub), &dir.join(sub)).unwrap();
+            }
+        }
+        crate::report::write(&dir, Size::Standard, &outputs, 0.0).unwrap();
+        let read = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
+        assert!(
+            read(&dir, "results.json") == read(&published, "results.json"),
+            "results.json rebuilt from docs/results/experiments differs from the committed one"
+        );
+        // The first paragraph names the seconds the report took to assemble.
+        let body = |t: String| t.split_once("## ").map(|(_, b)| b.to_string()).unwrap_or_default();
+        let (rebuilt, committed) = (body(read(&dir, "tables.md")), body(read(&published, "tables.md")));
+        if rebuilt != committed {
+            let line = rebuilt.lines().zip(committed.lines()).position(|(a, b)| a != b);
+            panic!("tables.md rebuilt differs from the committed one at body line {line:?}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
