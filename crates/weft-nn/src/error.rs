@@ -61,6 +61,27 @@ pub enum Error {
     /// Reading a dataset failed (a missing or changed file, a bad array).
     #[error(transparent)]
     Data(#[from] weft_data::Error),
+    /// Reading the dataset in a directory failed (the cause follows).
+    #[error("loading {path}")]
+    Load {
+        path: String,
+        #[source]
+        source: Box<Error>,
+    },
+    /// `--train-examples` asked for none, or for more than the training split holds.
+    #[error("--train-examples {asked}: {data} has {available} training examples")]
+    TrainExamples {
+        asked: usize,
+        data: String,
+        available: usize,
+    },
+    /// A training run needs training and validation examples.
+    #[error("{data} needs training and validation examples (it has {train} and {validation})")]
+    TooFewExamples {
+        data: String,
+        train: usize,
+        validation: usize,
+    },
     /// A projection layer failed on every example scored (the first failure).
     #[error("the postprocess failed on every example: {first}")]
     PostprocessFailed { first: String },
