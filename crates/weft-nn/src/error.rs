@@ -82,6 +82,25 @@ pub enum Error {
         train: usize,
         validation: usize,
     },
+    /// A flag's value is out of its range.
+    #[error("{flag} {reason}")]
+    InvalidFlag { flag: &'static str, reason: &'static str },
+    /// A volumetric model was asked to run on a scene of another kind.
+    #[error("{scene} is not a volumetric scene; NNWarp warps tetrahedral bodies")]
+    NotVolumetric { scene: String },
+    /// An output directory could not be created.
+    #[error("creating the output directory {path}")]
+    CreateDir {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A warp run failed (the cause follows).
+    #[error("running NNWarp against the full FEM reference")]
+    WarpRun {
+        #[source]
+        source: Box<Error>,
+    },
     /// A projection layer failed on every example scored (the first failure).
     #[error("the postprocess failed on every example: {first}")]
     PostprocessFailed { first: String },
