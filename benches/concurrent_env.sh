@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Two `embed` models training at once in one `evaluate` process, under each setting of the
 # two process-wide variables `cargo xtask evaluate` sets when it trains more than one model
-# at once (xtask/src/evaluate.rs, CONCURRENT_ENV): candle's elementwise pool
+# at once (crates/weft-experiments/src/evaluate/concurrent_env.rs, CONCURRENT_ENV): candle's elementwise pool
 # (CANDLE_NUM_THREADS) and mimalloc's purging of freed memory (MIMALLOC_PURGE_DELAY).
 #
 # Each setting starts a fresh standard `embed` evaluation in a temporary directory whose

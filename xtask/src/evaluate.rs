@@ -42,44 +42,8 @@ pub struct EvaluateArgs {
     jobs: Option<usize>,
 }
 
-/// The environment that models trained at once run faster under, read by candle and
-/// mimalloc once, at their start: candle's elementwise pool (its threads spin between calls
-/// and its calls queue on one lock, which models training at once take turns on), and
-/// mimalloc's return of freed memory to the kernel (each model's large buffers would be
-/// page-faulted back in; the process keeps its peak instead). Two `embed` models on two
-/// cores: a median epoch of 7.95 s without, 5.4 s with both (docs/BENCHMARKS.md,
-/// `benches/concurrent_env.sh`).
-const CONCURRENT_ENV: [(&str, &str); 2] = [("CANDLE_NUM_THREADS", "1"), ("MIMALLOC_PURGE_DELAY", "-1")];
-
-/// With more than one job, re-executes this command (the same process, `exec`) under
-/// [`CONCURRENT_ENV`] unless it already runs under it or the user set those variables;
-/// returns only if nothing is to be done (or not on Unix).
-fn reexec_for_concurrent_jobs(jobs: Option<usize>) -> anyhow::Result<()> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let unset: Vec<(&str, &str)> = CONCURRENT_ENV
-        .into_iter()
-        .filter(|(k, _)| std::env::var_os(k).is_none())
-        .collect();
-    if jobs.unwrap_or(cores) <= 1 || unset.len() < CONCURRENT_ENV.len() {
-        return Ok(());
-    }
-    #[cfg(unix)]
-    {
-        use anyhow::Context;
-        use std::os::unix::process::CommandExt;
-        let exe = std::env::current_exe().context("finding this executable to re-run it")?;
-        let err = std::process::Command::new(&exe)
-            .args(std::env::args_os().skip(1))
-            .envs(unset)
-            .exec();
-        Err(err).with_context(|| format!("re-running {} with {CONCURRENT_ENV:?}", exe.display()))
-    }
-    #[cfg(not(unix))]
-    Ok(())
-}
-
 pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
-    reexec_for_concurrent_jobs(args.jobs)?;
+    weft_experiments::evaluate::reexec_for_concurrent_jobs(args.jobs)?;
     let size = if args.quick { Size::Quick } else { args.size };
     let mut options = EvaluateOptions::new(size);
     if let Some(o) = args.out {

@@ -1,21 +1,17 @@
 //! `cargo xtask train`: argument parsing for training weft-nn's models on pipeline
 //! datasets. Every model trains through `weft_nn::trainer::Trainer` (one epoch loop,
 //! validation-only model selection, a checkpoint each epoch, bit-identical resume); the
-//! drivers that read a dataset and write a model directory are weft-nn's `train_model`
-//! functions. A model directory holds the configuration, what was fitted on the training
+//! jobs that read a dataset, write a model directory and say what they did are
+//! `weft_nn::train_job`'s. A model directory holds the configuration, what was fitted on the training
 //! split (normalisation, scaling, standardisation) and the trainer's run: `training.json`,
 //! `train.log`, `best/` and `last/` checkpoints.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::{Args, Subcommand};
 
-use weft_nn::progress::TrainProgress;
-use weft_nn::train_setup::{
-    DrapeLayerKind, Overrides, altconv_config, drape_config, drape_layer, embed_config, fit_altconv_steps,
-    nnwarp_config, refuse_overwrite, sets_field,
-};
+use weft_nn::train_job::{AltconvJob, DrapeJob, DrapeJobParams, EmbedJob, NnwarpJob, TrainJob, TrainParams};
+use weft_nn::train_setup::{DrapeLayerKind, Overrides};
 
 #[derive(Subcommand)]
 pub enum TrainCommand {
@@ -182,186 +178,50 @@ fn warp_materials() -> clap::builder::PossibleValuesParser {
 }
 
 impl TrainArgs {
-    fn overrides(&self) -> Overrides {
-        Overrides {
-            seed: self.seed,
-            learning_rate: self.lr,
-            epochs: self.epochs,
+    fn params<'a>(&'a self, data: &'a std::path::Path, out: &'a std::path::Path) -> TrainParams<'a> {
+        TrainParams {
+            data,
+            out,
+            config: self.config.as_deref(),
+            overrides: Overrides {
+                seed: self.seed,
+                learning_rate: self.lr,
+                epochs: self.epochs,
+            },
+            resume: self.resume,
+            quiet: self.quiet,
+            autograd: self.autograd,
         }
     }
 }
 
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
-        TrainCommand::Embed(args) => embed(args),
-        TrainCommand::Nnwarp(args) => nnwarp(args),
-        TrainCommand::Altconv(args) => altconv(args),
-        TrainCommand::Drape(args) => drape(args),
-    }
-}
-
-fn drape(args: DrapeArgs) -> anyhow::Result<()> {
-    use weft_nn::drape::DrapeRun;
-    use weft_nn::drape::Plan;
-    let c = &args.common;
-    let config = drape_config(c.config.as_deref(), &c.overrides())?;
-    let kind = match args.layer {
-        DrapeLayer::None => DrapeLayerKind::None,
-        DrapeLayer::Socp => DrapeLayerKind::Socp,
-        DrapeLayer::Quasistatic => DrapeLayerKind::Quasistatic,
-    };
-    let learn_mu = args.learn_mu.map(|l| l == LearnMu::PerVertex);
-    let layer = drape_layer(kind, args.mu, learn_mu, &args.scan_mu)?;
-    let epochs = if args.init.is_some() {
-        config.finetune_epochs
-    } else {
-        config.pretrain_epochs
-    };
-    refuse_overwrite(&args.out, c.resume)?;
-    let mut run = DrapeRun::load(&args.data, &config).with_context(|| format!("loading {}", args.data.display()))?;
-    if let Some(n) = args.train_examples {
-        anyhow::ensure!(
-            n > 0 && n <= run.train.len(),
-            "--train-examples {n}: {} has {} training examples",
-            args.data.display(),
-            run.train.len()
-        );
-        run.keep_training_prefix(n)?;
-    }
-    anyhow::ensure!(
-        !run.train.is_empty() && !run.validation.is_empty(),
-        "{} needs training and validation examples (it has {} and {})",
-        args.data.display(),
-        run.train.len(),
-        run.validation.len()
-    );
-    let name = args
-        .out
-        .file_name()
-        .map_or("model".into(), |n| n.to_string_lossy().into_owned());
-    eprintln!(
-        "drape/{name}: {layer}, {} training and {} validation examples on {} vertices, {epochs} epochs",
-        run.train.len(),
-        run.validation.len(),
-        run.num_vertices()
-    );
-    let plan = Plan {
-        name: &name,
-        layer,
-        init: args.init.as_deref(),
-        epochs,
-        retrain_on_mismatch: false,
-    };
-    let mut progress = TrainProgress::new(c.quiet, &format!("drape/{name}"))?;
-    let fitted = run.fit(&args.out, &plan, &config, &mut progress)?;
-    drop(progress);
-    let summary = run.summarize(&args.out, &fitted, &config, &args.scan_mu)?;
-    for line in summary.lines(&name) {
-        eprintln!("{line}");
-    }
-    eprintln!("model → {}", args.out.display());
-    Ok(())
-}
-
-fn embed(args: EmbedArgs) -> anyhow::Result<()> {
-    use weft_nn::embed::{EmbedData, train_model};
-    let c = &args.common;
-    let config = embed_config(
-        c.config.as_deref(),
-        &c.overrides(),
-        args.no_pb,
-        c.autograd,
-        &args.stages,
-    )?;
-    refuse_overwrite(&args.out, c.resume)?;
-    let dataset =
-        weft_data::ClothDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
-    let name = dataset.name.clone();
-    let data = EmbedData::new(dataset)?;
-    eprintln!(
-        "{name}: {} training and {} validation windows, {} vertices; L_phys scale {:?} {:.4e} m²/J (inertial \
-         Δt²/m̄ {:.4e}, curvature 1/mean diag H {:.4e})",
-        data.train_windows.len(),
-        data.validation_windows.len(),
-        data.num_vertices(),
-        config.phys_scale,
-        data.phys_scale(config.phys_scale),
-        data.inertial_scale,
-        data.curvature_scale
-    );
-    let mut progress = TrainProgress::new(c.quiet, &format!("embed/{name}"))?;
-    let (_, states) = train_model(&args.out, &data, &config, &args.stages, &mut progress)?;
-    drop(progress);
-    for (stage, s) in states {
-        eprintln!(
-            "{name}: stage {stage}: kept epoch {} of {}, validation loss {:.4e}",
-            s.best_epoch, s.epochs_done, s.best_validation
-        );
-    }
-    eprintln!("model → {}", args.out.display());
-    Ok(())
-}
-
-fn altconv(args: AltconvArgs) -> anyhow::Result<()> {
-    use weft_nn::altconv::{Variant, train_model};
-    let c = &args.common;
-    let variant = Variant::from_name(&args.model)?;
-    let mut config = altconv_config(c.config.as_deref(), &c.overrides(), variant, c.autograd)?;
-    refuse_overwrite(&args.out, c.resume)?;
-    let dataset =
-        weft_data::LimbDataset::load(&args.data).with_context(|| format!("loading {}", args.data.display()))?;
-    if !sets_field(c.config.as_deref(), "steps")? {
-        if let Some(fit) = fit_altconv_steps(&mut config, &dataset) {
-            eprintln!("{fit}");
-        }
-        config.validate()?;
-    }
-    eprintln!(
-        "altconv/{}: {} training and {} validation sequences of {} steps, {} vertices",
-        variant.name(),
-        dataset.split("train").count(),
-        dataset.split("validation").count(),
-        config.steps,
-        dataset.rest.num_vertices(),
-    );
-    let mut progress = TrainProgress::new(c.quiet, &format!("altconv/{}", variant.name()))?;
-    let trained = train_model(&args.out, &dataset, &config, &mut progress)?;
-    drop(progress);
-    eprintln!(
-        "altconv/{}: kept epoch {} of {}, validation {:.3} mm",
-        variant.name(),
-        trained.state.best_epoch,
-        trained.state.epochs_done,
-        1e3 * trained.state.best_validation
-    );
-    if let Some(summary) = weft_nn::altconv::validation_rollout(&args.out, &dataset, &trained)? {
-        for (name, mm) in &summary.errors_mm {
-            eprintln!(
-                "altconv/{}: {name} roll-out error over steps 1-{} of the validation sequences: {mm:.3} mm",
-                variant.name(),
-                summary.steps
-            );
+        TrainCommand::Embed(a) => say(EmbedJob::new(a.common.params(&a.data, &a.out), a.no_pb, &a.stages)?),
+        TrainCommand::Nnwarp(a) => say(NnwarpJob::new(a.common.params(&a.data, &a.out), &a.material)?),
+        TrainCommand::Altconv(a) => say(AltconvJob::new(a.common.params(&a.data, &a.out), &a.model)?),
+        TrainCommand::Drape(a) => {
+            let drape = DrapeJobParams {
+                layer: match a.layer {
+                    DrapeLayer::None => DrapeLayerKind::None,
+                    DrapeLayer::Socp => DrapeLayerKind::Socp,
+                    DrapeLayer::Quasistatic => DrapeLayerKind::Quasistatic,
+                },
+                mu: a.mu,
+                learn_mu: a.learn_mu.map(|l| l == LearnMu::PerVertex),
+                init: a.init.as_deref(),
+                scan_mu: &a.scan_mu,
+                train_examples: a.train_examples,
+            };
+            say(DrapeJob::new(a.common.params(&a.data, &a.out), drape)?)
         }
     }
-    eprintln!("model → {}", args.out.display());
-    Ok(())
 }
 
-fn nnwarp(args: NnwarpArgs) -> anyhow::Result<()> {
-    use weft_nn::nnwarp::train_model;
-    let c = &args.common;
-    let material = args.material.as_str();
-    let config = nnwarp_config(c.config.as_deref(), &c.overrides(), material)?;
-    refuse_overwrite(&args.out, c.resume)?;
-    let dataset = weft_data::WarpDataset::load(&args.data, material)
-        .with_context(|| format!("loading {}", args.data.display()))?;
-    let mut progress = TrainProgress::new(c.quiet, &format!("nnwarp/{material}"))?;
-    let (state, n_train, n_val) = train_model(&args.out, &dataset, &config, &mut progress)?;
-    drop(progress);
-    eprintln!(
-        "nnwarp/{material}: {n_train} training and {n_val} validation pairs; kept epoch {} of {}, validation {:.4e}",
-        state.best_epoch, state.epochs_done, state.best_validation
-    );
-    eprintln!("model → {}", args.out.display());
+/// Says what `job` settled, trains it and says its report.
+fn say(job: impl TrainJob) -> anyhow::Result<()> {
+    job.notes().iter().for_each(|line| eprintln!("{line}"));
+    job.start()?.iter().for_each(|line| eprintln!("{line}"));
+    job.run()?.lines.iter().for_each(|line| eprintln!("{line}"));
     Ok(())
 }

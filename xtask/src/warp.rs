@@ -5,19 +5,13 @@
 //! a static scene), each node's load rotated back to its rest orientation first, and every
 //! frame corrected node by node by the trained network (`weft_nn::nnwarp::NnWarpSimulation`).
 //! With `--reference` the scene also runs as it is written (full nonlinear FEM), and each
-//! frame's VTK carries the per-node error against it. The loop is weft-nn's
-//! (`weft_nn::nnwarp::run_against_reference`); this module writes its frames.
+//! frame's VTK carries the per-node error against it. The run is weft-nn's
+//! (`weft_nn::nnwarp::WarpScene`); this module parses its flags and prints.
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
 use clap::Args;
-use weft_nn::nnwarp::{NnWarpSimulation, load_model};
-use weft_nn::nnwarp::{ReferenceTwins, run_against_reference};
-use weft_nn::nnwarp::{WarpRunSetup, WarpRunSummary, write_frame_vtk};
-use weft_sim::{AnyScene, VolumeSimulation};
-
-use weft_data::files::write_json;
+use weft_nn::nnwarp::{WarpScene, WarpSceneParams};
 
 #[derive(Args)]
 pub struct WarpArgs {
@@ -45,76 +39,18 @@ pub struct WarpArgs {
 }
 
 pub fn run(args: WarpArgs) -> anyhow::Result<()> {
-    if args.every == 0 {
-        bail!("--every must be at least 1");
-    }
-    let loaded = weft_sim::load(&args.scene, args.quick)?;
-    let AnyScene::Volume(mut scene) = loaded.scene else {
-        bail!(
-            "{} is not a volumetric scene; NNWarp warps tetrahedral bodies",
-            args.scene
-        );
-    };
-    if let Some(f) = args.frames {
-        scene.frames = f;
-    }
-    let base_dir = loaded.base_dir.as_deref();
-    let (config, mlp) = load_model(&args.model).with_context(|| format!("loading {}", args.model.display()))?;
-    let scene_material = weft_data::nnwarp::material_key(scene.material);
-    if config.material != scene_material {
-        // A network learns one material's nonlinearity (Luo et al. Eq. 6-7); it still
-        // runs, for studies across materials, but its answer is not that material's.
-        eprintln!(
-            "warning: {} was trained on {}, but {} is {}: the correction is applied outside its training{}",
-            args.model.display(),
-            config.material,
-            scene.name,
-            scene_material,
-            if args.reference {
-                " (the error against the reference measures that)"
-            } else {
-                ""
-            }
-        );
-    }
-    // The reference twin builds the body, anchors and loads once; the linear twin shares them.
-    let mut reference_sim = VolumeSimulation::new(scene.clone(), base_dir)?;
-    let mut runtime = NnWarpSimulation::new(&reference_sim, mlp)?;
-    let mesh = reference_sim.mesh().clone();
-    let twins = args.reference.then(|| ReferenceTwins {
-        reference: &mut reference_sim,
-        others: Vec::new(),
-    });
-    let rest = mesh.flat_positions();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating the output directory {}", args.out.display()))?;
-    let report = run_against_reference(&mut runtime, twins, scene.frames, |f| {
-        if f.frame % args.every == 0 || f.frame == scene.frames {
-            write_frame_vtk(&args.out, f, &rest, &mesh)?;
-        }
-        anyhow::Ok(())
-    })
-    .context("running NNWarp against the full FEM reference")?;
-    let setup = WarpRunSetup {
-        scene: &scene.name,
+    let warp = WarpScene::load(WarpSceneParams {
         model: &args.model,
-        material: &config.material,
-        reference_material: scene.material.name(),
-        mesh: &mesh,
-        factorization_seconds: runtime.linear().factorization_seconds(),
-    };
-    let summary = WarpRunSummary::new(&setup, &report, scene.frames);
-    write_json(&args.out.join("summary.json"), &summary)?;
-    eprintln!(
-        "{}: {} frames, linear solve {:.2} ms + NNWarp {:.2} ms per frame{} → {}",
-        scene.name,
-        scene.frames,
-        1e3 * summary.solve_seconds_per_frame,
-        1e3 * summary.nnwarp_seconds_per_frame,
-        summary
-            .reference_seconds_per_frame
-            .map_or(String::new(), |s| format!(", full FEM {:.1} ms per frame", 1e3 * s)),
-        args.out.display()
-    );
+        scene: &args.scene,
+        out: &args.out,
+        frames: args.frames,
+        every: args.every,
+        reference: args.reference,
+        quick: args.quick,
+    })?;
+    if let Some(warning) = warp.warning() {
+        eprintln!("{warning}");
+    }
+    eprintln!("{}", warp.run()?.line);
     Ok(())
 }

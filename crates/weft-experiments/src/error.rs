@@ -38,6 +38,13 @@ pub enum Error {
     /// report missing a file, a record with a bad field.
     #[error("{0}")]
     Failed(String),
+    /// Starting this process anew failed (the command's executable, or its `exec`).
+    #[error("{what}")]
+    Exec {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
     /// Another error, with what was being done when it happened (the cause is its
     /// `source()`; `anyhow`'s `{:#}` prints the whole chain).
     #[error("{context}")]

@@ -61,6 +61,46 @@ pub enum Error {
     /// Reading a dataset failed (a missing or changed file, a bad array).
     #[error(transparent)]
     Data(#[from] weft_data::Error),
+    /// Reading the dataset in a directory failed (the cause follows).
+    #[error("loading {path}")]
+    Load {
+        path: String,
+        #[source]
+        source: Box<Error>,
+    },
+    /// `--train-examples` asked for none, or for more than the training split holds.
+    #[error("--train-examples {asked}: {data} has {available} training examples")]
+    TrainExamples {
+        asked: usize,
+        data: String,
+        available: usize,
+    },
+    /// A training run needs training and validation examples.
+    #[error("{data} needs training and validation examples (it has {train} and {validation})")]
+    TooFewExamples {
+        data: String,
+        train: usize,
+        validation: usize,
+    },
+    /// A flag's value is out of its range.
+    #[error("{flag} {reason}")]
+    InvalidFlag { flag: &'static str, reason: &'static str },
+    /// A volumetric model was asked to run on a scene of another kind.
+    #[error("{scene} is not a volumetric scene; NNWarp warps tetrahedral bodies")]
+    NotVolumetric { scene: String },
+    /// An output directory could not be created.
+    #[error("creating the output directory {path}")]
+    CreateDir {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A warp run failed (the cause follows).
+    #[error("running NNWarp against the full FEM reference")]
+    WarpRun {
+        #[source]
+        source: Box<Error>,
+    },
     /// A projection layer failed on every example scored (the first failure).
     #[error("the postprocess failed on every example: {first}")]
     PostprocessFailed { first: String },

@@ -91,6 +91,7 @@ pub mod params;
 pub mod pca;
 pub mod pca_simulator;
 pub mod progress;
+pub mod train_job;
 pub mod train_setup;
 pub mod trainer;
 

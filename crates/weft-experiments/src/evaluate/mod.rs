@@ -9,6 +9,7 @@
 //! `docs/RESULTS.md` documents every name that appears in `results.json`.
 
 pub mod altconv;
+mod concurrent_env;
 pub mod context;
 pub mod drape;
 pub mod embed;
@@ -24,6 +25,7 @@ use crate::error::Context;
 use crate::files::copy_tree;
 
 pub use crate::records::{Curve, EnergyBar, ExperimentOutput, LinePlot, Scatter};
+pub use concurrent_env::*;
 use context::EvalContext;
 use weft_data::Size;
 use weft_data::files::write_json;

@@ -15,10 +15,12 @@ mod model;
 mod reference;
 mod run;
 mod runtime;
+mod scene;
 mod training;
 
 pub use model::*;
 pub use reference::*;
 pub use run::*;
 pub use runtime::*;
+pub use scene::*;
 pub use training::*;
