@@ -43,6 +43,13 @@
 //!   ([`adam`]), resumable checkpoints ([`checkpoint`]), the one f32 ↔ f64 boundary
 //!   ([`convert`]) and the vectorised f32 activations of the runtimes ([`fast`]).
 //!
+//! **What a training command settles**, so the command line only parses and prints:
+//! [`train_setup`] (the configuration file or default, the overrides every command takes,
+//! the refusal to overwrite a model, altconv's window fitted to the data), [`train_job`]
+//! (each model's run from flags to the lines it reports), [`config_help`] (the
+//! configuration files' help text) and [`progress`] (a run's bar and epoch lines, an
+//! observer of the trainer).
+//!
 //! **Conventions:** configuration types are `*Settings` (their serialised field names are
 //! the model directories' `config.json`); one [`Error`], `#[non_exhaustive]`, with
 //! `Result<T, E = Error>`.
