@@ -1,7 +1,7 @@
 //! Generating datasets as a command asks for them: one dataset whose sequences must all
 //! complete, every dataset at one size (one failure does not stop the others), the default
 //! output directories, and the table of every dataset's size. The generation itself is
-//! [`crate::generate`]'s.
+//! [`generate`](mod@crate::generate)'s.
 
 use std::path::{Path, PathBuf};
 

@@ -2,7 +2,7 @@
 //! simulators and read back checked.
 //!
 //! What is here:
-//! - [`generate`]: every built-in dataset — each built-in cloth scene (Tan et al. §VI), the
+//! - [`generate`](mod@generate): every built-in dataset — each built-in cloth scene (Tan et al. §VI), the
 //!   soft-tissue `limb` (Alt-ConvLSTM), `nnwarp` (registered beam sequences, NNWarp §5) and
 //!   `drape` (a sleeve on the posed limb, Geng et al.) — as independent sequences seeded
 //!   from (dataset seed, index), so any slice can be computed anywhere ([`Shard`]), an

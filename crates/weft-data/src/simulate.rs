@@ -2,7 +2,7 @@
 //! TOML, its rest shape, `frames.safetensors`, `stats.json`, optionally one OBJ per frame,
 //! and for a volume the last frame's displacement field as VTK. The overrides a command
 //! line puts on a loaded scene are checked here too. Datasets of many sequences are
-//! [`crate::generate`]'s; this writes one run.
+//! [`generate`](mod@crate::generate)'s; this writes one run.
 
 use std::path::Path;
 

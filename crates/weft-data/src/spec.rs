@@ -1,6 +1,6 @@
 //! What a dataset is: its name, [`Size`], sequence and frame counts, [`Split`], the scene
 //! its sequences are seeded from, and the seed of each sequence. Generation
-//! ([`crate::generate`]) and the dataset kinds ([`crate::drape`], [`crate::nnwarp`]) build
+//! ([`generate`](mod@crate::generate)) and the dataset kinds ([`crate::drape`], [`crate::nnwarp`]) build
 //! on it.
 
 use serde::{Deserialize, Serialize};

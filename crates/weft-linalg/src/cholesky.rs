@@ -22,7 +22,7 @@ fn single_threaded() {
 /// on two threads (see the `two_domain` module: vertex-separator substructuring).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Substructuring {
-    /// Split when the pattern has vertex blocks, at least [`MIN_SPLIT_VERTICES`]
+    /// Split when the pattern has vertex blocks, at least `MIN_SPLIT_VERTICES`
     /// vertices, rayon has two or more threads, a level-set separator of at most 10 %
     /// of the vertices exists, and the larger domain's factor is at most three times
     /// the smaller's.

@@ -77,7 +77,7 @@ pub struct EmbedJob<'a> {
 }
 
 impl<'a> EmbedJob<'a> {
-    /// `no_pb` is the "[46] + L_vert" baseline; `stages` those to run.
+    /// `no_pb` is the "\[46\] + L_vert" baseline; `stages` those to run.
     pub fn new(params: TrainParams<'a>, no_pb: bool, stages: &'a [u8]) -> Result<Self> {
         let config = embed_config(params.config, &params.overrides, no_pb, params.autograd, stages)?;
         refuse_overwrite(params.out, params.resume)?;

@@ -116,7 +116,7 @@ pub fn fit_altconv_steps(
 }
 
 /// The embed configuration at `path` (or the default) under `overrides`: `no_pb` is the
-/// "[46] + L_vert" baseline (λ_ephys = λ_mphys = 0); `autograd` trains through candle's
+/// "\[46\] + L_vert" baseline (λ_ephys = λ_mphys = 0); `autograd` trains through candle's
 /// autograd instead of the fused kernels. Checked, with the `stages` asked for.
 pub fn embed_config(
     path: Option<&Path>,

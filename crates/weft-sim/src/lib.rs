@@ -6,7 +6,7 @@
 //! Euler in variational form (Tan et al. Eq. 4). A scene lists the terms it needs and
 //! only those are built: no obstacle, no collision code runs.
 //!
-//! Every scene kind (cloth, volumetric, soft tissue) loads through one [`load`] from a
+//! Every scene kind (cloth, volumetric, soft tissue) loads through one [`load`](mod@load) from a
 //! built-in name or a TOML file. [`warp`] holds the geometric warps of a linear solution
 //! (modal and rotation-strain warping) and NNWarp's per-node inputs.
 //!

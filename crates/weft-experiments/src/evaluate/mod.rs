@@ -2,7 +2,7 @@
 //!
 //! Each experiment (`sim`, `proj`, `embed`, `nnwarp`, `altconv`, `drape`) runs its methods and a tight
 //! reference in one process, so time ratios compare one machine state, and returns an
-//! [`ExperimentOutput`]: tidy [`Record`]s, roll-out curves, energies and renders. Outputs
+//! [`ExperimentOutput`]: tidy [`Record`](crate::records::Record)s, roll-out curves, energies and renders. Outputs
 //! are cached per experiment in `OUT/experiments/<name>.json`, so an interrupted
 //! evaluation resumes with the experiments it has not finished. The report (results.json,
 //! tables.md, plots, index.html) is then rebuilt from every cached experiment.

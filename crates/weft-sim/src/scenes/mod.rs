@@ -6,7 +6,7 @@
 //!   ([`VolumeScene`]), and the skinned soft-tissue limb ([`SoftTissueScene`]).
 //! - [`soft_tissue`]: the limb's skeleton, skinning and soft-tissue dynamics.
 //! - [`drape`]: a sleeve draped on the posed limb (Geng et al.'s shirt analogue, design §8).
-//! - [`load`]: one entry point for every kind ([`AnyScene`]).
+//! - [`load`](mod@load): one entry point for every kind ([`AnyScene`]).
 //!
 //! A scene builds only the energy terms it names: a scene without an obstacle runs no
 //! collision code.

@@ -14,9 +14,9 @@
 //! The paper's columns "N steps" are read the same way: its 20-step known-motion column is
 //! the training loss, the mean over the 20 teacher-forced training steps.
 //!
-//! One file per phase: [`studies`] (every model trained, the rate chosen on validation),
-//! [`scoring`] (a model's errors on a split, and [`score_model`] for a model trained
-//! outside the evaluation), [`tables`] (records, tables, plots, heat maps).
+//! One file per phase: `studies` (every model trained, the rate chosen on validation),
+//! `scoring` (a model's errors on a split, and [`score_model`] for a model trained
+//! outside the evaluation), `tables` (records, tables, plots, heat maps).
 
 mod scoring;
 mod studies;

@@ -15,9 +15,9 @@
 //! compressed and stretched edges, mJ, at the quasistatic layer's stretch stiffness), and
 //! on `train` the `training-seconds-per-example` of each trained model.
 //!
-//! One file per phase: [`data`] (the dataset and what a garment's phases share),
-//! [`studies`] (the models trained, the rate and μ chosen), [`scoring`] (every method
-//! scored, and [`score_model`] for a model trained outside the evaluation), [`tables`]
+//! One file per phase: `data` (the dataset and what a garment's phases share),
+//! `studies` (the models trained, the rate and μ chosen), `scoring` (every method
+//! scored, and [`score_model`] for a model trained outside the evaluation), `tables`
 //! (records, tables, notes, renders).
 
 mod data;

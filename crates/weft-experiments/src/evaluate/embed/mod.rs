@@ -1,15 +1,15 @@
 //! Experiment `embed`: Tan et al.'s mesh embedding with PB-loss (`ours`), without it
-//! (`no-pb`, "[46] + L_vert") and PCA on positions (`pca`), on the design's eight cloth
+//! (`no-pb`, "\[46\] + L_vert") and PCA on positions (`pca`), on the design's eight cloth
 //! scenes. Each scene's dataset is generated (`cargo xtask dataset`) and both networks
 //! trained (`cargo xtask train embed`) into `OUT/embed/`, resuming whatever an earlier run
 //! left there. Metrics on the test split (the last 5 of every 17 frames): M_rms, M_STED per
 //! 5-frame window, and M_phys on frames whose two predecessors are in their window, with
 //! the method's own reconstructions as predecessors (docs/RESULTS.md).
 //!
-//! One file per phase: [`data`] the scenes' datasets and frame sets, [`studies`] what is
+//! One file per phase: `data` the scenes' datasets and frame sets, `studies` what is
 //! chosen on the validation windows (the first scene's schedule, budgets and stage-3
-//! studies, each scene's λ_ephys), [`scoring`] training and scoring one model and the
-//! metrics, [`tables`] the paper's tables, the plots and the records. This module holds the
+//! studies, each scene's λ_ephys), `scoring` training and scoring one model and the
+//! metrics, `tables` the paper's tables, the plots and the records. This module holds the
 //! experiment's entry, its types and the loop over the scenes. The networks and their
 //! training are weft-nn's (`weft_nn::embed`), not this module's.
 

@@ -14,10 +14,10 @@
 //! time steps (Fig. 15).
 
 //!
-//! One file per phase: [`data`] (the bodies), [`studies`] (the networks trained on
-//! growing data, one chosen on validation), [`scoring`] (every method against the
+//! One file per phase: `data` (the bodies), `studies` (the networks trained on
+//! growing data, one chosen on validation), `scoring` (every method against the
 //! nonlinear reference, and [`score_model`] for a model trained outside the evaluation),
-//! [`figures`] (Table 1's timings, the extrapolation and trajectory figures).
+//! `figures` (Table 1's timings, the extrapolation and trajectory figures).
 
 mod data;
 mod figures;
