@@ -71,6 +71,13 @@ pub struct CheckArgs {
     /// required.
     #[arg(long)]
     published: bool,
+    /// Also compare every figure (timings aside) with the report in OTHER, e.g. a quick
+    /// evaluation run before a change that must not move a figure; fails beyond `--rtol`.
+    #[arg(long, value_name = "OTHER")]
+    against: Option<PathBuf>,
+    /// The relative difference `--against` accepts.
+    #[arg(long, default_value_t = 1e-6, requires = "against")]
+    rtol: f64,
 }
 
 pub fn check(args: CheckArgs) -> anyhow::Result<()> {
@@ -81,5 +88,19 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         s.records,
         s.files
     );
+    if let Some(other) = &args.against {
+        anyhow::ensure!(args.rtol >= 0.0, "--rtol {} must be a non-negative number", args.rtol);
+        let c = weft_experiments::report::compare::compare(other, &args.dir)?;
+        let (largest, cell) = c.largest.clone().unwrap_or((0.0, "none".into()));
+        outln!(
+            "against {}: {} figures compared, {} differ, largest relative difference {largest:.3e} ({cell}); cells only there: {}, only here: {}",
+            other.display(),
+            c.compared,
+            c.differing,
+            c.only_in_first.len(),
+            c.only_in_second.len()
+        );
+        anyhow::ensure!(c.agrees(args.rtol), "the figures differ beyond --rtol {}", args.rtol);
+    }
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! error images and one self-contained `index.html`, all rebuilt from the experiments'
 //! outputs. Also the check CI runs on a report (`cargo xtask check-report`).
 
+pub mod compare;
 pub mod html;
 pub mod peers;
 pub mod plots;
