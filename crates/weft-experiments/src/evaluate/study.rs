@@ -13,9 +13,6 @@
 //! experiment keeps those. A sweep that trains its candidates concurrently builds the
 //! trials itself and hands them to [`Study::from_trials`].
 
-// Until the experiments adopt it (embed, drape, altconv, nnwarp), some of the API is unused.
-#![allow(dead_code)]
-
 use std::cmp::Ordering;
 
 /// A swept study: every candidate with its outcome, in sweep order, and the choice.
@@ -75,7 +72,9 @@ impl<C, O> Study<C, O> {
         &self.trials
     }
 
-    /// The chosen trial's index in [`Study::trials`].
+    /// The chosen trial's index in [`Study::trials`] (the experiments take it with the
+    /// trials, [`Study::into_parts`]).
+    #[cfg(test)]
     pub(crate) fn chosen_index(&self) -> usize {
         self.chosen
     }
