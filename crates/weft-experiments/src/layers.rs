@@ -1,4 +1,6 @@
-//! The crate's layers, and a test that no module imports from a layer above its own.
+//! The crate's layers, and a test that no module imports from a layer above its own; and a
+//! test that no function is longer than [`LONGEST_FUNCTION`] lines (issue 68: functions
+//! short enough to read at once).
 //!
 //! Every `crate::…` and `super::…` path in `src/**/*.rs` (outside comments) is resolved to
 //! the module it names and checked against [`LAYERS`]: a module may use its own entry
@@ -289,6 +291,89 @@ fn sources(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
             out.push(p);
         }
     }
+}
+
+/// The most lines a function (signature to closing brace, tests included) may take.
+const LONGEST_FUNCTION: usize = 150;
+
+/// Every function with a body in `text`: (line of `fn`, name, lines from `fn` to its
+/// closing brace). Comments and literals are blanked first, so braces in them do not count.
+fn function_lengths(text: &str) -> Vec<(usize, String, usize)> {
+    let code: Vec<char> = code_only(text).chars().collect();
+    let line_at = |i: usize| code[..i].iter().filter(|&&c| c == '\n').count() + 1;
+    let mut found = Vec::new();
+    let mut i = 0;
+    while i + 3 <= code.len() {
+        let is_fn = code[i..].starts_with(&['f', 'n', ' ']) && !ident_before(&code, i);
+        if !is_fn {
+            i += 1;
+            continue;
+        }
+        let name: String = code[i + 3..]
+            .iter()
+            .skip_while(|c| c.is_whitespace())
+            .take_while(|c| c.is_alphanumeric() || **c == '_')
+            .collect();
+        // The body opens at the first `{` before any `;` (a declaration has no body).
+        let Some(open) = (i..code.len()).find(|&j| code[j] == '{' || code[j] == ';') else {
+            break;
+        };
+        if code[open] == ';' {
+            i = open + 1;
+            continue;
+        }
+        let mut depth = 0usize;
+        let mut close = open;
+        for (j, &c) in code.iter().enumerate().skip(open) {
+            match c {
+                '{' => depth += 1,
+                '}' => depth -= 1,
+                _ => {}
+            }
+            if depth == 0 {
+                close = j;
+                break;
+            }
+        }
+        found.push((line_at(i), name, line_at(close) - line_at(i) + 1));
+        // Nested functions are measured too: carry on inside the body.
+        i = open + 1;
+    }
+    found
+}
+
+#[test]
+fn no_function_is_longer_than_the_limit() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    sources(&src, &mut files);
+    let mut long = Vec::new();
+    for f in &files {
+        for (line, name, lines) in function_lengths(&std::fs::read_to_string(f).unwrap()) {
+            if lines > LONGEST_FUNCTION {
+                long.push(format!(
+                    "{}:{line} `{name}`: {lines} lines",
+                    f.strip_prefix(&src).unwrap().display()
+                ));
+            }
+        }
+    }
+    assert!(
+        long.is_empty(),
+        "functions over {LONGEST_FUNCTION} lines:\n{}",
+        long.join("\n")
+    );
+}
+
+#[test]
+fn a_function_is_measured_from_fn_to_its_closing_brace_past_braces_in_literals() {
+    let text = "trait T {\n    fn declared(&self);\n}\n\nfn outer() {\n    let s = \"}}{\"; // }\n    fn inner() {\n    }\n    let c = '{';\n}\n";
+    let found = function_lengths(text);
+    assert_eq!(
+        found,
+        vec![(5, "outer".to_string(), 6), (7, "inner".to_string(), 2)],
+        "{found:?}"
+    );
 }
 
 #[test]
