@@ -88,6 +88,9 @@ pub fn check(args: CheckArgs) -> anyhow::Result<()> {
         s.records,
         s.files
     );
+    for stale in &s.stale {
+        outln!("stale, republish: {stale}");
+    }
     if let Some(other) = &args.against {
         anyhow::ensure!(args.rtol >= 0.0, "--rtol {} must be a non-negative number", args.rtol);
         let c = weft_experiments::report::compare::compare(other, &args.dir)?;

@@ -33,7 +33,9 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
     name = "cargo xtask",
     bin_name = "cargo xtask",
     about = "weft: fast, physically faithful deformable simulation with learned models",
-    version
+    // The code version a publication records (`version::code_version`), with `-dirty`
+    // for a build of uncommitted code.
+    version = env!("WEFT_CODE_VERSION")
 )]
 struct Cli {
     #[command(subcommand)]

@@ -45,6 +45,11 @@ pub struct Record {
     pub seconds_per_frame: Option<f64>,
     /// The ground-truth solver's wall time per frame, measured in the same run (s).
     pub ground_truth_seconds_per_frame: Option<f64>,
+    /// The training seed of a learned model's figure; `null` on a figure over seeds (the
+    /// mean and its `-sd` twin, both derived from the per-seed records beside them) and on
+    /// figures of methods that train nothing.
+    #[serde(default)]
+    pub seed: Option<u64>,
 }
 
 impl Record {
@@ -224,7 +229,45 @@ impl ExperimentOutput {
             paper_value: None,
             seconds_per_frame: timing.seconds_per_frame,
             ground_truth_seconds_per_frame: timing.ground_truth_seconds_per_frame,
+            seed: None,
         });
+    }
+
+    /// A learned method's figure over its seeds: one record per seed (its `seed` set,
+    /// its own time where `per_seed` gives one), then their mean (with the paper's figure
+    /// and the method's time) and, with several seeds, their spread as the `-sd` twin.
+    /// Every verdict is recomputed from the per-seed records ([`figure`]); the mean and
+    /// `-sd` records are for a reader and must agree with them (`check-report`).
+    /// Returns the mean and spread.
+    pub fn record_over_seeds(&mut self, f: &SeedFigure, per_seed: &[(u64, f64)]) -> Figure {
+        let (mean, sd) = mean_sd(per_seed.iter().map(|(_, v)| *v));
+        for &(seed, value) in per_seed {
+            self.record(f.scene, f.method, f.metric, value, f.unit, Timing::default());
+            let r = self.records.last_mut().expect("just pushed");
+            r.split = f.split.map(Into::into);
+            r.seed = Some(seed);
+        }
+        self.record(f.scene, f.method, f.metric, mean, f.unit, f.timing);
+        if let Some(p) = f.paper {
+            self.paper(p);
+        }
+        if let Some(split) = f.split {
+            self.split(split);
+        }
+        if per_seed.len() > 1 {
+            self.record(
+                f.scene,
+                f.method,
+                &format!("{}-sd", f.metric),
+                sd,
+                f.unit,
+                Timing::default(),
+            );
+            if let Some(split) = f.split {
+                self.split(split);
+            }
+        }
+        (mean, sd)
     }
 
     /// Sets the paper value of the last record.
@@ -251,6 +294,20 @@ impl ExperimentOutput {
             unit: unit.into(),
         });
     }
+}
+
+/// What names a figure [`ExperimentOutput::record_over_seeds`] writes over seeds.
+#[derive(Debug, Clone, Copy)]
+pub struct SeedFigure<'a> {
+    pub scene: &'a str,
+    pub method: &'a str,
+    pub metric: &'a str,
+    pub split: Option<&'a str>,
+    pub unit: &'a str,
+    /// The method's time per frame, on the mean record.
+    pub timing: Timing,
+    /// The paper's figure for the same quantity, on the mean record.
+    pub paper: Option<f64>,
 }
 
 /// A method's time per frame beside the ground truth's, both from the same run.
@@ -338,7 +395,9 @@ pub fn mean_sd(samples: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// The first record of `method`'s `metric` among those `within` keeps (an experiment, a
-/// scene, a split: the caller's choice). Every claim and table looks its figures up here.
+/// scene, a split: the caller's choice) that is not one seed's: a figure over seeds or of a
+/// method that trains nothing. Every table looks its figures up here; every verdict goes
+/// through [`figure`], which recomputes them from the seeds.
 pub fn find<'a>(
     records: &'a [Record],
     within: impl Fn(&Record) -> bool,
@@ -347,19 +406,38 @@ pub fn find<'a>(
 ) -> Option<&'a Record> {
     records
         .iter()
-        .find(|r| r.method == method && r.metric == metric && within(r))
+        .find(|r| r.seed.is_none() && r.method == method && r.metric == metric && within(r))
 }
 
 /// A figure over the seeds: their mean and spread (sd; 0 for a single run).
 pub type Figure = (f64, f64);
 
-/// `method`'s `metric` among the records `within` keeps, with its spread: the `-sd`
-/// record an evaluation writes beside a mean over several seeds, 0 where there is none
-/// (one run, e.g. a PCA).
+/// `method`'s `metric` among the records `within` keeps, with its spread, recomputed
+/// from the per-seed records (`seed` set) where the output has them — the mean and `-sd`
+/// records beside them are for a reader, and a verdict never trusts them over the seeds.
+/// An output from before per-seed records falls back to the mean record and its `-sd`
+/// twin, 0 where there is none (one run, e.g. a PCA).
 pub fn figure(records: &[Record], within: impl Fn(&Record) -> bool, method: &str, metric: &str) -> Option<Figure> {
+    let seeds: Vec<f64> = records
+        .iter()
+        .filter(|r| r.seed.is_some() && r.method == method && r.metric == metric && within(r))
+        .map(|r| r.value)
+        .collect();
+    if !seeds.is_empty() {
+        return Some(mean_sd(seeds.into_iter()));
+    }
     let mean = find(records, &within, method, metric)?.value;
     let sd = find(records, &within, method, &format!("{metric}-sd")).map_or(0.0, |r| r.value);
     Some((mean, sd))
+}
+
+/// How many seeds' records `method`'s `metric` has among those `within` keeps (0 in an
+/// output from before per-seed records).
+pub fn seed_count(records: &[Record], within: impl Fn(&Record) -> bool, method: &str, metric: &str) -> usize {
+    records
+        .iter()
+        .filter(|r| r.seed.is_some() && r.method == method && r.metric == metric && within(r))
+        .count()
 }
 
 /// Whether `a` is lower than `b` by more than the two spreads together — the rule a
@@ -463,6 +541,7 @@ mod tests {
             paper_value: None,
             seconds_per_frame: Some(0.1),
             ground_truth_seconds_per_frame: Some(0.2),
+            seed: None,
         };
         assert!(validate(std::slice::from_ref(&good)).is_ok());
         let bad_name = Record {
@@ -517,6 +596,7 @@ mod tests {
             paper_value: None,
             seconds_per_frame: None,
             ground_truth_seconds_per_frame: None,
+            seed: None,
         };
         let records = [
             r("a", "m-rms", Some("validation"), 1.0),
@@ -538,5 +618,57 @@ mod tests {
         assert!(!lower_beyond_spread((5.0, 0.5), (6.0, 0.5)));
         assert!(!lower_beyond_spread((5.0, 0.5), (5.9, 0.5)));
         assert!(lower_beyond_spread((5.0, 0.5), (6.1, 0.5)));
+    }
+
+    #[test]
+    fn figures_over_seeds_are_written_per_seed_and_recomputed_from_the_seeds_not_the_mean() {
+        let mut out = ExperimentOutput::new("altconv", Size::Quick);
+        let f = SeedFigure {
+            scene: "limb",
+            method: "alt-convlstm",
+            metric: "error-mm-rollout50",
+            split: Some("test"),
+            unit: "mm",
+            timing: Timing::new(0.01, 1.0),
+            paper: Some(8.14),
+        };
+        let (mean, sd) = out.record_over_seeds(&f, &[(0, 1.0), (1, 2.0), (2, 6.0)]);
+        assert_eq!((mean, sd), (3.0, (14.0f64 / 3.0).sqrt()));
+        // Three per-seed records (no time, no paper figure), the mean (with both) and its -sd.
+        let seeds: Vec<Option<u64>> = out.records.iter().map(|r| r.seed).collect();
+        assert_eq!(seeds, [Some(0), Some(1), Some(2), None, None]);
+        assert_eq!(out.records[3].paper_value, Some(8.14));
+        assert_eq!(out.records[3].seconds_per_frame, Some(0.01));
+        assert_eq!(out.records[4].metric, "error-mm-rollout50-sd");
+        assert!(out.records.iter().all(|r| r.split.as_deref() == Some("test")));
+        validate(&out.records).unwrap();
+        // A verdict reads the seeds: a mean record that disagrees with them is not used.
+        let test = |r: &Record| r.is_test();
+        out.records[3].value = 100.0;
+        out.records[4].value = 100.0;
+        assert_eq!(
+            figure(&out.records, test, "alt-convlstm", "error-mm-rollout50"),
+            Some((mean, sd))
+        );
+        // A table reads the mean record, never one seed's.
+        assert_eq!(
+            find(&out.records, test, "alt-convlstm", "error-mm-rollout50").map(|r| r.value),
+            Some(100.0)
+        );
+        assert_eq!(seed_count(&out.records, test, "alt-convlstm", "error-mm-rollout50"), 3);
+        // One seed: its record and the mean, no spread record.
+        let mut one = ExperimentOutput::new("drape", Size::Quick);
+        one.record_over_seeds(
+            &SeedFigure {
+                method: "network-only",
+                ..f
+            },
+            &[(1, 4.0)],
+        );
+        assert_eq!(one.records.len(), 2);
+        assert_eq!(
+            figure(&one.records, test, "network-only", "error-mm-rollout50"),
+            Some((4.0, 0.0))
+        );
     }
 }

@@ -637,6 +637,7 @@ fn write_outputs(out: &std::path::Path, cells: &[Cell], quick: bool, seconds: f6
                     paper_value: None,
                     seconds_per_frame: None,
                     ground_truth_seconds_per_frame: None,
+                    seed: None,
                 });
             }
         };

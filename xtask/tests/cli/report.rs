@@ -74,6 +74,25 @@ fn republishing_one_experiment_keeps_the_others() {
     let root = std::env::temp_dir().join(format!("weft-publish-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     let dest = root.join("published");
+    // A build of uncommitted code may not publish (CI builds a clean clone and runs the
+    // rest of this test; a developer's dirty tree checks the refusal instead).
+    let version = Command::new(XTASK).arg("--version").output().unwrap();
+    if String::from_utf8_lossy(&version.stdout).contains("-dirty") {
+        let o = Command::new(XTASK)
+            .args(["evaluate", "--quick", "--quiet", "--only", "proj", "--out"])
+            .arg(root.join("a"))
+            .arg("--publish")
+            .arg(&dest)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("uncommitted"), "{err}");
+        assert!(
+            !root.join("a").join("experiments").join("proj.json").exists(),
+            "it ran before refusing"
+        );
+        return;
+    }
     for (only, out) in [("proj", "a"), ("sim", "b")] {
         let o = Command::new(XTASK)
             .args(["evaluate", "--quick", "--quiet", "--only", only, "--out"])

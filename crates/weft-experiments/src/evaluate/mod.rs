@@ -111,6 +111,18 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             "--jobs 0: at least one model must train at a time".into(),
         ));
     }
+    // A published figure must trace to a commit: a build of uncommitted code cannot say
+    // which code made it (issue 72).
+    if let Some(dest) = &args.publish
+        && crate::report::published::is_dirty(&args.code_version)
+    {
+        return Err(crate::Error::Invalid(format!(
+            "--publish {}: this build is of uncommitted code (code version {}); commit, rebuild and rerun, so that \
+             PROVENANCE.md can name the commit",
+            dest.display(),
+            args.code_version
+        )));
+    }
     let out = args.out.clone();
     std::fs::create_dir_all(out.join("experiments")).with_context(|| format!("creating {}", out.display()))?;
     let ctx = EvalContext {
@@ -259,7 +271,8 @@ fn publish(
         "# Provenance\n\nProduced by\n\n```sh\ncargo xtask {}\n```\n\nExperiments it ran: {}. Experiments it reused from \
          `{}/experiments/`, where earlier runs of `cargo xtask evaluate` with the same `--out` left them: {} \
          (each experiment's wall time is at the top of `tables.md`; `--only NAME --force` reruns one). \
-         Machine: {cores} cores of {cpu}; code version {}. `index.html` is the whole report in one file. The predictions (every method's positions beside the reference) are not committed: the same \
+         Machine: {cores} cores of {cpu}. Published by code version `{}` (a build of committed code: \
+         `--publish` refuses any other). `index.html` is the whole report in one file. The predictions (every method's positions beside the reference) are not committed: the same \
          command writes them to `{}/predictions/`.\n",
         args.command,
         list(ran),

@@ -6,6 +6,7 @@ pub mod compare;
 pub mod html;
 pub mod peers;
 pub mod plots;
+pub mod published;
 pub mod summary;
 
 use std::path::Path;
@@ -236,6 +237,9 @@ pub struct CheckSummary {
     pub records: usize,
     /// Plot, render and prediction files read back.
     pub files: usize,
+    /// A published report's experiments due for republication, each with the reason
+    /// ([`published::check`]); empty for a run's report.
+    pub stale: Vec<String>,
 }
 
 /// `cargo xtask check-report DIR`: every output exists and parses, every record has every
@@ -252,7 +256,7 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
         )
     })?;
     ensure!(!raw.is_empty(), "results.json holds no record");
-    const FIELDS: [&str; 10] = [
+    const FIELDS: [&str; 11] = [
         "experiment",
         "scene",
         "method",
@@ -263,6 +267,7 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
         "paper_value",
         "seconds_per_frame",
         "ground_truth_seconds_per_frame",
+        "seed",
     ];
     for (i, r) in raw.iter().enumerate() {
         let obj = r.as_object().with_context(|| format!("record {i} is not an object"))?;
@@ -271,25 +276,28 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
         }
         ensure!(
             obj.len() == FIELDS.len(),
-            "record {i} has fields beyond the documented ten: {r}"
+            "record {i} has fields beyond the documented eleven: {r}"
         );
     }
     let records: Vec<Record> = serde_json::from_str(&text).context("results.json records do not parse")?;
     crate::records::validate(&records)?;
-    // One value per (experiment, scene, method, metric, split): a second would make every
-    // table and claim depend on which one a reader happens to take.
+    // One value per (experiment, scene, method, metric, split, seed): a second would make
+    // every table and claim depend on which one a reader happens to take.
     let mut keys = std::collections::HashSet::new();
     for r in &records {
         ensure!(
-            keys.insert((&r.experiment, &r.scene, &r.method, &r.metric, &r.split)),
-            "results.json holds two records of experiment {:?}, scene {:?}, method {:?}, metric {:?}, split {:?}",
+            keys.insert((&r.experiment, &r.scene, &r.method, &r.metric, &r.split, r.seed)),
+            "results.json holds two records of experiment {:?}, scene {:?}, method {:?}, metric {:?}, split {:?}, \
+             seed {:?}",
             r.experiment,
             r.scene,
             r.method,
             r.metric,
-            r.split
+            r.split,
+            r.seed
         );
     }
+    published::check_seed_records(&records)?;
     peers::read(dir)?;
     for f in ["tables.md", "index.html"] {
         let path = dir.join(f);
@@ -313,11 +321,14 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
              experiment's output)"
         );
     }
-    if published {
+    let stale = if published {
         let path = dir.join("PROVENANCE.md");
         let t = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
         ensure!(t.contains("cargo xtask"), "PROVENANCE.md names no command");
-    }
+        published::check(dir, &records)?
+    } else {
+        Vec::new()
+    };
     let mut files = 0;
     for sub in ["plots", "renders", "predictions"] {
         if published && sub == "predictions" && !dir.join(sub).exists() {
@@ -371,6 +382,7 @@ pub fn check(dir: &Path, published: bool) -> crate::Result<CheckSummary> {
     Ok(CheckSummary {
         records: records.len(),
         files,
+        stale,
     })
 }
 
@@ -403,7 +415,7 @@ mod tests {
             serde_json::json!({
                 "experiment": "proj", "scene": "sheet", "method": "socp", "metric": "m-rms",
                 "split": "test", "value": value, "unit": "mm", "paper_value": null,
-                "seconds_per_frame": null, "ground_truth_seconds_per_frame": null
+                "seconds_per_frame": null, "ground_truth_seconds_per_frame": null, "seed": null
             })
         };
         std::fs::write(

@@ -201,6 +201,7 @@ fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: 
         windows: &windows,
         gt,
         train_steps,
+        seeds,
     };
     let heat = tables::score_splits(&scoring, out, &methods)?;
     tables::render_heat_maps(ctx, out, &dataset, &heat, horizon)?;

@@ -16,7 +16,7 @@ use super::{SKINNING, WINDOWS};
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;
 use crate::paper::Table;
-use crate::records::{ExperimentOutput, LinePlot, Series, Timing, mean_and_spread, mean_sd};
+use crate::records::{ExperimentOutput, LinePlot, SeedFigure, Series, Timing, mean_and_spread, mean_sd};
 use crate::render::{View, error_colors, error_png};
 
 /// The validation curves' plot and, with several rates, the table of the rate chosen on
@@ -73,6 +73,8 @@ pub(super) struct SceneScoring<'a> {
     pub gt: f64,
     /// Steps each model was trained on.
     pub train_steps: usize,
+    /// The training seed of each model of a method, in its models' order.
+    pub seeds: &'a [u64],
 }
 
 /// One method's scores on one split, one [`Errors`] per seed.
@@ -81,27 +83,34 @@ struct MethodRuns<'a> {
     method: &'a str,
     split: &'a str,
     runs: &'a [Errors],
+    /// Each run's training seed; empty for skinning, which trains nothing.
+    seeds: &'a [u64],
     timing: Timing,
 }
 
 impl MethodRuns<'_> {
-    /// A figure over the seeds: the mean, and the spread as the `-sd` record.
+    /// A figure over the seeds: one record per seed, their mean and, with several, the
+    /// spread as the `-sd` record; skinning's single figure alone.
     fn record(&self, out: &mut ExperimentOutput, metric: &str, of: impl Fn(&Errors) -> f64, paper: Option<f64>) {
-        let (m, sd) = mean_sd(self.runs.iter().map(of));
-        out.record(self.scene, self.method, metric, m, "mm", self.timing);
-        if let Some(p) = paper {
-            out.paper(p);
+        if self.seeds.is_empty() {
+            out.record(self.scene, self.method, metric, of(&self.runs[0]), "mm", self.timing);
+            if let Some(p) = paper {
+                out.paper(p);
+            }
+            out.split(self.split);
+            return;
         }
-        out.split(self.split);
-        out.record(
-            self.scene,
-            self.method,
-            &format!("{metric}-sd"),
-            sd,
-            "mm",
-            Timing::default(),
-        );
-        out.split(self.split);
+        let per_seed: Vec<(u64, f64)> = self.seeds.iter().copied().zip(self.runs.iter().map(of)).collect();
+        let figure = SeedFigure {
+            scene: self.scene,
+            method: self.method,
+            metric,
+            split: Some(self.split),
+            unit: "mm",
+            timing: self.timing,
+            paper,
+        };
+        out.record_over_seeds(&figure, &per_seed);
     }
 
     /// The records of one method: single step, each roll-out window, the peak, and (past
@@ -205,6 +214,7 @@ pub(super) fn score_splits(
                 method,
                 split,
                 runs: &runs,
+                seeds: if nets.is_empty() { &[] } else { &s.seeds[..runs.len()] },
                 timing: Timing::new(e.seconds_per_frame, s.gt),
             };
             method_runs.records(out, s, &mut skinned);

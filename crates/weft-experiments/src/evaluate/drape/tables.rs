@@ -13,7 +13,7 @@ use super::scoring::{MethodScores, Scores};
 use super::studies::MuStudy;
 use crate::evaluate::context::EvalContext;
 use crate::paper::Table;
-use crate::records::{ExperimentOutput, Timing, mean_sd};
+use crate::records::{ExperimentOutput, SeedFigure, Timing, mean_sd};
 use crate::render::View;
 
 /// The tables' rows built from the methods' scores: errors, energies, training times.
@@ -33,7 +33,7 @@ fn split_records(
     split: &str,
     seeds_scores: &[Scores],
 ) -> Vec<String> {
-    let many = g.seeds.len() > 1;
+    let many = seeds_scores.len() > 1;
     // The first seed's time per example (its test split was scored afresh).
     let timing = Timing::new(seeds_scores[0].seconds_per_example, g.gt);
     let paper = paper_errors(method);
@@ -65,16 +65,17 @@ fn split_records(
             energies.map(|r| r[2 * k_split + 1]),
         ),
     ] {
-        let (m, sd) = mean_sd(seeds_scores.iter().map(of));
-        out.record(g.scene, method, metric, m, unit, timing);
-        if let Some(p) = p {
-            out.paper(p);
-        }
-        out.split(split);
-        if many {
-            out.record(g.scene, method, &format!("{metric}-sd"), sd, unit, Timing::default());
-            out.split(split);
-        }
+        let per_seed: Vec<(u64, f64)> = g.seeds.iter().copied().zip(seeds_scores.iter().map(of)).collect();
+        let figure = SeedFigure {
+            scene: g.scene,
+            method,
+            metric,
+            split: Some(split),
+            unit,
+            timing,
+            paper: p,
+        };
+        let (m, sd) = out.record_over_seeds(&figure, &per_seed);
         let ours = if many {
             crate::records::mean_and_spread(m, sd)
         } else {

@@ -567,4 +567,43 @@ mod tests {
         assert!(restored(&config, true).is_none());
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    /// The committed cache of the standard run (`checkpoints/evaluate-standard`, what a
+    /// republication reads instead of retraining) holds no model of another configuration
+    /// than its scene's: outside the studies' own directories, every kept `scores.json`
+    /// was trained under the scene's epochs, stage-3 rate and schedule — a stale model
+    /// would be mixed into the `find … scores.json` readings of docs/EMBEDDING.md.
+    #[test]
+    fn the_committed_cache_holds_no_model_of_another_configuration_than_its_scene() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../checkpoints/evaluate-standard/embed");
+        let read =
+            |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
+        let key = |config: &serde_json::Value| {
+            (
+                config["epochs"].clone(),
+                config["fine_tune_learning_rate"].clone(),
+                config["schedule"].clone(),
+            )
+        };
+        let mut checked = 0;
+        for scene in std::fs::read_dir(root.join("scenes")).unwrap() {
+            let path = scene.unwrap().path();
+            let name = path.file_stem().unwrap().to_string_lossy().to_string();
+            let expected = key(&read(&path)["config"]);
+            for method in std::fs::read_dir(root.join("models").join(&name)).unwrap() {
+                let method = method.unwrap().path();
+                if method.file_name().unwrap().to_string_lossy().ends_with("-study") {
+                    continue;
+                }
+                for seed in std::fs::read_dir(&method).unwrap() {
+                    let scores = seed.unwrap().path().join("scores.json");
+                    if scores.exists() {
+                        assert_eq!(key(&read(&scores)["config"]), expected, "{} is stale", scores.display());
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked >= 60, "only {checked} kept models checked");
+    }
 }

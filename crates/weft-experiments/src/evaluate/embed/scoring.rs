@@ -713,7 +713,7 @@ pub(super) fn pca_baselines(s: &Scene, r: &mut SceneResults) -> crate::Result<(f
         .map(|f| pca.decode(&pca.encode(data.dataset.sequences[f.sequence].frame(f.frame))))
         .collect();
     let seconds = t.elapsed().as_secs_f64() / predicted.len().max(1) as f64;
-    tables::record_method(out, s, "pca", &[score(data, &predicted)?], seconds);
+    tables::record_method(out, s, "pca", (&[], &[score(data, &predicted)?]), seconds);
     let to = s.ctx.out.join("predictions").join("embed").join(scene);
     std::fs::create_dir_all(&to)?;
     write_predictions(&to.join("pca.safetensors"), data, &predicted)?;

@@ -15,7 +15,7 @@ use super::{EARLY_STOPPING_PATIENCE, IkRow, Scene, SceneResults, Scores, Studies
 use crate::error::Context;
 use crate::paper::{Table, format_ms, paper_cell as cell, with_spread};
 use crate::records::{
-    ExperimentOutput, Figure, LinePlot, Record, Series, Timing, figure, lower_beyond_spread, mean_sd,
+    ExperimentOutput, Figure, LinePlot, Record, SeedFigure, Series, Timing, figure, lower_beyond_spread, mean_sd,
     three_significant_decimals,
 };
 
@@ -399,9 +399,16 @@ pub(super) fn configuration_note(config: &EmbedTrainingSettings, size: Size) -> 
     )
 }
 
-/// A method's test figures over its seeds `runs` on the scene: the mean (beside Table I's
-/// figure where the paper has one), and the spread as the `-sd` record.
-pub(super) fn record_method(out: &mut ExperimentOutput, s: &Scene, method: &str, runs: &[Scores], seconds: f64) {
+/// A method's test figures on the scene: with `seeds` (one per run of `runs`), one record
+/// per seed, their mean (beside Table I's figure where the paper has one) and their spread
+/// as the `-sd` record; without (a PCA: one deterministic run), its figure alone.
+pub(super) fn record_method(
+    out: &mut ExperimentOutput,
+    s: &Scene,
+    method: &str,
+    (seeds, runs): (&[u64], &[Scores]),
+    seconds: f64,
+) {
     let scene = s.name;
     let timing = Timing {
         seconds_per_frame: Some(seconds),
@@ -413,11 +420,6 @@ pub(super) fn record_method(out: &mut ExperimentOutput, s: &Scene, method: &str,
         ("m-phys", &|s| s.m_phys, "N^2"),
     ];
     for (metric, of, unit) in metrics {
-        let (mean, sd) = mean_sd(runs.iter().map(of));
-        out.record(scene, method, metric, mean, unit, timing);
-        if let Some(r) = out.records.last_mut() {
-            r.split = Some("test".into());
-        }
         let paper = TABLE_I
             .iter()
             .find(|t| t.0 == scene && t.1 == method)
@@ -426,15 +428,25 @@ pub(super) fn record_method(out: &mut ExperimentOutput, s: &Scene, method: &str,
                 "m-sted" => t.3,
                 _ => t.4,
             });
-        if let Some(p) = paper {
-            out.paper(p);
-        }
-        if runs.len() > 1 {
-            out.record(scene, method, &format!("{metric}-sd"), sd, unit, Timing::default());
-            if let Some(r) = out.records.last_mut() {
-                r.split = Some("test".into());
+        if seeds.is_empty() {
+            out.record(scene, method, metric, of(&runs[0]), unit, timing);
+            out.split("test");
+            if let Some(p) = paper {
+                out.paper(p);
             }
+            continue;
         }
+        let per_seed: Vec<(u64, f64)> = seeds.iter().copied().zip(runs.iter().map(of)).collect();
+        let figure = SeedFigure {
+            scene,
+            method,
+            metric,
+            split: Some("test"),
+            unit,
+            timing,
+            paper,
+        };
+        out.record_over_seeds(&figure, &per_seed);
     }
 }
 
@@ -467,7 +479,8 @@ pub(super) fn report_method(s: &Scene, r: &mut SceneResults, method: &str, runs:
              run whose weights were not kept)"
         ));
     }
-    record_method(out, s, method, &scores, seconds);
+    let seeds: Vec<u64> = runs.iter().map(|(_, s)| s.config.seed).collect();
+    record_method(out, s, method, (&seeds, &scores), seconds);
     if method == "ours" {
         let snapshots: Vec<Scores> = runs
             .iter()

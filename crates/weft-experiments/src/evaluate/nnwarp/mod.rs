@@ -181,7 +181,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
                 .find(|s| s.material == m)
                 .context("a material without a trained model")?
                 .finals;
-            score_scene(&mut out, &root, &mut bench, m, finals, field, lame)?;
+            score_scene(&mut out, &root, &mut bench, m, finals, &seeds, field, lame)?;
         }
     }
     let beams: Vec<&Shape> = shapes.iter().filter(|s| matches!(s.name, "beam" | "t-beam")).collect();

@@ -22,9 +22,10 @@ use super::{
 };
 use crate::error::Context;
 use crate::evaluate::context::Scoring;
-use crate::records::{ExperimentOutput, Timing};
+use crate::records::{ExperimentOutput, SeedFigure, Timing};
 
-/// One shape under material `m` (NNWarp with each of `finals`, one network per seed):
+/// One shape under material `m` (NNWarp with each of `finals`, one network per seed of
+/// `seeds`, in order):
 /// every method's `rel-error` averaged over the loads against the nonlinear reference,
 /// NNWarp's spread over its seeds, and a note of the loads; a load the reference or the
 /// warped solve cannot reach ends the loads and is reported under failures.
@@ -34,6 +35,7 @@ pub(super) fn score_scene(
     bench: &mut Bench,
     m: WarpMaterial,
     finals: &[PathBuf],
+    seeds: &[u64],
     field: FieldDirection,
     lame: LameParameters,
 ) -> crate::Result<()> {
@@ -74,27 +76,30 @@ pub(super) fn score_scene(
     }
     let levels = per_level.len() as f64;
     for (k, name) in METHODS.iter().enumerate() {
-        out.record(
-            &scene,
-            name,
-            "rel-error",
-            tallies[k].error / levels,
-            "1",
-            Timing::new(tallies[k].seconds / levels, reference.seconds / levels),
-        );
-        out.split(shape.split);
+        let timing = Timing::new(tallies[k].seconds / levels, reference.seconds / levels);
+        if *name == "nnwarp" {
+            // One record per seed (each seed's error averaged over the loads), their mean
+            // and their spread.
+            let per_seed: Vec<(u64, f64)> = seeds
+                .iter()
+                .copied()
+                .zip(seed_errors.iter().map(|e| e / levels))
+                .collect();
+            let figure = SeedFigure {
+                scene: &scene,
+                method: name,
+                metric: "rel-error",
+                split: Some(shape.split),
+                unit: "1",
+                timing,
+                paper: None,
+            };
+            out.record_over_seeds(&figure, &per_seed);
+        } else {
+            out.record(&scene, name, "rel-error", tallies[k].error / levels, "1", timing);
+            out.split(shape.split);
+        }
     }
-    // NNWarp's spread over its seeds (each seed's error averaged over the loads).
-    let per_seed: Vec<f64> = seed_errors.iter().map(|e| e / levels).collect();
-    out.record(
-        &scene,
-        "nnwarp",
-        "rel-error-sd",
-        crate::records::mean_sd(per_seed.iter().copied()).1,
-        "1",
-        Timing::default(),
-    );
-    out.split(shape.split);
     out.notes.push(format!(
         "nnwarp/{scene}: {} nodes, {} tets, {} anchored; warped linear solves per load {:?}; rel-error per \
          load (nnwarp, modal-warping, rotation-strain-warping, linear): {}",
