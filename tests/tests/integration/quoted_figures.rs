@@ -9,8 +9,8 @@
 //! frame 11: 14.9 mm<!-- report: curve embed sheet-ms ours 11 error_mm -->
 //! ```
 //!
-//! `record EXPERIMENT SCENE METHOD METRIC [SPLIT]` names one record of
-//! `docs/results/results.json`; `curve EXPERIMENT SCENE METHOD FRAME FIELD` one point of a
+//! `record EXPERIMENT SCENE METHOD METRIC [SPLIT] [seed=N]` names one record of
+//! `docs/results/results.json` (without `seed=`, the one without a seed: the seeds' mean); `curve EXPERIMENT SCENE METHOD FRAME FIELD` one point of a
 //! curve in `docs/results/experiments/EXPERIMENT.json`. The number may carry a unit; a time
 //! written in `ms` or `µs` is compared with a record in `s`. Written with d decimals (and an
 //! exponent e), it must be within half a unit of its last digit, `0.5 × 10^(e − d)`, of the
@@ -117,8 +117,17 @@ fn same_precision(value: f64, written: &str) -> String {
 fn published(mark: &[String], records: &[Value], results: &Path) -> Result<(f64, String, String), String> {
     let words: Vec<&str> = mark.iter().map(String::as_str).collect();
     match words.as_slice() {
-        ["record", experiment, scene, method, metric, split @ ..] => {
-            let split = split.first().copied();
+        ["record", experiment, scene, method, metric, rest @ ..] => {
+            // A per-seed record is named by `seed=N`; without it the mark means the seeds'
+            // mean (the record without a seed).
+            let seed = rest
+                .iter()
+                .find_map(|w| w.strip_prefix("seed="))
+                .map(|n| n.parse::<u64>());
+            let seed = seed
+                .transpose()
+                .map_err(|_| format!("unreadable mark {mark:?}: seed=N"))?;
+            let split = rest.iter().find(|w| !w.starts_with("seed=")).copied();
             let found: Vec<&Value> = records
                 .iter()
                 .filter(|r| {
@@ -127,6 +136,7 @@ fn published(mark: &[String], records: &[Value], results: &Path) -> Result<(f64,
                         && r["method"] == *method
                         && r["metric"] == *metric
                         && split.is_none_or(|s| r["split"] == s)
+                        && r.get("seed").and_then(Value::as_u64) == seed
                 })
                 .collect();
             let label = format!(
@@ -163,7 +173,7 @@ fn published(mark: &[String], records: &[Value], results: &Path) -> Result<(f64,
             Ok((value, if field.ends_with("_mm") { "mm" } else { "" }.to_string(), label))
         }
         _ => Err(format!(
-            "unreadable mark {mark:?}: `record EXPERIMENT SCENE METHOD METRIC [SPLIT]` or `curve EXPERIMENT SCENE METHOD FRAME FIELD`"
+            "unreadable mark {mark:?}: `record EXPERIMENT SCENE METHOD METRIC [SPLIT] [seed=N]` or `curve EXPERIMENT SCENE METHOD FRAME FIELD`"
         )),
     }
 }
@@ -262,6 +272,7 @@ fn marks_read_the_number_before_them_at_its_precision() {
     // A record that is not published, and one figure off by more than its last digit.
     let records: Vec<Value> = serde_json::from_str(
         r#"[{"experiment":"embed","scene":"sheet-ms","method":"ours","metric":"m-rms","split":"test","value":6.647,"unit":"mm"},
+            {"experiment":"embed","scene":"sheet-ms","method":"ours","metric":"m-rms","split":"test","seed":1,"value":7.1,"unit":"mm"},
             {"experiment":"sim","scene":"beam","method":"nnwarp","metric":"frame-seconds","split":null,"value":0.0107,"unit":"s"}]"#,
     )
     .unwrap();
@@ -272,6 +283,12 @@ fn marks_read_the_number_before_them_at_its_precision() {
             .unwrap()
             .0,
         6.647
+    );
+    assert_eq!(
+        published(&mark("record embed sheet-ms ours m-rms test seed=1"), &records, &here)
+            .unwrap()
+            .0,
+        7.1
     );
     assert!(published(&mark("record embed sheet-ms ours m-sted"), &records, &here).is_err());
     let dir = std::env::temp_dir().join(format!("weft-quoted-figures-{}", std::process::id()));
