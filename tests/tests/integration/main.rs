@@ -6,4 +6,5 @@ mod fixtures;
 mod ground_truth_regression;
 mod layers;
 mod pipeline;
+mod quoted_figures;
 mod readers;

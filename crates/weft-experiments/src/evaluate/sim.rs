@@ -9,23 +9,21 @@
 //!   FEM, all under gravity, against a tight Neo-Hookean reference (the same time step,
 //!   Newton tolerance 1e-8 of the heaviest node's weight), so a material's error is its
 //!   model error; a doubled step shows the time discretisation's.
-//! - NNWarp Table 1's columns that need no network: tetrahedra, pre-factorisation and
-//!   solve time of linear FEM on the beam and the limb body, beside the full
-//!   Neo-Hookean frame time on the same body.
+//!
+//! NNWarp Table 1's timings (pre-factorised linear FEM, the correction, the full frame) are
+//! the `nnwarp` experiment's, all measured in its run: the report prints that table once.
 //!
 //! Errors are M_rms (Kavan et al., 1000 × per-coordinate RMS of raw metres: mm) and the
 //! largest vertex distance (mm), over every frame each method computes, compared with the
 //! reference at the same time.
 
 use std::collections::HashMap;
-use std::time::Instant;
 
 use crate::error::Context;
-use weft_mesh::limb::limb;
 use weft_sim::energies::{LameParameters, Material, TetElasticity};
 use weft_sim::scenes::cloth::MeshSpec;
-use weft_sim::scenes::volume::{LimbResolution, SoftTissueScene, VolumeSolve};
-use weft_sim::{ClothScene, ClothSimulation, Energy, LinearSolve, PrefactorizedLinear, VolumeScene, VolumeSimulation};
+use weft_sim::scenes::volume::VolumeSolve;
+use weft_sim::{ClothScene, ClothSimulation, Energy, VolumeScene, VolumeSimulation};
 
 use super::context::EvalContext;
 use crate::records::{Curve, ExperimentOutput, RmsAccumulator, Timing};
@@ -41,7 +39,6 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     cloth(ctx, &mut out, "sheet-ms", if quick { 30 } else { 60 }, true)?;
     cloth(ctx, &mut out, "ball-fem", if quick { 30 } else { 100 }, false)?;
     beam(ctx, &mut out, if quick { 20 } else { 100 })?;
-    linear_timings(ctx, &mut out)?;
     Ok(out)
 }
 
@@ -480,130 +477,4 @@ fn beam(ctx: &EvalContext, out: &mut ExperimentOutput, frames: usize) -> crate::
     }
     bar.finish_and_clear();
     score(ctx, out, "beam", &reference, runs, dt0, View::BEAM)
-}
-
-/// NNWarp Table 1 layout: tetrahedra, pre-factorisation and solve of linear FEM, beside
-/// one full Neo-Hookean frame on the same body.
-fn linear_timings(ctx: &EvalContext, out: &mut ExperimentOutput) -> crate::Result<()> {
-    let quick = ctx.size == Size::Quick;
-    // The beam: the built-in clamped beam (NNWarp's training beam has 2629 tets).
-    let beam = VolumeScene::builtin("beam-neo-hookean", quick)?;
-    let mesh = beam.build_mesh(None)?;
-    let fixed_nodes = weft_sim::anchors::nodes_at_min(mesh.positions(), 0, 1e-9)?;
-    let full = {
-        let mut sim = VolumeSimulation::new(beam.clone(), None)?;
-        let solves = 3;
-        let mut s = 0.0;
-        for _ in 0..solves {
-            s += sim.step()?.seconds;
-        }
-        s / solves as f64
-    };
-    prefactorized_row(
-        out,
-        "beam",
-        &mesh,
-        &fixed_nodes,
-        beam.young,
-        beam.poisson,
-        full,
-        (2629.0, 0.0069, None),
-    )?;
-
-    // The limb body: about 50 k tets at standard size (NNWarp's dragon has 51 850).
-    let resolution = if quick {
-        LimbResolution::Quick
-    } else {
-        LimbResolution::Benchmark
-    };
-    let body = limb(&resolution.params())?;
-    let mut scene = SoftTissueScene::builtin(quick);
-    scene.resolution = resolution;
-    let full = {
-        let mut sim = weft_sim::scenes::soft_tissue::SoftTissue::new(limb(&resolution.params())?, scene.params)?;
-        sim.step_frame()?.seconds
-    };
-    let bones = body.all_bone_nodes();
-    let p = scene.params;
-    prefactorized_row(
-        out,
-        "limb",
-        &body.mesh,
-        &bones,
-        p.young,
-        p.poisson,
-        full,
-        (51850.0, 0.307, Some(0.015)),
-    )?;
-    Ok(())
-}
-
-fn prefactorized_row(
-    out: &mut ExperimentOutput,
-    scene: &str,
-    mesh: &weft_mesh::TetMesh,
-    fixed_nodes: &[usize],
-    young: f64,
-    poisson: f64,
-    full_frame_seconds: f64,
-    paper: (f64, f64, Option<f64>),
-) -> crate::Result<()> {
-    let lame = LameParameters::from_young_poisson(young, poisson)?;
-    let elastic = TetElasticity::new(mesh, Material::Linear, lame)?;
-    let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), 1000.0);
-    let fixed = weft_sim::anchors::fixed_dofs(mesh.num_vertices(), fixed_nodes)?;
-    let rest = mesh.flat_positions();
-    let start = Instant::now();
-    let mut lin = PrefactorizedLinear::new(&rest, &[&elastic], masses.clone(), fixed, LinearSolve::Static)?;
-    let setup = start.elapsed().as_secs_f64();
-    let factor = lin.factorization_seconds();
-    let forces: Vec<f64> = masses.iter().flat_map(|m| [0.0, 0.0, -9.81 * m]).collect();
-    let solves = 10;
-    let mut solve = 0.0;
-    for _ in 0..solves {
-        solve += lin.step(&forces, &[])?.seconds;
-    }
-    let solve = solve / solves as f64;
-    let none = Timing::default();
-    out.record(
-        scene,
-        "prefactorized-linear",
-        "tetrahedra",
-        mesh.num_tets() as f64,
-        "count",
-        none,
-    );
-    out.paper(paper.0);
-    out.record(
-        scene,
-        "prefactorized-linear",
-        "factorization-seconds",
-        factor,
-        "s",
-        none,
-    );
-    out.paper(paper.1);
-    let timing = Timing::new(solve, full_frame_seconds);
-    out.record(scene, "prefactorized-linear", "solve-seconds", solve, "s", timing);
-    if let Some(p) = paper.2 {
-        out.paper(p);
-    }
-    out.record(
-        scene,
-        "neo-hookean",
-        "frame-seconds",
-        full_frame_seconds,
-        "s",
-        Timing::new(full_frame_seconds, full_frame_seconds),
-    );
-    out.notes.push(format!(
-        "sim/{scene} timings: {} tets, assembly + factorisation {:.4} s (factorisation alone {:.4} s), static solve {:.5} s, \
-         one Neo-Hookean implicit-Euler frame {:.4} s",
-        mesh.num_tets(),
-        setup,
-        factor,
-        solve,
-        full_frame_seconds
-    ));
-    Ok(())
 }
