@@ -34,17 +34,18 @@ fn inline(s: &str) -> String {
 fn table_html(t: &Table) -> String {
     let mut s = format!(
         "<h3>{}</h3>\n<p class=\"cap\">{}</p>\n<div class=\"scroll\"><table>\n<tr>",
-        escape(&t.title),
+        inline(&t.title),
         inline(&t.caption)
     );
     for h in &t.header {
-        s.push_str(&format!("<th>{}</th>", escape(h)));
+        s.push_str(&format!("<th>{}</th>", inline(h)));
     }
     s.push_str("</tr>\n");
     for r in &t.rows {
         s.push_str("<tr>");
         for c in r {
-            s.push_str(&format!("<td>{}</td>", escape(c)));
+            // Cells name scenes and methods as `code`, as tables.md prints them.
+            s.push_str(&format!("<td>{}</td>", inline(c)));
         }
         s.push_str("</tr>\n");
     }
@@ -92,7 +93,9 @@ fn claims_html(claims: &[super::summary::Claim]) -> String {
             Verdict::NotMeasured => "na",
         };
         s.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"{class}\">{}</td><td><code>{}</code></td></tr>\n",
+            "<tr><td data-label=\"paper\">{}</td><td data-label=\"central claim\">{}</td><td data-label=\"the paper\">{}</td>\
+             <td data-label=\"ours\">{}</td><td data-label=\"verdict\" class=\"{class}\">{}</td>\
+             <td data-label=\"decided by\"><code>{}</code></td></tr>\n",
             escape(c.paper),
             escape(c.claim),
             inline(&c.paper_figure),
@@ -217,7 +220,7 @@ pub fn page(
         }
         body.push_str("<h3>Notes</h3>\n<ul>\n");
         for n in &o.notes {
-            body.push_str(&format!("<li>{}</li>\n", escape(n)));
+            body.push_str(&format!("<li>{}</li>\n", inline(n)));
         }
         for f in &o.failures {
             body.push_str(&format!("<li><b>failed:</b> {}</li>\n", escape(f)));
@@ -225,7 +228,7 @@ pub fn page(
         body.push_str("</ul>\n");
     }
     Ok(format!(
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>weft evaluation ({})</title>\n\
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>weft evaluation ({})</title>\n\
          <style>\nbody {{ font-family: sans-serif; max-width: 1600px; margin: 2em auto; padding: 0 1em; color: #222; }}\n\
          table {{ border-collapse: collapse; margin-bottom: 1.5em; }}\n\
          th, td {{ border: 1px solid #bbb; padding: 4px 10px; text-align: left; }}\n\
@@ -238,7 +241,11 @@ pub fn page(
          code {{ overflow-wrap: anywhere; }}\n\
          img {{ max-width: 100%; height: auto; }}\n\
          @media (max-width: 900px) {{ body {{ margin: 1em auto; }} .chart {{ width: 100%; }} \
-         .family svg {{ max-width: none; width: 900px; }} }}\n\
+         .family svg {{ max-width: none; }} }}\n\
+         @media (max-width: 700px) {{ .claims tr:first-child {{ display: none; }} \
+         .claims, .claims tbody, .claims tr, .claims td {{ display: block; }} \
+         .claims tr {{ margin-bottom: 1em; border-top: 2px solid #888; }} \
+         .claims td::before {{ content: attr(data-label); display: block; font-size: 12px; color: #666; }} }}\n\
          .renders {{ display: flex; flex-wrap: wrap; }}\nfigure {{ margin: 4px; }}\n\
          figcaption {{ font-size: 12px; color: #555; }}\n\
          .claims td.yes {{ background: #d8f0d8; font-weight: bold; }}\n\

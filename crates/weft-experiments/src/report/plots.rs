@@ -125,7 +125,7 @@ where
     let notes = notes.iter().map(|n| {
         (
             n.as_str(),
-            TextStyle::from(("sans-serif", 14).into_font().color(&BLACK.mix(0.75))),
+            TextStyle::from(("sans-serif", 16).into_font().color(&BLACK.mix(0.8))),
         )
     });
     for (text, style) in styles.into_iter().chain(notes) {
@@ -195,6 +195,9 @@ fn tick_label(v: f64) -> String {
             s.to_string()
         }
     };
+    if v == 0.0 {
+        return "0".into();
+    }
     if (1e-3..1e5).contains(&v.abs()) {
         trim(&crate::records::three_significant(v))
     } else {
@@ -355,7 +358,7 @@ where
     let (ylo, yhi) = log_range(p.points.iter().map(|q| q.error));
     let (xlo, xhi) = log_range(p.points.iter().map(|q| q.time_ratio));
     let mut chart = ChartBuilder::on(area)
-        .caption(&p.title, ("sans-serif", 16))
+        .caption(&p.title, ("sans-serif", 17))
         .margin(8)
         .margin_right(16)
         .x_label_area_size(38)
@@ -367,8 +370,8 @@ where
         .map_err(crate::Error::plot)?;
     chart
         .configure_mesh()
-        .label_style(("sans-serif", 12))
-        .axis_desc_style(("sans-serif", 13))
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 14))
         .x_desc("time / ground truth's")
         .y_desc(p.error_label.as_str())
         .x_label_formatter(&|v| tick_label(*v))
@@ -464,7 +467,7 @@ where
             .map_or(&[][..], |(_, m)| m);
         panel_on(&areas[row * columns + column], p, methods)?;
     }
-    let style = TextStyle::from(("sans-serif", 14)).pos(Pos::new(HPos::Left, VPos::Center));
+    let style = TextStyle::from(("sans-serif", 15)).pos(Pos::new(HPos::Left, VPos::Center));
     for ((x, y), marker, text) in legend_layout(&sections, legend.dim_in_pixel().0).0 {
         match marker {
             Some(i) => {
@@ -489,7 +492,7 @@ pub fn small_multiples(stem: &Path, title: &str, notes: &[String], groups: &[Vec
     let width = (columns as u32 * PANEL.0).max(SIZE.0);
     // The header, wrapped at about 8 px a character of the notes, 10 of the title.
     let lines = |text: &str, px: usize| text.chars().count().div_ceil((width as usize * 9 / 10 / px).max(1)) as u32;
-    let header = 16 + 30 * lines(title, 10) + 22 * notes.iter().map(|n| lines(n, 8)).sum::<u32>();
+    let header = 16 + 30 * lines(title, 10) + 26 * notes.iter().map(|n| lines(n, 8)).sum::<u32>();
     let legend = legend_layout(&sections(groups), width).1;
     let size = (width, header + rows as u32 * PANEL.1 + legend);
     both_sized(
@@ -530,6 +533,8 @@ where
             .flat_map(|c| values(c))
             .filter(|v| cap.is_none_or(|cap| *v <= cap)),
     );
+    // A clipped axis stops at a round figure (1, 2 or 5 times a power of ten).
+    let yhi = if cap.is_some() { round_up(yhi) } else { yhi };
     let mut notes = Vec::new();
     for (c, peak) in curves.iter().zip(&peaks).filter(|(_, p)| **p > yhi) {
         let leaves = c.frames.iter().zip(&c.error_mm).find(|(_, m)| **m > yhi);
@@ -571,34 +576,39 @@ where
         .map_err(crate::Error::plot)?;
     for (i, c) in curves.iter().enumerate() {
         let colour = palette(i);
-        // A curve over seeds: its mean ± the seeds' spread as a band under the line.
-        if c.error_mm_sd.len() == c.error_mm.len() && !c.error_mm_sd.is_empty() {
-            let upper = c.frames.iter().zip(&c.error_mm).zip(&c.error_mm_sd);
-            let band: Vec<(f64, f64)> = upper
-                .clone()
-                .map(|((x, m), sd)| (*x, (m + sd).clamp(ylo, yhi)))
-                .chain(upper.rev().map(|((x, m), sd)| (*x, (m - sd).clamp(ylo, yhi))))
-                .collect();
-            chart
-                .draw_series(std::iter::once(Polygon::new(band, colour.mix(0.18).filled())))
-                .map_err(crate::Error::plot)?;
-        }
-        // The line stops where it leaves the axis (and resumes if it comes back).
-        let points: Vec<(f64, f64)> = c
-            .frames
-            .iter()
-            .zip(&c.error_mm)
-            .map(|(x, y)| (*x, y.max(ylo)))
+        // The frames on the axis, in runs: a curve stops where it leaves the axis (and
+        // resumes if it comes back), and so does its band.
+        let on_axis: Vec<usize> = (0..c.frames.len().min(c.error_mm.len()))
+            .filter(|&k| c.error_mm[k] <= yhi)
             .collect();
-        let runs = points.split(|(_, y)| *y > yhi).filter(|run| !run.is_empty());
-        for (k, run) in runs.enumerate() {
+        let runs: Vec<&[usize]> = on_axis.chunk_by(|a, b| b - a == 1).collect();
+        // A curve over seeds: its mean ± the seeds' spread as a band under the line.
+        if c.error_mm_sd.len() == c.error_mm.len() {
+            for run in &runs {
+                let edge = |k: &usize, sign: f64| {
+                    (
+                        c.frames[*k],
+                        (c.error_mm[*k] + sign * c.error_mm_sd[*k]).clamp(ylo, yhi),
+                    )
+                };
+                let band: Vec<(f64, f64)> = run
+                    .iter()
+                    .map(|k| edge(k, 1.0))
+                    .chain(run.iter().rev().map(|k| edge(k, -1.0)))
+                    .collect();
+                chart
+                    .draw_series(std::iter::once(Polygon::new(band, colour.mix(0.18).filled())))
+                    .map_err(crate::Error::plot)?;
+            }
+        }
+        for (n, run) in runs.iter().enumerate() {
             let series = chart
                 .draw_series(LineSeries::new(
-                    run.iter().copied(),
+                    run.iter().map(|&k| (c.frames[k], c.error_mm[k].max(ylo))),
                     ShapeStyle::from(&colour).stroke_width(2),
                 ))
                 .map_err(crate::Error::plot)?;
-            if k == 0 {
+            if n == 0 {
                 series
                     .label(c.method.clone())
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
@@ -606,6 +616,16 @@ where
         }
     }
     finish(&root, &mut chart, SeriesLabelPosition::LowerRight)
+}
+
+/// The smallest of 1, 2 and 5 times a power of ten at or above `v` (> 0).
+fn round_up(v: f64) -> f64 {
+    let decade = 10f64.powf(v.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * decade)
+        .find(|x| *x >= v * (1.0 - 1e-12))
+        .unwrap_or(v)
 }
 
 /// A roll-out curve whose peak is more than this many times the median curve's peak has
@@ -767,6 +787,7 @@ where
             chart
                 .configure_mesh()
                 .x_desc(p.x_label.as_str())
+                .x_label_formatter(&|v| tick_label(*v))
                 .y_desc(p.y_label.as_str())
                 .y_label_formatter(&|v| tick_label(*v))
                 .draw()
@@ -829,7 +850,7 @@ mod tests {
             (1e-7, "1e-7"),
             (2.5e-8, "2.5e-8"),
             (3e6, "3e6"),
-            (0.0, "0e0"),
+            (0.0, "0"),
         ];
         for (v, label) in cases {
             assert_eq!(tick_label(v), label, "{v}");
@@ -872,5 +893,39 @@ mod tests {
         ];
         // d is beaten by a; e is beaten by b (same time, more error).
         assert_eq!(pareto_front(&points), [1, 0, 2]);
+    }
+
+    #[test]
+    fn a_roll_out_axis_stops_short_of_a_diverged_curve_only() {
+        // The sheet's embeddings peak near 300 mm, the PCA + MLP simulator at 1e19 mm.
+        assert_eq!(rollout_clip(&[230.0, 120.0, 1.8e19]), Some(2300.0));
+        // Solver variants a few times apart are all drawn whole.
+        assert_eq!(rollout_clip(&[1.9, 4.9, 4.6, 2.8]), None);
+        assert_eq!(rollout_clip(&[5.0]), None);
+        assert_eq!(rollout_clip(&[]), None);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b;
+        assert!(close(round_up(7248.0), 10000.0) && close(round_up(0.15), 0.2) && close(round_up(2.0), 2.0));
+    }
+
+    #[test]
+    fn titles_wrap_into_lines_that_fit_and_keep_every_word() {
+        let title = "altconv / limb-jiggle (test): roll-out error at each step, mean over vertices and sequences";
+        let measure = |s: &str| 9 * s.chars().count() as u32;
+        let lines = wrap(title, 400, measure);
+        assert!(lines.len() > 1, "{lines:?}");
+        assert!(lines.iter().all(|l| measure(l) <= 400), "{lines:?}");
+        assert_eq!(lines.join(" "), title);
+        assert_eq!(wrap("short", 400, measure), ["short"]);
+    }
+
+    #[test]
+    fn small_multiples_start_each_group_on_a_new_row() {
+        // Two simulation panels, then ten reconstruction panels: rows of at most four.
+        let (cells, rows, columns) = grid(&[2, 10]);
+        assert_eq!((rows, columns), (4, 4));
+        assert_eq!(cells[..3], [(0, 0), (0, 1), (1, 0)]);
+        assert_eq!(cells[11], (3, 1));
+        let (cells, rows, columns) = grid(&[1]);
+        assert_eq!((cells, rows, columns), (vec![(0, 0)], 1, 1));
     }
 }
