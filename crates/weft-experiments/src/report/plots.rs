@@ -122,12 +122,9 @@ where
     let width = (root.dim_in_pixel().0 as f64 * 0.9) as u32;
     let mut area = root.clone().margin(6, 0, 0, 0);
     let styles = [(title, TextStyle::from(("sans-serif", 20)))];
-    let notes = notes.iter().map(|n| {
-        (
-            n.as_str(),
-            TextStyle::from(("sans-serif", 16).into_font().color(&BLACK.mix(0.8))),
-        )
-    });
+    let notes = notes
+        .iter()
+        .map(|n| (n.as_str(), ("sans-serif", 16).into_font().color(&BLACK.mix(0.8))));
     for (text, style) in styles.into_iter().chain(notes) {
         let measure = |s: &str| root.estimate_text_size(s, &style).map_or(u32::MAX, |(w, _)| w);
         for line in wrap(text, width, measure) {
