@@ -132,7 +132,6 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
         code_version: args.code_version.clone(),
         jobs: args.jobs,
     };
-    let start = Instant::now();
     let mut ran: Vec<&str> = Vec::new();
     for name in &selected {
         let cache = out.join("experiments").join(format!("{name}.json"));
@@ -208,7 +207,7 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             outputs.push(o);
         }
     }
-    crate::report::write(&out, size, &outputs, start.elapsed().as_secs_f64())?;
+    crate::report::write(&out, size, &outputs)?;
     eprintln!(
         "report: {} (results.json, tables.md, plots/, predictions/, renders/)",
         out.join("index.html").display()
@@ -357,7 +356,7 @@ mod tests {
                 crate::files::copy_tree(&published.join(sub), &dir.join(sub)).unwrap();
             }
         }
-        crate::report::write(&dir, Size::Standard, &outputs, 0.0).unwrap();
+        crate::report::write(&dir, Size::Standard, &outputs).unwrap();
         let read = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
         assert!(
             read(&dir, "results.json") == read(&published, "results.json"),

@@ -46,7 +46,7 @@ pub struct Charts {
     pub lines: Vec<(String, String)>,
 }
 
-pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds: f64) -> crate::Result<()> {
+pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput]) -> crate::Result<()> {
     let records: Vec<Record> = outputs.iter().flat_map(|o| o.records.iter().cloned()).collect();
     crate::records::validate(&records)?;
     write_json(&out.join("results.json"), &records)?;
@@ -131,29 +131,11 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
     }
     // The summary: the papers' claims and one plot per family of scenes.
     let claims = summary::claims(outputs);
-    let mut families = Vec::new();
-    for f in summary::FAMILIES {
-        let points: Vec<ParetoPoint> = f
-            .points(&records)
-            .into_iter()
-            .map(|p| ParetoPoint {
-                method: p.label,
-                time_ratio: p.time_ratio,
-                error: p.error,
-                peer: false,
-            })
-            .collect();
-        if points.is_empty() {
-            continue;
-        }
-        let stem = format!("plots/family-{}", f.name);
-        plots::pareto(&out.join(&stem), f.title, f.error_label, &points)?;
-        families.push((f.title.to_string(), stem));
-    }
+    let families = family_figures(out, &records)?;
     let tables = paper::tables(outputs);
     write_text(
         &out.join("tables.md"),
-        &(tables_markdown(size, outputs, &claims, &tables, wall_seconds) + &peers::markdown(&peer_files)),
+        &(tables_markdown(size, outputs, &claims, &tables) + &peers::markdown(&peer_files)),
     )?;
     let page = html::page(
         out,
@@ -165,10 +147,66 @@ pub fn write(out: &Path, size: Size, outputs: &[ExperimentOutput], wall_seconds:
         },
         &tables,
         &charts,
-        wall_seconds,
     )?;
     write_text(&out.join("index.html"), &page)?;
     Ok(())
+}
+
+/// One small-multiples figure per family of scenes (`summary::FAMILIES`): a panel per scene
+/// and error kind, a row per kind (and per shape of NNWarp's `shape/material` scenes), the
+/// header saying what each kind of error measures. Returns (title, file stem) per figure.
+fn family_figures(out: &Path, records: &[Record]) -> crate::Result<Vec<(String, String)>> {
+    let mut families = Vec::new();
+    for f in summary::FAMILIES {
+        let panels = f.panels(records);
+        if panels.is_empty() {
+            continue;
+        }
+        let mut groups: Vec<Vec<plots::Panel>> = Vec::new();
+        let mut last = None;
+        for p in &panels {
+            let key = (p.kind, p.scene.split_once('/').map(|(shape, _)| shape.to_string()));
+            if last.as_ref() != Some(&key) {
+                groups.push(Vec::new());
+                last = Some(key);
+            }
+            groups.last_mut().expect("a group was just pushed").push(plots::Panel {
+                title: p.title(),
+                error_label: p.error_label.clone(),
+                legend: p.kind.as_str().to_string(),
+                points: p
+                    .points
+                    .iter()
+                    .map(|q| ParetoPoint {
+                        method: q.method.clone(),
+                        time_ratio: q.time_ratio,
+                        error: q.error,
+                        peer: false,
+                    })
+                    .collect(),
+            });
+        }
+        let mut notes = vec![
+            "One panel per scene and kind of error, never averaged across scenes; a point is one method's error on \
+             that scene against its time per frame over the ground truth's, both from one run. Lower left is \
+             better; the grey line is the panel's Pareto front."
+                .to_string(),
+        ];
+        for kind in distinct(panels.iter().map(|p| p.kind.as_str())) {
+            let meaning = panels
+                .iter()
+                .find(|p| p.kind.as_str() == kind)
+                .map(|p| p.kind.meaning());
+            notes.push(format!("{kind}: {}.", meaning.unwrap_or_default()));
+        }
+        if panels.iter().flat_map(|p| &p.points).any(|q| q.error <= 0.0) {
+            notes.push("An error of 0 (a method identical to the reference) sits on its panel's floor.".into());
+        }
+        let stem = format!("plots/family-{}", f.name);
+        plots::small_multiples(&out.join(&stem), f.title, &notes, &groups)?;
+        families.push((f.title.to_string(), stem));
+    }
+    Ok(families)
 }
 
 /// Distinct names in first-seen order.
@@ -181,20 +219,13 @@ fn tables_markdown(
     outputs: &[ExperimentOutput],
     claims: &[summary::Claim],
     tables: &[paper::Table],
-    wall: f64,
 ) -> String {
     let mut s = format!(
         "# weft evaluation ({} size)\n\nEvery figure below was measured by `cargo xtask evaluate --size {}`, each \
-         experiment in one run of its own (report assembled in {:.0} s; experiments: {}). Time ratios compare methods \
-         timed in the same run.\n\n",
+         experiment in one run of its own ({}). Time ratios compare methods timed in the same run.\n\n",
         size.as_str(),
         size.as_str(),
-        wall,
-        outputs
-            .iter()
-            .map(|o| format!("`{}` {:.0} s", o.experiment, o.wall_seconds))
-            .collect::<Vec<_>>()
-            .join(", ")
+        experiment_times(outputs, |e| format!("`{e}`"))
     );
     s.push_str(
         "## The papers' claims\n\n| paper | claim | paper | ours | verdict | decided by |\n|---|---|---|---|---|---|\n",
@@ -214,12 +245,16 @@ fn tables_markdown(
     for t in tables {
         s.push_str(&t.markdown());
     }
-    s.push_str("## Tables that later experiments fill\n\n");
     let ran: Vec<&str> = outputs.iter().map(|o| o.experiment.as_str()).collect();
-    for (what, exp) in paper::pending(&ran) {
-        s.push_str(&format!("- {what}: experiment `{exp}`, not yet in this evaluation.\n"));
+    let pending = paper::pending(&ran);
+    if !pending.is_empty() {
+        s.push_str("## Tables that later experiments fill\n\n");
+        for (what, exp) in pending {
+            s.push_str(&format!("- {what}: experiment `{exp}`, not yet in this evaluation.\n"));
+        }
+        s.push('\n');
     }
-    s.push_str("\n## Notes\n\n");
+    s.push_str("## Notes\n\n");
     for o in outputs {
         for n in &o.notes {
             s.push_str(&format!("- {n}\n"));
@@ -229,6 +264,25 @@ fn tables_markdown(
         }
     }
     s
+}
+
+/// Each experiment's wall time and their total ("experiments' wall time: `sim` 955 s, `proj`
+/// 14 s; 969 s (16 min) in all"): the seconds each experiment took when it ran, kept in its
+/// cached output. The seconds spent assembling the report are not worth printing: rebuilt
+/// from cached outputs it takes a second ("report assembled in 0 s" said nothing).
+pub(crate) fn experiment_times(outputs: &[ExperimentOutput], name: impl Fn(&str) -> String) -> String {
+    let total: f64 = outputs.iter().map(|o| o.wall_seconds).sum();
+    let each = outputs
+        .iter()
+        .map(|o| format!("{} {:.0} s", name(&o.experiment), o.wall_seconds))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let human = if total >= 3600.0 {
+        format!("{:.1} h", total / 3600.0)
+    } else {
+        format!("{:.0} min", total / 60.0)
+    };
+    format!("experiments' wall time: {each}; {total:.0} s ({human}) in all")
 }
 
 /// What [`check`] found in a report.

@@ -1,6 +1,6 @@
 //! The report's first page: each paper's central claim decided from the records, and one
-//! speed-against-accuracy plot per family of scenes with the ground-truth variants and the
-//! learned models on the same axes.
+//! speed-against-accuracy figure per family of scenes, one panel per scene and error kind
+//! (a simulation's error never on the axis of a reconstruction's).
 //!
 //! Everything here is computed from `results.json`'s records alone, so the summary of a
 //! report is rebuilt whenever any experiment is republished.
@@ -472,17 +472,74 @@ pub fn claims(outputs: &[ExperimentOutput]) -> Vec<Claim> {
     .collect()
 }
 
-/// A family of scenes drawn on one speed-against-accuracy plot.
+/// What a family panel's error measures. Errors of different kinds are never drawn on one
+/// axis: a reconstruction of a given true frame (the embedding, PCA) is not a simulation
+/// that has to find the frame, and would look better than any solver beside it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// A simulated sequence against a tight reference simulation: M_rms over its frames.
+    Simulation,
+    /// Encoding and decoding given true test frames (Tan et al.'s M_rms): no time stepping.
+    Reconstruction,
+    /// A static solve at each load against full nonlinear FEM (NNWarp's rel-error).
+    StaticSolve,
+    /// An autoregressive roll-out from the true first frames on unseen motions.
+    RollOut,
+    /// One drape predicted per test pose, no time stepping (Geng et al.'s SqrtMSE).
+    PosePrediction,
+    /// A projection's result against the same projection solved tightly.
+    Projection,
+}
+
+impl ErrorKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Simulation => "simulation",
+            Self::Reconstruction => "reconstruction",
+            Self::StaticSolve => "static solve",
+            Self::RollOut => "roll-out",
+            Self::PosePrediction => "pose to drape",
+            Self::Projection => "projection",
+        }
+    }
+
+    /// One sentence for the plot's header: what a point's error is.
+    pub fn meaning(self) -> &'static str {
+        match self {
+            Self::Simulation => "M_rms over the frames of a simulated sequence against a tight reference simulation",
+            Self::Reconstruction => {
+                "M_rms of encoding and decoding given true test frames (no time stepping: not comparable with a \
+                 simulation's error)"
+            }
+            Self::StaticSolve => "rel-error of the static solve at each load against full nonlinear FEM",
+            Self::RollOut => "error of an autoregressive roll-out on unseen test motions",
+            Self::PosePrediction => "SqrtMSE of the drape predicted for each test pose",
+            Self::Projection => "SqrtMSE against the same projection solved to a tight tolerance",
+        }
+    }
+}
+
+/// One experiment's share of a family: the scenes it contributes (by prefix; empty: all),
+/// the metric and split read, and what that error measures.
+#[derive(Debug, Clone, Copy)]
+pub struct Member {
+    pub experiment: &'static str,
+    pub scene_prefixes: &'static [&'static str],
+    /// `error-mm-rollout` stands for the longest roll-out window recorded.
+    pub metric: &'static str,
+    pub split: Option<&'static str>,
+    pub kind: ErrorKind,
+    /// The axis label, without the kind (which each panel's title names).
+    pub error_label: &'static str,
+}
+
+/// A family of scenes drawn as one figure: one speed-against-accuracy panel per scene and
+/// error kind.
 #[derive(Debug, Clone, Copy)]
 pub struct Family {
     pub name: &'static str,
     pub title: &'static str,
-    /// The error metric every point of the family is measured in, and its axis label.
-    pub metric: &'static str,
-    pub error_label: &'static str,
-    pub split: Option<&'static str>,
-    /// The experiments (and, for `sim`, the scene prefixes) that belong to it.
-    pub members: &'static [(&'static str, &'static [&'static str])],
+    pub members: &'static [Member],
 }
 
 /// The five families: cloth (ground-truth variants and the embedding), volumetric (the
@@ -490,100 +547,151 @@ pub struct Family {
 pub const FAMILIES: [Family; 5] = [
     Family {
         name: "cloth",
-        title: "Cloth: solver variants and the learned embedding",
-        metric: "m-rms",
-        error_label: "M_rms (mm)",
-        split: None,
-        members: &[("sim", &["sheet", "ball"]), ("embed", &[])],
+        title: "Cloth: solver variants (simulation) and the learned embedding (reconstruction)",
+        members: &[
+            Member {
+                experiment: "sim",
+                scene_prefixes: &["sheet", "ball"],
+                metric: "m-rms",
+                split: None,
+                kind: ErrorKind::Simulation,
+                error_label: "M_rms over the sequence (mm)",
+            },
+            Member {
+                experiment: "embed",
+                scene_prefixes: &[],
+                metric: "m-rms",
+                split: Some("test"),
+                kind: ErrorKind::Reconstruction,
+                error_label: "M_rms of the test frames (mm)",
+            },
+        ],
     },
     Family {
         name: "volumetric",
         title: "Volumetric: warped linear FEM and NNWarp against full FEM",
-        metric: "rel-error",
-        error_label: "rel-error",
-        split: None,
-        members: &[("nnwarp", &[])],
+        members: &[Member {
+            experiment: "nnwarp",
+            scene_prefixes: &[],
+            metric: "rel-error",
+            split: None,
+            kind: ErrorKind::StaticSolve,
+            error_label: "rel-error",
+        }],
     },
     Family {
         name: "soft-tissue",
         title: "Soft tissue: skinning and the learned dynamics on unseen motions",
-        metric: "error-mm-rollout",
-        error_label: "longest roll-out error on the test motions (mm)",
-        split: Some("test"),
-        members: &[("altconv", &[])],
+        members: &[Member {
+            experiment: "altconv",
+            scene_prefixes: &[],
+            metric: "error-mm-rollout",
+            split: Some("test"),
+            kind: ErrorKind::RollOut,
+            error_label: "roll-out error (mm)",
+        }],
     },
     Family {
         name: "garments",
         title: "Garments: pose to cloth, with and without projection layers",
-        metric: "sqrtmse-mm",
-        error_label: "SqrtMSE on the test poses (mm)",
-        split: Some("test"),
-        members: &[("drape", &[])],
+        members: &[Member {
+            experiment: "drape",
+            scene_prefixes: &[],
+            metric: "sqrtmse-mm",
+            split: Some("test"),
+            kind: ErrorKind::PosePrediction,
+            error_label: "SqrtMSE on the test poses (mm)",
+        }],
     },
     Family {
         name: "projection",
         title: "Projection layers against their tight references",
-        metric: "sqrt-mse",
-        error_label: "SqrtMSE (mm)",
-        split: None,
-        members: &[("proj", &[])],
+        members: &[Member {
+            experiment: "proj",
+            scene_prefixes: &[],
+            metric: "sqrt-mse",
+            split: None,
+            kind: ErrorKind::Projection,
+            error_label: "SqrtMSE (mm)",
+        }],
     },
 ];
 
-/// One method's point on a family plot: its error averaged over the family's scenes and
-/// its time ratio's geometric mean.
+/// One method's point on a family panel: one record's error and time ratio, not averaged
+/// with any other scene's.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FamilyPoint {
-    pub label: String,
+    pub method: String,
     pub time_ratio: f64,
     pub error: f64,
 }
 
-impl Family {
-    fn holds(&self, r: &Record) -> bool {
-        self.members.iter().any(|(e, prefixes)| {
-            r.experiment == *e && (prefixes.is_empty() || prefixes.iter().any(|p| r.scene.starts_with(p)))
-        })
-    }
+/// One panel of a family figure: the points of one scene and one error kind.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    pub experiment: &'static str,
+    pub scene: String,
+    pub split: Option<&'static str>,
+    pub kind: ErrorKind,
+    /// The y axis: what the error is, with its unit.
+    pub error_label: String,
+    pub points: Vec<FamilyPoint>,
+}
 
-    /// The family's points: one per (experiment, method) with a timed record in its metric.
-    pub fn points(&self, records: &[Record]) -> Vec<FamilyPoint> {
-        // Soft tissue reads its longest roll-out window (50 steps at standard size).
-        let metric = if self.metric == "error-mm-rollout" {
-            match longest_rollout(records) {
-                Some((_, m)) => m,
-                None => return Vec::new(),
-            }
-        } else {
-            self.metric.to_string()
-        };
-        let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-        for r in records.iter().filter(|r| {
-            self.holds(r) && r.metric == metric && (self.split.is_none() || r.split.as_deref() == self.split)
-        }) {
-            let (Some(t), Some(g)) = (r.seconds_per_frame, r.ground_truth_seconds_per_frame) else {
-                continue;
+impl Panel {
+    /// The panel's caption: its scene, and its error kind.
+    pub fn title(&self) -> String {
+        format!("{} · {}", self.scene, self.kind.as_str())
+    }
+}
+
+impl Family {
+    /// The family's panels, member by member and scene by scene in first-seen order: one per
+    /// (member, scene) with a timed record in the member's metric, one point per method.
+    pub fn panels(&self, records: &[Record]) -> Vec<Panel> {
+        let mut panels: Vec<Panel> = Vec::new();
+        for m in self.members {
+            // Soft tissue reads its longest roll-out window (50 steps at standard size).
+            let (metric, error_label) = if m.metric == "error-mm-rollout" {
+                match longest_rollout(records) {
+                    Some((steps, metric)) => (metric, format!("{steps}-step {}", m.error_label)),
+                    None => continue,
+                }
+            } else {
+                (m.metric.to_string(), m.error_label.to_string())
             };
-            if !(t > 0.0 && g > 0.0) {
-                continue;
-            }
-            let label = format!("{} ({})", r.method, r.experiment);
-            match groups.iter_mut().find(|(l, _)| *l == label) {
-                Some((_, v)) => v.push((t / g, r.value)),
-                None => groups.push((label, vec![(t / g, r.value)])),
+            let first = panels.len();
+            for r in records.iter().filter(|r| {
+                r.experiment == m.experiment
+                    && (m.scene_prefixes.is_empty() || m.scene_prefixes.iter().any(|p| r.scene.starts_with(p)))
+                    && r.metric == metric
+                    && (m.split.is_none() || r.split.as_deref() == m.split)
+            }) {
+                let (Some(t), Some(g)) = (r.seconds_per_frame, r.ground_truth_seconds_per_frame) else {
+                    continue;
+                };
+                if !(t > 0.0 && g > 0.0) {
+                    continue;
+                }
+                let point = FamilyPoint {
+                    method: r.method.clone(),
+                    time_ratio: t / g,
+                    error: r.value,
+                };
+                match panels[first..].iter_mut().find(|p| p.scene == r.scene) {
+                    Some(p) => p.points.push(point),
+                    None => panels.push(Panel {
+                        experiment: m.experiment,
+                        scene: r.scene.clone(),
+                        split: m.split,
+                        kind: m.kind,
+                        error_label: error_label.clone(),
+                        points: vec![point],
+                    }),
+                }
             }
         }
-        groups
-            .into_iter()
-            .map(|(label, v)| {
-                let n = v.len() as f64;
-                FamilyPoint {
-                    label,
-                    time_ratio: (v.iter().map(|(t, _)| t.ln()).sum::<f64>() / n).exp(),
-                    error: v.iter().map(|(_, e)| e).sum::<f64>() / n,
-                }
-            })
-            .collect()
+        panels
     }
 }
 
@@ -911,24 +1019,82 @@ mod tests {
     }
 
     #[test]
-    fn family_points_average_a_method_over_its_scenes_and_skip_untimed_records() {
+    fn a_family_panel_holds_one_scene_and_one_error_kind_never_averaged() {
+        // `sheet-ms` is both a simulated scene (`sim`) and an embedded one (`embed`): the
+        // simulators' per-step error and the embedding's reconstruction error go to two
+        // panels, and no point is averaged over scenes.
         let mut r = vec![
             rec("sim", "sheet-ms", "loose", "m-rms", None, 2.0),
             rec("sim", "ball-ms", "loose", "m-rms", None, 4.0),
             rec("sim", "beam-stvk", "loose", "m-rms", None, 100.0),
             rec("embed", "sheet-ms", "ours", "m-rms", Some("test"), 9.0),
+            rec("embed", "sheet-ms", "pca", "m-rms", Some("test"), 0.1),
+            rec("embed", "sheet-ms", "ours", "m-rms", Some("validation"), 8.0),
+            rec("embed", "ball-ms", "ours", "m-rms", Some("test"), 3.0),
         ];
         r[1].seconds_per_frame = Some(0.04);
-        let mut untimed = rec("embed", "sheet-ms", "pca", "m-rms", Some("test"), 1.0);
+        let mut untimed = rec("embed", "ball-ms", "pca", "m-rms", Some("test"), 1.0);
         untimed.seconds_per_frame = None;
         r.push(untimed);
-        let p = FAMILIES[0].points(&r);
-        assert_eq!(p.len(), 2, "{p:?}");
-        assert_eq!(p[0].label, "loose (sim)");
-        assert_eq!(p[0].error, 3.0, "the beam is not cloth");
-        assert!(
-            (p[0].time_ratio - 0.02).abs() < 1e-12,
-            "geometric mean of 0.01 and 0.04"
+        let panels = FAMILIES[0].panels(&r);
+        let summary: Vec<(&str, ErrorKind, Vec<(&str, f64)>)> = panels
+            .iter()
+            .map(|p| {
+                let points = p.points.iter().map(|q| (q.method.as_str(), q.error)).collect();
+                (p.scene.as_str(), p.kind, points)
+            })
+            .collect();
+        assert_eq!(
+            summary,
+            [
+                ("sheet-ms", ErrorKind::Simulation, vec![("loose", 2.0)]),
+                ("ball-ms", ErrorKind::Simulation, vec![("loose", 4.0)]),
+                ("sheet-ms", ErrorKind::Reconstruction, vec![("ours", 9.0), ("pca", 0.1)]),
+                ("ball-ms", ErrorKind::Reconstruction, vec![("ours", 3.0)]),
+            ],
+            "the beam is not cloth, validation and untimed records are not drawn"
         );
+        assert!((panels[1].points[0].time_ratio - 0.04).abs() < 1e-12);
+        // Every point of every panel of every family is one record of the panel's own scene
+        // and error kind: a panel mixing a simulation with a reconstruction fails here.
+        for family in FAMILIES {
+            for p in family.panels(&r) {
+                let member = family.members.iter().find(|m| m.experiment == p.experiment).unwrap();
+                assert_eq!(member.kind, p.kind);
+                for q in &p.points {
+                    let source: Vec<&Record> = r
+                        .iter()
+                        .filter(|x| x.experiment == p.experiment && x.scene == p.scene && x.method == q.method)
+                        .filter(|x| x.metric == member.metric && (p.split.is_none() || x.split.as_deref() == p.split))
+                        .collect();
+                    assert_eq!(source.len(), 1, "{p:?}");
+                    assert_eq!(source[0].value, q.error, "{p:?}");
+                }
+            }
+        }
+        assert_eq!(panels[2].title(), "sheet-ms · reconstruction");
+    }
+
+    #[test]
+    fn the_soft_tissue_panels_read_the_longest_test_window_and_name_it() {
+        let r = vec![
+            rec("altconv", "limb", "skinning", "error-mm-rollout10", Some("test"), 3.0),
+            rec("altconv", "limb", "skinning", "error-mm-rollout50", Some("test"), 5.0),
+            rec("altconv", "limb", "skinning", "error-mm-rollout50", Some("known"), 1.0),
+            rec(
+                "altconv",
+                "limb-jiggle",
+                "skinning",
+                "error-mm-rollout50",
+                Some("test"),
+                9.0,
+            ),
+        ];
+        let panels = FAMILIES[2].panels(&r);
+        assert_eq!(panels.len(), 2);
+        assert_eq!(panels[0].points[0].error, 5.0);
+        assert_eq!(panels[1].points[0].error, 9.0);
+        assert_eq!(panels[0].error_label, "50-step roll-out error (mm)");
+        assert!(FAMILIES[2].panels(&[]).is_empty());
     }
 }
