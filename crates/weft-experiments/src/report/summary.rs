@@ -661,8 +661,10 @@ impl Family {
                 (m.metric.to_string(), m.error_label.to_string())
             };
             let first = panels.len();
+            // One point per method: the figure over its seeds, never one seed's.
             for r in records.iter().filter(|r| {
-                r.experiment == m.experiment
+                r.seed.is_none()
+                    && r.experiment == m.experiment
                     && (m.scene_prefixes.is_empty() || m.scene_prefixes.iter().any(|p| r.scene.starts_with(p)))
                     && r.metric == metric
                     && (m.split.is_none() || r.split.as_deref() == m.split)
