@@ -563,9 +563,9 @@ fn drape_claim(records: &[Record]) -> Claim {
     let other_mu = LearnedMu::of(records, other);
     claim.ours = format!(
         "{scene}: `{}` (the trained model of the lowest validation SqrtMSE) {} mm on test against {} mm for the \
-         equal-budget `{CONTROL}` ({}; `network-only` {}); stretching error cut {cut:.1}× against the control¹; \
+         equal-budget `{CONTROL}` ({}; `network-only` {}); stretching error cut {}× against the control¹; \
          trained against applied afterwards: {}; {}²{}. ¹ The energy is the quasistatic layer's own edge-spring \
-         energy{}. ² The paper gives no spring stiffnesses: μ's absolute value is not comparable with its. The \
+         energy{}. ² The paper gives no spring stiffnesses: μ's absolute value is not comparable with the paper's. The \
          control and every trained model get the same extra epochs from `network-only`; ours: mean ± sd over the \
          seeds",
         best.method,
@@ -573,6 +573,7 @@ fn drape_claim(records: &[Record]) -> Claim {
         with_sd(control),
         percent_change(best.value, control.value),
         test("network-only", "sqrtmse-mm").map_or("—".into(), |r| format!("{} mm", with_sd(r))),
+        crate::records::three_significant(cut),
         drape_layer_changes(records, scene, |r| Some(r.value)),
         mu.describe(scene),
         if other_mu.values.is_empty() {
@@ -836,6 +837,7 @@ mod tests {
         for part in [
             "loose-sleeve: `trained-qs-mu0.1`",
             "against 10.000 ± 0.200 mm for the equal-budget `network-only-continued` (−10.0 %",
+            "stretching error cut 6.00× against the control",
             "learned μ 0.100, 0.110, 0.120 (largest / smallest 1.20)",
             "sleeve: learned μ 0.100, 0.500, 0.0100 (largest / smallest 50.00)",
         ] {
