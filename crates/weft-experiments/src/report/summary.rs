@@ -580,8 +580,7 @@ fn drape_claim(records: &[Record]) -> Claim {
         "{scene}: `{}` (the trained model of the lowest validation SqrtMSE) {} mm on test against {} mm for \
          {against}; stretching error cut {}× against it¹; trained against applied afterwards: {}; {}²{}. ¹ The \
          energy is the quasistatic layer's own edge-spring energy{}. ² The paper gives no spring stiffnesses: μ's \
-         absolute value is not comparable with the paper's. The control and every trained model get the same extra \
-         epochs from `network-only`; ours: mean ± sd over the seeds",
+         absolute value is not comparable with the paper's. {}Ours: mean ± sd over the seeds",
         best.method,
         with_sd(best),
         with_sd(base),
@@ -596,6 +595,11 @@ fn drape_claim(records: &[Record]) -> Claim {
         untrained.map_or(String::new(), |(post, c)| format!(
             ", which a layer applied to the untrained network already cuts (`{post}`: {c:.0}×)"
         )),
+        if control_run {
+            "The control and every trained model get the same extra epochs from `network-only`. "
+        } else {
+            ""
+        },
     );
     claim.verdict = if !control_run {
         Verdict::NotMeasured
