@@ -5,6 +5,9 @@
 //! - `network-only` is trained first; every `trained-*` model starts from its best weights
 //!   and is trained on with its layer in the loss (a fine-tune: Geng et al. do not say
 //!   whether they trained from scratch; this costs a fraction of it).
+//! - [`CONTROL`] (`network-only-continued`) is the equal-budget control: the same
+//!   fine-tune as a `trained-*` model (its epochs, rate and fresh Adam from `network-only`'s
+//!   best weights) without a layer. The claim measures training through a layer against it.
 //! - Every model keeps the weights of its best validation SqrtMSE (Geng et al. §4.1).
 //! - μ: fixed at 1, 0.1, 0.01, or learned (global, and per vertex), from 0.1; the global
 //!   μ is also learned from 1 and 0.01 (Geng et al. §6.2), reported in its own table.
@@ -37,6 +40,8 @@ use weft_data::Size;
 pub use scoring::{Scores, score, score_model};
 
 const SPLITS: [&str; 3] = ["train", "validation", "test"];
+/// The equal-budget control's method name (the claim's baseline).
+pub use crate::report::summary::DRAPE_CONTROL as CONTROL;
 /// The fixed μ of Geng et al. Table 3, with their method-name suffixes.
 const FIXED_MU: [(f64, &str); 3] = [(1.0, "mu1"), (0.1, "mu0.1"), (0.01, "mu0.01")];
 /// Starts of the learned global μ (Geng et al. §6.2); the method row starts at 0.1.

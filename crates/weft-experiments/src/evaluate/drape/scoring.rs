@@ -15,7 +15,7 @@ use weft_proj::RestShape;
 
 use super::data::GarmentData;
 use super::studies::SeedRun;
-use super::{FIXED_MU, label_of, method_name};
+use super::{CONTROL, FIXED_MU, label_of, method_name};
 use crate::error::Context;
 use crate::evaluate::context::{EvalContext, Scoring};
 use crate::records::{ExperimentOutput, Timing};
@@ -26,7 +26,8 @@ pub(super) type MethodScores = Vec<(String, Vec<Vec<Scores>>, Vec<f64>)>;
 
 /// The methods of the tables, in their order.
 fn method_order() -> Vec<String> {
-    std::iter::once("network-only".to_string())
+    ["network-only".to_string(), CONTROL.into()]
+        .into_iter()
         .chain(["postprocess-socp".into(), "trained-socp".into()])
         .chain(
             FIXED_MU
