@@ -323,7 +323,7 @@ mod tests {
         for sub in ["experiments", "renders"] {
             std::fs::create_dir_all(dir.join(sub)).unwrap();
         }
-        super::super::write(&dir, Size::Quick, &outputs, 1.0).unwrap();
+        super::super::write(&dir, Size::Quick, &outputs).unwrap();
         for o in &outputs {
             weft_data::files::write_json(&dir.join("experiments").join(format!("{}.json", o.experiment)), o).unwrap();
         }

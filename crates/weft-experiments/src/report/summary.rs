@@ -5,7 +5,7 @@
 //! Everything here is computed from `results.json`'s records alone, so the summary of a
 //! report is rebuilt whenever any experiment is republished.
 
-use crate::records::{ExperimentOutput, MIN_SEEDS, Record, figure, find, lower_beyond_spread, seed_count};
+use crate::records::{ExperimentOutput, Figure, MIN_SEEDS, Record, figure, find, lower_beyond_spread, seed_count};
 
 /// Whether the records reproduce a claim.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -380,19 +380,25 @@ fn drape_scenes(records: &[Record]) -> (&'static str, &'static str) {
 
 /// The `trained-*` method of the drape `scene` with the lowest validation SqrtMSE (the
 /// mean over seeds): the method the claim is decided with, chosen without the test split.
-fn drape_best_on_validation<'a>(records: &'a [Record], scene: &str) -> Option<&'a str> {
-    records
+fn drape_best_on_validation(records: &[Record], scene: &str) -> Option<String> {
+    let mut methods: Vec<&str> = records
         .iter()
         .filter(|r| on("drape", scene, VALIDATION)(r) && r.method.starts_with("trained-") && r.metric == "sqrtmse-mm")
-        .min_by(|a, b| a.value.total_cmp(&b.value))
         .map(|r| r.method.as_str())
+        .collect();
+    methods.sort_unstable();
+    methods.dedup();
+    methods
+        .into_iter()
+        .filter_map(|m| Some((m, figure(records, on("drape", scene, VALIDATION), m, "sqrtmse-mm")?.0)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(m, _)| m.to_string())
 }
 
 /// Each layer trained through against applied afterwards, on test SqrtMSE, as `value`
-/// reads a method's test record (ours: `value`; the paper's: `paper_value`); pairs
-/// without both figures are left out.
-fn drape_layer_changes(records: &[Record], scene: &str, value: impl Fn(&Record) -> Option<f64>) -> String {
-    let test = |method: &str| find(records, on("drape", scene, TEST), method, "sqrtmse-mm").and_then(&value);
+/// reads a method's test figure (ours: the mean over its seeds; the paper's: the mean
+/// record's `paper_value`); pairs without both figures are left out.
+fn drape_layer_changes(test: impl Fn(&str) -> Option<f64>) -> String {
     LAYER_PAIRS
         .iter()
         .filter_map(|(layer, trained, post)| {
@@ -427,7 +433,7 @@ fn drape_paper_figure(records: &[Record], scene: &str) -> String {
         pct(mu01, table3_network),
         pct(per_vertex, table3_network),
         pct(socp, network),
-        drape_layer_changes(records, scene, |r| r.paper_value),
+        drape_layer_changes(|m| find(records, on("drape", scene, TEST), m, "sqrtmse-mm")?.paper_value),
     )
 }
 
@@ -528,12 +534,14 @@ impl LearnedMu {
 fn drape_claim(records: &[Record]) -> Claim {
     const CONTROL: &str = DRAPE_CONTROL;
     let (scene, other) = drape_scenes(records);
-    let test = |method: &str, metric: &str| find(records, on("drape", scene, TEST), method, metric);
-    let sd =
-        |method: &str, metric: &str| figure(records, on("drape", scene, TEST), method, metric).map_or(0.0, |f| f.1);
-    let with_sd = |r: &Record| match test(&r.method, "sqrtmse-mm-sd") {
-        Some(sd) => format!("{:.3} ± {:.3}", r.value, sd.value),
-        None => format!("{:.3}", r.value),
+    // Every figure of ours is the mean and spread over the per-seed records.
+    let fig = |method: &str, metric: &str| figure(records, on("drape", scene, TEST), method, metric);
+    let with_sd = |(mean, sd): Figure| {
+        if sd > 0.0 {
+            format!("{mean:.3} ± {sd:.3}")
+        } else {
+            format!("{mean:.3}")
+        }
     };
     let mut claim = Claim {
         paper: "Geng, Johnson & Fedkiw 2020, projection layers in training",
@@ -547,41 +555,44 @@ fn drape_claim(records: &[Record]) -> Claim {
     };
     // Without the control (a report from before issue 72) the figures are still shown
     // against the network alone, and nothing is decided.
-    let control_run = test(CONTROL, "sqrtmse-mm").is_some();
+    let control_run = fig(CONTROL, "sqrtmse-mm").is_some();
     let baseline = if control_run { CONTROL } else { "network-only" };
-    let (Some(base), Some(base_s)) = (test(baseline, "sqrtmse-mm"), test(baseline, "stretching-energy-error")) else {
+    let (Some(base), Some(base_s)) = (fig(baseline, "sqrtmse-mm"), fig(baseline, "stretching-energy-error")) else {
         return claim;
     };
-    let Some(best) = drape_best_on_validation(records, scene).and_then(|m| test(m, "sqrtmse-mm")) else {
+    let Some(best_method) = drape_best_on_validation(records, scene) else {
         return claim;
     };
-    let Some(best_s) = test(&best.method, "stretching-energy-error") else {
+    let (Some(best), Some(best_s)) = (
+        fig(&best_method, "sqrtmse-mm"),
+        fig(&best_method, "stretching-energy-error"),
+    ) else {
         return claim;
     };
-    let cut = base_s.value / best_s.value.max(f64::MIN_POSITIVE);
-    let beats = best.value + sd(&best.method, "sqrtmse-mm") <= 0.95 * (base.value - sd(baseline, "sqrtmse-mm"));
+    let cut = base_s.0 / best_s.0.max(f64::MIN_POSITIVE);
+    let beats = best.0 + best.1 <= 0.95 * (base.0 - base.1);
     let mu = LearnedMu::of(records, scene);
     // The largest stretching cut of any layer applied after the untrained network: the
     // metric is the quasistatic layer's own edge-spring energy, which any such layer
     // lowers by construction.
-    let untrained = test("network-only", "stretching-energy-error").and_then(|n| {
+    let untrained = fig("network-only", "stretching-energy-error").and_then(|n| {
         LAYER_PAIRS
             .iter()
-            .filter_map(|(_, _, post)| Some((*post, n.value / test(post, "stretching-energy-error")?.value)))
+            .filter_map(|(_, _, post)| Some((*post, n.0 / fig(post, "stretching-energy-error")?.0)))
             .max_by(|a, b| a.1.total_cmp(&b.1))
     });
     let other_mu = LearnedMu::of(records, other);
     let against = if control_run {
         format!(
             "the equal-budget `{CONTROL}` ({}; `network-only` {})",
-            percent_change(best.value, base.value),
-            test("network-only", "sqrtmse-mm").map_or("—".into(), |r| format!("{} mm", with_sd(r))),
+            percent_change(best.0, base.0),
+            fig("network-only", "sqrtmse-mm").map_or("—".into(), |f| format!("{} mm", with_sd(f))),
         )
     } else {
         format!(
             "`network-only` ({}; no `{CONTROL}` records, so no equal-budget control to decide against: the gain \
              includes the trained model's extra epochs)",
-            percent_change(best.value, base.value)
+            percent_change(best.0, base.0)
         )
     };
     claim.ours = format!(
@@ -589,11 +600,11 @@ fn drape_claim(records: &[Record]) -> Claim {
          {against}; stretching error cut {}× against it¹; trained against applied afterwards: {}; {}²{}. ¹ The \
          energy is the quasistatic layer's own edge-spring energy{}. ² The paper gives no spring stiffnesses: μ's \
          absolute value is not comparable with the paper's. {}Ours: mean ± sd over the seeds",
-        best.method,
+        best_method,
         with_sd(best),
         with_sd(base),
         crate::records::three_significant(cut),
-        drape_layer_changes(records, scene, |r| Some(r.value)),
+        drape_layer_changes(|m| Some(fig(m, "sqrtmse-mm")?.0)),
         mu.describe(scene),
         if other_mu.values.is_empty() {
             String::new()
@@ -1065,7 +1076,7 @@ mod tests {
             }
         }
         assert_eq!(
-            drape_best_on_validation(&poisoned, "loose-sleeve"),
+            drape_best_on_validation(&poisoned, "loose-sleeve").as_deref(),
             Some("trained-qs-mu0.1")
         );
         let p = drape_claim(&poisoned);
