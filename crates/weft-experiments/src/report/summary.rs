@@ -163,7 +163,10 @@ fn embed_claim(records: &[Record]) -> Claim {
         experiment: "embed",
         claim: "The physics-based loss lowers M_phys (physical implausibility) below the baseline trained without it, \
                 beyond the seeds' spread and with M_rms within 2 %, on at least three quarters of the scenes",
-        paper_figure: format!("lower on {} of {} scenes (Table I)", paper.0, paper.1),
+        paper_figure: format!(
+            "lower on {} of {} scenes (Table I: test frames, one model per scene, no spread)",
+            paper.0, paper.1
+        ),
         ours: format!(
             "lower on {} of {} scenes (on the means alone, as the paper compares: no spread, no M_rms filter, \
              on {}); the paper's own M_phys gain would clear these spreads on {} of {}; `ours` M_rms at or below the paper's on {} of \
@@ -311,6 +314,15 @@ fn nnwarp_claim(records: &[Record]) -> Claim {
     if per_material.is_empty() {
         return claim;
     }
+    let seeds = match seed_count(
+        records,
+        |r| r.experiment == "nnwarp" && r.split.as_deref() == Some("unseen-shape"),
+        "nnwarp",
+        "rel-error",
+    ) {
+        0 => String::new(),
+        n => format!(" ({n} seed records; NNWarp's figure is their mean plus spread)"),
+    };
     claim.ours = per_material
         .iter()
         .map(|(material, (pass, total, ratios))| {
@@ -318,7 +330,8 @@ fn nnwarp_claim(records: &[Record]) -> Claim {
             format!("{material}: {pass} of {total} unseen shapes ≤ 0.3× (NNWarp / better warp {mean:.2} on average)")
         })
         .collect::<Vec<_>>()
-        .join("; ");
+        .join("; ")
+        + &seeds;
     claim.verdict = if per_material.values().any(|(pass, _, _)| *pass >= 2) {
         Verdict::Reproduced
     } else {
@@ -1295,7 +1308,10 @@ mod tests {
         r[3].paper_value = Some(2.0);
         r[2].paper_value = Some(9.0);
         let c = embed_claim(&r);
-        assert_eq!(c.paper_figure, "lower on 1 of 1 scenes (Table I)");
+        assert_eq!(
+            c.paper_figure,
+            "lower on 1 of 1 scenes (Table I: test frames, one model per scene, no spread)"
+        );
         assert!(c.ours.contains("at or below the paper's on 0 of 1;"), "{}", c.ours);
         // The paper halves M_phys; with no spread that clears it.
         assert!(c.ours.contains("would clear these spreads on 1 of 1;"), "{}", c.ours);
