@@ -286,7 +286,8 @@ fn publish(
             "\nExperiments taken from the report published here before (its `experiments/` outputs, unchanged): {}.\n",
             list(imported)
         )
-    } + &provenance_per_experiment(outputs);
+    } + &provenance_per_experiment(outputs)
+        + &stale_list(outputs);
     Ok(weft_data::files::write_text(&dest.join("PROVENANCE.md"), &text)?)
 }
 
@@ -305,6 +306,22 @@ fn provenance_per_experiment(outputs: &[ExperimentOutput]) -> String {
                 o.experiment, o.wall_seconds, o.command, o.code_version
             ));
         }
+    }
+    s
+}
+
+/// The experiments due for republication (`report::published::stale`), if any.
+fn stale_list(outputs: &[ExperimentOutput]) -> String {
+    let stale = crate::report::published::stale(outputs);
+    if stale.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\nStale, due for republication (made before `--publish` required committed code and learned \
+         experiments wrote per-seed records; `cargo xtask check-report --published` lists the same):\n\n",
+    );
+    for e in stale {
+        s.push_str(&format!("- {e}\n"));
     }
     s
 }

@@ -44,8 +44,14 @@ pub fn check(dir: &Path, records: &[Record]) -> crate::Result<Vec<String>> {
     check_provenance(dir, &outputs)?;
     check_seed_records(records)?;
     check_claims(dir, &outputs)?;
+    Ok(stale(&outputs))
+}
+
+/// The experiments among `outputs` made before the rules above, each with the reason: by
+/// uncommitted code, or learned without per-seed records. `PROVENANCE.md` lists them.
+pub fn stale(outputs: &[ExperimentOutput]) -> Vec<String> {
     let mut stale = Vec::new();
-    for o in &outputs {
+    for o in outputs {
         if is_dirty(&o.code_version) {
             stale.push(format!(
                 "{}: made by uncommitted code ({})",
@@ -59,7 +65,7 @@ pub fn check(dir: &Path, records: &[Record]) -> crate::Result<Vec<String>> {
             ));
         }
     }
-    Ok(stale)
+    stale
 }
 
 fn read_outputs(dir: &Path) -> crate::Result<Vec<ExperimentOutput>> {
