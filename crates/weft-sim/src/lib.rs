@@ -35,6 +35,7 @@ pub mod anchors;
 pub mod energies;
 pub mod energy;
 pub mod error;
+pub mod guard;
 pub mod integrators;
 pub mod newton;
 pub mod rng;
@@ -43,6 +44,10 @@ pub mod warp;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
+pub use guard::{
+    Correction, ErrorEstimate, Guard, GuardReport, GuardSettings, GuardTolerance, GuardTotals, GuardedFrame,
+    InertialPredictor, Outcome, StepInput, Surrogate,
+};
 pub use integrators::{
     ForceResidual, ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear,
     Quasistatic, QuasistaticReport, RayleighDamping, StepReport,
