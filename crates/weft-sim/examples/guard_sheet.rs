@@ -67,7 +67,12 @@ fn exact_modulus(integrator: &ImplicitEuler, x: &[f64]) -> Result<f64, Box<dyn s
 fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dyn std::error::Error>> {
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     let predictor = InertialPredictor::for_integrator(sim.integrator());
-    let mut guard = Guard::new(sim.integrator(), &scene.name, Box::new(predictor), GuardSettings::ground_truth())?;
+    let mut guard = Guard::new(
+        sim.integrator(),
+        &scene.name,
+        Box::new(predictor),
+        GuardSettings::ground_truth(),
+    )?;
     let noise = [0.1, 1.0, 5.0];
     let (mut err, mut est, mut own, mut certified) = (Vec::new(), Vec::new(), Vec::new(), 0usize);
     let mut from_noisy = vec![Vec::new(); noise.len()];
@@ -112,7 +117,10 @@ fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dy
         mean(&certified_modulus),
         certified_modulus.iter().fold(f64::INFINITY, |a, b| a.min(*b))
     );
-    println!("  Newton iterations to the truth's tolerance: {:.2} from the solver's own start", mean(&own));
+    println!(
+        "  Newton iterations to the truth's tolerance: {:.2} from the solver's own start",
+        mean(&own)
+    );
     for (k, mm) in noise.iter().enumerate() {
         println!(
             "    from the truth + {mm} mm noise: {:.2} iterations; estimate / true distance {:.2} mean (min {:.2})",
@@ -124,7 +132,11 @@ fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dy
     Ok(())
 }
 
-fn guarded_runs(scene: &ClothScene, truth: &[Vec<f64>], truth_iterations: usize) -> Result<(), Box<dyn std::error::Error>> {
+fn guarded_runs(
+    scene: &ClothScene,
+    truth: &[Vec<f64>],
+    truth_iterations: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
     println!("  ground truth: {truth_iterations} Newton iterations over the run");
     let mut rows: Vec<(String, GuardSettings)> = vec![("truth's tolerance".into(), GuardSettings::ground_truth())];
     for tau in [0.1, 0.5, 1.0, 2.0, 5.0, 1e9] {

@@ -103,7 +103,12 @@ impl Estimator {
     /// integrator's current state). The residual is the integrator's own gradient of
     /// Tan et al. Eq. 4 ([`ImplicitEuler::l_phys_gradient`]).
     pub(crate) fn estimate(&mut self, integrator: &ImplicitEuler, x: &[f64]) -> Result<ErrorEstimate> {
-        integrator.l_phys_gradient(integrator.previous_positions(), integrator.positions(), x, &mut self.grad)?;
+        integrator.l_phys_gradient(
+            integrator.previous_positions(),
+            integrator.positions(),
+            x,
+            &mut self.grad,
+        )?;
         let (mut sq, mut max) = (0.0f64, 0.0f64);
         for i in (0..x.len()).filter(|&i| self.free[i]) {
             let g = self.grad[i];

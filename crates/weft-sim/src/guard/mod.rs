@@ -19,8 +19,8 @@ use crate::error::{Error, Result};
 use crate::integrators::ImplicitEuler;
 use crate::scenes::MotionLabel;
 
-pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate};
 use estimate::Estimator;
+pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 
 /// When a proposal is good enough to pass on.
@@ -299,7 +299,10 @@ impl Guard {
         let clock = Instant::now();
         let proposal_error = reference.map(|r| self.true_error(&x, r));
         let (rejection, proposal_estimate) = self.screen(integrator, prescribed, &mut x)?;
-        let accepted = rejection.is_none() && proposal_estimate.as_ref().is_some_and(|e| self.acceptable(integrator, e));
+        let accepted = rejection.is_none()
+            && proposal_estimate
+                .as_ref()
+                .is_some_and(|e| self.acceptable(integrator, e));
         seconds.guard = clock.elapsed().as_secs_f64();
         let mut report = GuardReport {
             frame,

@@ -167,7 +167,12 @@ impl ImplicitEuler {
     /// prescribed ones at their values.
     pub fn inertial_start(&self, prescribed: &[(usize, f64)]) -> Result<Vec<f64>> {
         crate::anchors::check_prescribed(prescribed, &self.fixed)?;
-        let mut x: Vec<f64> = self.current.iter().zip(&self.previous).map(|(c, p)| 2.0 * c - p).collect();
+        let mut x: Vec<f64> = self
+            .current
+            .iter()
+            .zip(&self.previous)
+            .map(|(c, p)| 2.0 * c - p)
+            .collect();
         self.constrain(prescribed, &mut x);
         Ok(x)
     }

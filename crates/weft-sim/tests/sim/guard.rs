@@ -112,7 +112,11 @@ fn correction_from_a_proposal_reaches_the_ground_truth_frame() {
         // same minimiser up to it: far closer than the 2 mm the proposal was off.
         let before = r.proposal_error.unwrap().m_rms_mm;
         let after = r.error.unwrap().m_rms_mm;
-        assert!(after < 1e-2 * before, "frame {}: {after} mm after, {before} mm before", r.frame);
+        assert!(
+            after < 1e-2 * before,
+            "frame {}: {after} mm after, {before} mm before",
+            r.frame
+        );
     }
 }
 
@@ -125,8 +129,13 @@ fn estimate_bounds_the_distance_to_the_step_minimiser_wherever_certified() {
         let frames = truth(&scene);
         let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
         let predictor = InertialPredictor::for_integrator(sim.integrator());
-        let mut guard = Guard::new(sim.integrator(), &scene.name, Box::new(predictor), GuardSettings::ground_truth())
-            .unwrap();
+        let mut guard = Guard::new(
+            sim.integrator(),
+            &scene.name,
+            Box::new(predictor),
+            GuardSettings::ground_truth(),
+        )
+        .unwrap();
         let mut rng = SplitMix64::new(7);
         for m in 1..frames.len() {
             let prev = &frames[m.saturating_sub(2)];
@@ -155,7 +164,10 @@ fn estimate_bounds_the_distance_to_the_step_minimiser_wherever_certified() {
             }
         }
     }
-    assert!(checked >= 10, "only {checked} certified proposals: the sweep tests nothing");
+    assert!(
+        checked >= 10,
+        "only {checked} certified proposals: the sweep tests nothing"
+    );
 }
 
 #[test]
@@ -166,7 +178,11 @@ fn the_dial_runs_from_pure_surrogate_to_ground_truth() {
     let mut loose = GuardSettings::millimetres(1e12).unwrap();
     loose.accept_unverified = true;
     let probe = ClothSimulation::new(scene.clone(), None).unwrap();
-    let (mut sim, mut guard) = guarded(&scene, Box::new(InertialPredictor::for_integrator(probe.integrator())), loose);
+    let (mut sim, mut guard) = guarded(
+        &scene,
+        Box::new(InertialPredictor::for_integrator(probe.integrator())),
+        loose,
+    );
     for _ in 1..frames.len() {
         sim.step_guarded(&mut guard, None).unwrap();
     }
@@ -208,7 +224,16 @@ fn a_nan_proposal_is_rejected_corrected_and_counted() {
 fn bad_tolerances_and_mismatched_surrogates_are_typed_errors() {
     for tau in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         let err = GuardSettings::millimetres(tau).unwrap_err();
-        assert!(matches!(err, Error::InvalidParameter { name: "guard tolerance (mm)", .. }), "{err}");
+        assert!(
+            matches!(
+                err,
+                Error::InvalidParameter {
+                    name: "guard tolerance (mm)",
+                    ..
+                }
+            ),
+            "{err}"
+        );
     }
     let mut settings = GuardSettings::ground_truth();
     settings.tolerance = GuardTolerance::Millimetres(f64::NAN);
@@ -222,17 +247,44 @@ fn bad_tolerances_and_mismatched_surrogates_are_typed_errors() {
     let other = Box::new(InertialPredictor::new(n + 3));
     let err = Guard::new(sim.integrator(), "sheet-ms", other, GuardSettings::ground_truth()).unwrap_err();
     let text = err.to_string();
-    assert!(matches!(err, Error::SurrogateMismatch { what: "mesh DOF count", .. }), "{text}");
-    assert!(text.contains(&n.to_string()) && text.contains(&(n + 3).to_string()), "{text}");
+    assert!(
+        matches!(
+            err,
+            Error::SurrogateMismatch {
+                what: "mesh DOF count",
+                ..
+            }
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains(&n.to_string()) && text.contains(&(n + 3).to_string()),
+        "{text}"
+    );
     // A surrogate of another scene.
     let oracle = Box::new(Oracle::new(vec![vec![0.0; n]], &sim, 0.0));
     let err = Guard::new(sim.integrator(), "sheet-fem", oracle, GuardSettings::ground_truth()).unwrap_err();
     assert!(matches!(err, Error::SurrogateMismatch { what: "scene", .. }), "{err}");
     // A proposal of the wrong length.
-    let mut guard = Guard::new(sim.integrator(), "sheet-ms", Box::new(Short(n)), GuardSettings::ground_truth()).unwrap();
+    let mut guard = Guard::new(
+        sim.integrator(),
+        "sheet-ms",
+        Box::new(Short(n)),
+        GuardSettings::ground_truth(),
+    )
+    .unwrap();
     let mut sim = sim;
     let err = sim.step_guarded(&mut guard, None).unwrap_err();
-    assert!(matches!(err, Error::SurrogateMismatch { what: "proposal length (DOFs)", .. }), "{err}");
+    assert!(
+        matches!(
+            err,
+            Error::SurrogateMismatch {
+                what: "proposal length (DOFs)",
+                ..
+            }
+        ),
+        "{err}"
+    );
 }
 
 /// Claims `.0` DOFs but proposes three fewer.
