@@ -80,7 +80,7 @@ impl Estimator {
     }
 
     /// The mass-weighted distance (m·√kg) of `mm`.
-    pub(crate) fn from_mm(&self, mm: f64) -> f64 {
+    pub(crate) fn distance_of_mm(&self, mm: f64) -> f64 {
         1e-3 * mm * self.rms_scale
     }
 

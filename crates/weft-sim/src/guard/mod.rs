@@ -383,7 +383,9 @@ impl Guard {
                 Some(e) if e.certified => e.modulus,
                 _ => 1.0 / integrator.dt().powi(2),
             };
-            let force = self.estimator.max_residual_for(modulus * self.estimator.from_mm(tau));
+            let force = self
+                .estimator
+                .max_residual_for(modulus * self.estimator.distance_of_mm(tau));
             settings.tolerance = force.max(ground_truth.tolerance);
         }
         for attempt in [settings, ground_truth] {
