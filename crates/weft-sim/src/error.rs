@@ -53,6 +53,18 @@ pub enum Error {
          {limit:.3} m (half the garment's length)"
     )]
     GarmentOffBody { vertex: usize, distance: f64, limit: f64 },
+    #[error("surrogate {surrogate:?} does not fit: its {what} is {got}, the scene's is {expected}")]
+    SurrogateMismatch {
+        surrogate: String,
+        what: &'static str,
+        expected: String,
+        got: String,
+    },
+    #[error("surrogate {surrogate:?} failed to propose a frame: {source}")]
+    Surrogate {
+        surrogate: String,
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     #[error("scene error: {0}")]
     Scene(String),
 }

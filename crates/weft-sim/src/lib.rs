@@ -8,7 +8,10 @@
 //!
 //! Every scene kind (cloth, volumetric, soft tissue) loads through one [`load`](mod@load) from a
 //! built-in name or a TOML file. [`warp`] holds the geometric warps of a linear solution
-//! (modal and rotation-strain warping) and NNWarp's per-node inputs.
+//! (modal and rotation-strain warping) and NNWarp's per-node inputs. [`guard`] steps a
+//! learned [`Surrogate`] under a [`Guard`] that checks every proposed frame against the
+//! implicit-Euler step's residual and corrects it with Newton when its certified error
+//! estimate exceeds a tolerance (docs/GUARD.md).
 //!
 //! This crate is not a learning library (it never touches candle); its only file I/O is
 //! reading scene files and the meshes they name.
@@ -35,6 +38,7 @@ pub mod anchors;
 pub mod energies;
 pub mod energy;
 pub mod error;
+pub mod guard;
 pub mod integrators;
 pub mod newton;
 pub mod rng;
@@ -43,6 +47,10 @@ pub mod warp;
 
 pub use energy::Energy;
 pub use error::{Error, Result};
+pub use guard::{
+    Correction, ErrorEstimate, Guard, GuardReport, GuardSettings, GuardTolerance, GuardTotals, GuardedFrame,
+    InertialPredictor, Outcome, StepInput, Surrogate,
+};
 pub use integrators::{
     ForceResidual, ImplicitEuler, LinearSolve, LinearStepReport, Newmark, NewmarkReport, PrefactorizedLinear,
     Quasistatic, QuasistaticReport, RayleighDamping, StepReport,

@@ -135,22 +135,11 @@ impl ImplicitEuler {
     /// left unchanged, so a caller can retry with a smaller step.
     pub fn step(&mut self, prescribed: &[(usize, f64)]) -> Result<StepReport> {
         let start = Instant::now();
-        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
-        self.inertia.set_history(&self.current, &self.previous)?;
         // Start from the inertial prediction (a better guess than p_{m−1} for fast
         // motion), with the prescribed DOFs moved into place.
-        let mut x = self.inertia.prediction().to_vec();
-        for (i, f) in self.fixed.iter().enumerate() {
-            if *f {
-                x[i] = self.current[i];
-            }
-        }
-        for &(dof, value) in prescribed {
-            x[dof] = value;
-        }
-        let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
-        let newton = self.solver.minimize(&all, &mut x, &self.settings)?;
-        drop(all);
+        let mut x = self.inertial_start(prescribed)?;
+        let settings = self.settings;
+        let newton = self.solve_step_from(prescribed, &mut x, &settings)?;
         let potential_energy = self.terms.iter().map(|t| t.value(&x)).sum();
         let dt = self.dt();
         let kinetic_energy = self
@@ -171,6 +160,80 @@ impl ImplicitEuler {
             kinetic_energy,
             seconds: start.elapsed().as_secs_f64(),
         })
+    }
+
+    /// The solver's own start for the next step: the inertial prediction
+    /// `2p_m − p_{m−1}` (`x + Δt v`), with unprescribed fixed DOFs held at `p_m` and the
+    /// prescribed ones at their values.
+    pub fn inertial_start(&self, prescribed: &[(usize, f64)]) -> Result<Vec<f64>> {
+        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
+        let mut x: Vec<f64> = self
+            .current
+            .iter()
+            .zip(&self.previous)
+            .map(|(c, p)| 2.0 * c - p)
+            .collect();
+        self.constrain(prescribed, &mut x);
+        Ok(x)
+    }
+
+    /// Sets the fixed DOFs of `x` to the step's constraints: prescribed ones to their
+    /// values, the others held at `p_m`.
+    pub fn constrain(&self, prescribed: &[(usize, f64)], x: &mut [f64]) {
+        for (i, f) in self.fixed.iter().enumerate() {
+            if *f {
+                x[i] = self.current[i];
+            }
+        }
+        for &(dof, value) in prescribed {
+            x[dof] = value;
+        }
+    }
+
+    /// Solves the next step's minimisation from the start `x` (updated in place to the
+    /// minimiser; its fixed DOFs are first set by [`ImplicitEuler::constrain`]) with
+    /// `settings`, without advancing the state: the guarded roll-out (`crate::guard`)
+    /// starts Newton from a surrogate's proposal and commits with
+    /// [`ImplicitEuler::advance_to`].
+    pub fn solve_step_from(
+        &mut self,
+        prescribed: &[(usize, f64)],
+        x: &mut [f64],
+        settings: &NewtonSettings,
+    ) -> Result<NewtonReport> {
+        crate::anchors::check_prescribed(prescribed, &self.fixed)?;
+        if x.len() != self.current.len() {
+            return Err(Error::LengthMismatch {
+                what: "step start",
+                expected: self.current.len(),
+                got: x.len(),
+            });
+        }
+        self.inertia.set_history(&self.current, &self.previous)?;
+        self.constrain(prescribed, x);
+        let all = crate::energy::with_extra(&self.terms, &[&self.inertia]);
+        self.solver.minimize(&all, x, settings)
+    }
+
+    /// Advances the state to `x` as the next frame (`p_{m−1} ← p_m`, `p_m ← x`) without
+    /// solving: a frame the caller has already checked.
+    pub fn advance_to(&mut self, x: &[f64]) -> Result<()> {
+        if x.len() != self.current.len() {
+            return Err(Error::LengthMismatch {
+                what: "next frame",
+                expected: self.current.len(),
+                got: x.len(),
+            });
+        }
+        if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "next frame",
+                dof: i,
+            });
+        }
+        self.previous.copy_from_slice(&self.current);
+        self.current.copy_from_slice(x);
+        Ok(())
     }
 
     /// `L_phys(p_{m−2}, p_{m−1}, p, q)` (Tan et al. Eq. 4) for any frame `p` (with the

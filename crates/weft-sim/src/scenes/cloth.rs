@@ -12,6 +12,7 @@ use weft_mesh::{Topology, TriMesh, generators};
 use crate::energies::{ConstantForce, DihedralBending, Membrane, ObstaclePenalty, ObstacleShape, Springs};
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_positive};
+use crate::guard::{Guard, GuardedFrame};
 use crate::integrators::implicit_euler::{ImplicitEuler, StepReport};
 use crate::newton::{Globalization, HessianProjection};
 use crate::rng::SplitMix64;
@@ -755,16 +756,21 @@ impl ClothSimulation {
         if (amp >= 0.0) == forward { plus } else { minus }
     }
 
+    /// The grasp of frame `m` as prescribed DOFs `(dof, value)` for the integrator.
+    pub fn prescribed_at(&self, m: usize) -> Vec<(usize, f64)> {
+        let (q, _) = self.controls_at(m);
+        self.grasp
+            .iter()
+            .zip(&q)
+            .flat_map(|(&v, p)| (0..3).map(move |k| (3 * v + k, p[k])))
+            .collect()
+    }
+
     /// Simulates the next frame.
     pub fn step(&mut self) -> Result<Frame> {
         let m = self.frame + 1;
         let (q, label) = self.controls_at(m);
-        let prescribed: Vec<(usize, f64)> = self
-            .grasp
-            .iter()
-            .zip(&q)
-            .flat_map(|(&v, p)| (0..3).map(move |k| (3 * v + k, p[k])))
-            .collect();
+        let prescribed = self.prescribed_at(m);
         let report = self.integrator.step(&prescribed)?;
         let positions = self.integrator.positions().to_vec();
         if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
@@ -776,6 +782,23 @@ impl ClothSimulation {
         self.frame = m;
         Ok(Frame {
             positions,
+            controls: q.iter().flat_map(|p| [p.x, p.y, p.z]).collect(),
+            label,
+            report,
+        })
+    }
+
+    /// The next frame under `guard`: its surrogate proposes it, the guard accepts or
+    /// corrects it (see [`crate::guard`]); `reference` is the ground truth's frame, if
+    /// known, for the report's true error.
+    pub fn step_guarded(&mut self, guard: &mut Guard, reference: Option<&[f64]>) -> Result<GuardedFrame> {
+        let m = self.frame + 1;
+        let (q, label) = self.controls_at(m);
+        let prescribed = self.prescribed_at(m);
+        let report = guard.step(&mut self.integrator, m, &prescribed, reference)?;
+        self.frame = m;
+        Ok(GuardedFrame {
+            positions: self.integrator.positions().to_vec(),
             controls: q.iter().flat_map(|p| [p.x, p.y, p.z]).collect(),
             label,
             report,

@@ -4,6 +4,7 @@
 mod drape;
 mod energies;
 mod fem;
+mod guard;
 mod simulation;
 mod volume_scenes;
 mod warp;

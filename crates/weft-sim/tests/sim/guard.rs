@@ -1,0 +1,304 @@
+//! The guarded roll-out (`weft_sim::guard`, docs/GUARD.md) on the quick mass-spring sheet.
+
+use weft_sim::guard::{
+    Correction, Guard, GuardSettings, GuardTolerance, InertialPredictor, Outcome, Rejection, StepInput, Surrogate,
+    SurrogateError,
+};
+use weft_sim::rng::SplitMix64;
+use weft_sim::{ClothScene, ClothSimulation, Error};
+
+fn quick_sheet(dt: f64) -> ClothScene {
+    let mut s = ClothScene::builtin("sheet-ms", true).unwrap();
+    s.dt = dt;
+    s.frames = 12;
+    s
+}
+
+/// The ground truth's frames, rest state first.
+fn truth(scene: &ClothScene) -> Vec<Vec<f64>> {
+    let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
+    let mut frames = vec![sim.integrator().positions().to_vec()];
+    for _ in 0..scene.frames {
+        frames.push(sim.step().unwrap().positions);
+    }
+    frames
+}
+
+/// `x` plus seeded uniform noise of `mm` RMS per coordinate on the free DOFs.
+fn perturbed(x: &[f64], fixed: &[bool], mm: f64, rng: &mut SplitMix64) -> Vec<f64> {
+    let a = 1e-3 * mm * 3f64.sqrt();
+    x.iter()
+        .zip(fixed)
+        .map(|(v, f)| if *f { *v } else { v + a * (2.0 * rng.unit() - 1.0) })
+        .collect()
+}
+
+/// Proposes the ground truth's frame, perturbed by `noise_mm`, or NaN on `nan_frame`.
+#[derive(Debug)]
+struct Oracle {
+    frames: Vec<Vec<f64>>,
+    fixed: Vec<bool>,
+    noise_mm: f64,
+    nan_frame: Option<usize>,
+    rng: SplitMix64,
+}
+
+impl Oracle {
+    fn new(frames: Vec<Vec<f64>>, sim: &ClothSimulation, noise_mm: f64) -> Self {
+        Self {
+            frames,
+            fixed: sim.integrator().fixed().to_vec(),
+            noise_mm,
+            nan_frame: None,
+            rng: SplitMix64::new(73),
+        }
+    }
+}
+
+impl Surrogate for Oracle {
+    fn name(&self) -> &str {
+        "oracle"
+    }
+    fn num_dofs(&self) -> usize {
+        self.frames[0].len()
+    }
+    fn scene(&self) -> Option<&str> {
+        Some("sheet-ms")
+    }
+    fn propose(&mut self, input: &StepInput<'_>) -> Result<Vec<f64>, SurrogateError> {
+        let mut x = perturbed(&self.frames[input.frame], &self.fixed, self.noise_mm, &mut self.rng);
+        if self.nan_frame == Some(input.frame) {
+            x[5] = f64::NAN;
+        }
+        Ok(x)
+    }
+}
+
+fn guarded(scene: &ClothScene, surrogate: Box<dyn Surrogate>, settings: GuardSettings) -> (ClothSimulation, Guard) {
+    let sim = ClothSimulation::new(scene.clone(), None).unwrap();
+    let guard = Guard::new(sim.integrator(), &scene.name, surrogate, settings).unwrap();
+    (sim, guard)
+}
+
+#[test]
+fn guard_accepts_the_true_frame_and_corrects_a_perturbed_one() {
+    let scene = quick_sheet(0.02);
+    let frames = truth(&scene);
+    for (noise, expected) in [(0.0, Outcome::Accepted), (1.0, Outcome::Corrected)] {
+        let probe = ClothSimulation::new(scene.clone(), None).unwrap();
+        let oracle = Oracle::new(frames.clone(), &probe, noise);
+        let (mut sim, mut guard) = guarded(&scene, Box::new(oracle), GuardSettings::ground_truth());
+        for reference in &frames[1..] {
+            let f = sim.step_guarded(&mut guard, Some(reference)).unwrap();
+            assert_eq!(f.report.outcome, expected, "noise {noise} mm, frame {}", f.report.frame);
+            assert!(f.report.estimate.residual_max <= sim.integrator().settings.tolerance);
+        }
+    }
+}
+
+#[test]
+fn correction_from_a_proposal_reaches_the_ground_truth_frame() {
+    let scene = quick_sheet(0.02);
+    let frames = truth(&scene);
+    let probe = ClothSimulation::new(scene.clone(), None).unwrap();
+    let oracle = Oracle::new(frames.clone(), &probe, 2.0);
+    let (mut sim, mut guard) = guarded(&scene, Box::new(oracle), GuardSettings::ground_truth());
+    for reference in &frames[1..] {
+        let f = sim.step_guarded(&mut guard, Some(reference)).unwrap();
+        let r = f.report;
+        assert_eq!(r.outcome, Outcome::Corrected);
+        assert!(r.newton_iterations > 0 && r.factorizations > 0);
+        // Both frames meet the truth's tolerance from the same history, so they are the
+        // same minimiser up to it: far closer than the 2 mm the proposal was off.
+        let before = r.proposal_error.unwrap().m_rms_mm;
+        let after = r.error.unwrap().m_rms_mm;
+        assert!(
+            after < 1e-2 * before,
+            "frame {}: {after} mm after, {before} mm before",
+            r.frame
+        );
+    }
+}
+
+#[test]
+fn estimate_bounds_the_distance_to_the_step_minimiser_wherever_certified() {
+    // Two time steps: the shorter one raises the mass term 1/Δt² and certifies more frames.
+    let mut checked = 0;
+    for dt in [0.02, 0.005] {
+        let scene = quick_sheet(dt);
+        let frames = truth(&scene);
+        let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
+        let predictor = InertialPredictor::for_integrator(sim.integrator());
+        let mut guard = Guard::new(
+            sim.integrator(),
+            &scene.name,
+            Box::new(predictor),
+            GuardSettings::ground_truth(),
+        )
+        .unwrap();
+        let mut rng = SplitMix64::new(7);
+        for m in 1..frames.len() {
+            let prev = &frames[m.saturating_sub(2)];
+            sim.integrator_mut().set_state(&frames[m - 1], prev).unwrap();
+            let prescribed = sim.prescribed_at(m);
+            let integrator = sim.integrator();
+            // The truth is the minimiser to its tolerance; its own estimate covers the rest.
+            let at_truth = guard.estimate(integrator, &frames[m]).unwrap();
+            let mut proposals = vec![integrator.inertial_start(&prescribed).unwrap()];
+            for mm in [0.1, 1.0, 10.0] {
+                proposals.push(perturbed(&frames[m], integrator.fixed(), mm, &mut rng));
+            }
+            for x in proposals {
+                let e = guard.estimate(integrator, &x).unwrap();
+                if !(e.certified && at_truth.certified) {
+                    continue;
+                }
+                checked += 1;
+                let distance = guard.mass_norm(&x, &frames[m]);
+                assert!(
+                    distance <= e.distance + at_truth.distance,
+                    "dt {dt}, frame {m}: ‖x − x*‖_M = {distance:e} above the bound {:e} + {:e}",
+                    e.distance,
+                    at_truth.distance
+                );
+            }
+        }
+    }
+    assert!(
+        checked >= 10,
+        "only {checked} certified proposals: the sweep tests nothing"
+    );
+}
+
+#[test]
+fn the_dial_runs_from_pure_surrogate_to_ground_truth() {
+    let scene = quick_sheet(0.02);
+    let frames = truth(&scene);
+    // τ huge, unverified estimates accepted: every inertial proposal passes, no Newton.
+    let mut loose = GuardSettings::millimetres(1e12).unwrap();
+    loose.accept_unverified = true;
+    let probe = ClothSimulation::new(scene.clone(), None).unwrap();
+    let (mut sim, mut guard) = guarded(
+        &scene,
+        Box::new(InertialPredictor::for_integrator(probe.integrator())),
+        loose,
+    );
+    for _ in 1..frames.len() {
+        sim.step_guarded(&mut guard, None).unwrap();
+    }
+    let t = guard.totals();
+    assert_eq!((t.accepted, t.newton_iterations), (t.frames, 0));
+    // At the truth's tolerance the guarded run reproduces the truth's frames.
+    let (mut sim, mut guard) = guarded(
+        &scene,
+        Box::new(InertialPredictor::for_integrator(probe.integrator())),
+        GuardSettings::ground_truth(),
+    );
+    for reference in &frames[1..] {
+        let f = sim.step_guarded(&mut guard, Some(reference)).unwrap();
+        assert_eq!(f.positions, *reference, "frame {}", f.report.frame);
+    }
+}
+
+#[test]
+fn a_nan_proposal_is_rejected_corrected_and_counted() {
+    let scene = quick_sheet(0.02);
+    let frames = truth(&scene);
+    let probe = ClothSimulation::new(scene.clone(), None).unwrap();
+    let mut oracle = Oracle::new(frames.clone(), &probe, 0.0);
+    oracle.nan_frame = Some(3);
+    let (mut sim, mut guard) = guarded(&scene, Box::new(oracle), GuardSettings::ground_truth());
+    for reference in &frames[1..] {
+        let f = sim.step_guarded(&mut guard, Some(reference)).unwrap();
+        assert!(f.positions.iter().all(|v| v.is_finite()));
+        if f.report.frame == 3 {
+            assert_eq!(f.report.outcome, Outcome::Rejected(Rejection::NonFinite));
+            assert!(f.report.newton_iterations > 0);
+        }
+    }
+    assert_eq!(guard.totals().rejected, 1);
+    assert_eq!(guard.totals().accepted, frames.len() - 2);
+}
+
+#[test]
+fn bad_tolerances_and_mismatched_surrogates_are_typed_errors() {
+    for tau in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let err = GuardSettings::millimetres(tau).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                Error::InvalidParameter {
+                    name: "guard tolerance (mm)",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+    let mut settings = GuardSettings::ground_truth();
+    settings.tolerance = GuardTolerance::Millimetres(f64::NAN);
+    settings.correction = Correction::ToTolerance;
+    let scene = quick_sheet(0.02);
+    let sim = ClothSimulation::new(scene.clone(), None).unwrap();
+    let n = sim.integrator().positions().len();
+    let predictor = || Box::new(InertialPredictor::for_integrator(sim.integrator()));
+    assert!(Guard::new(sim.integrator(), "sheet-ms", predictor(), settings).is_err());
+    // A surrogate for another mesh: the message names the two DOF counts.
+    let other = Box::new(InertialPredictor::new(n + 3));
+    let err = Guard::new(sim.integrator(), "sheet-ms", other, GuardSettings::ground_truth()).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        matches!(
+            err,
+            Error::SurrogateMismatch {
+                what: "mesh DOF count",
+                ..
+            }
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains(&n.to_string()) && text.contains(&(n + 3).to_string()),
+        "{text}"
+    );
+    // A surrogate of another scene.
+    let oracle = Box::new(Oracle::new(vec![vec![0.0; n]], &sim, 0.0));
+    let err = Guard::new(sim.integrator(), "sheet-fem", oracle, GuardSettings::ground_truth()).unwrap_err();
+    assert!(matches!(err, Error::SurrogateMismatch { what: "scene", .. }), "{err}");
+    // A proposal of the wrong length.
+    let mut guard = Guard::new(
+        sim.integrator(),
+        "sheet-ms",
+        Box::new(Short(n)),
+        GuardSettings::ground_truth(),
+    )
+    .unwrap();
+    let mut sim = sim;
+    let err = sim.step_guarded(&mut guard, None).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::SurrogateMismatch {
+                what: "proposal length (DOFs)",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+/// Claims `.0` DOFs but proposes three fewer.
+#[derive(Debug)]
+struct Short(usize);
+
+impl Surrogate for Short {
+    fn name(&self) -> &str {
+        "short"
+    }
+    fn num_dofs(&self) -> usize {
+        self.0
+    }
+    fn propose(&mut self, _input: &StepInput<'_>) -> Result<Vec<f64>, SurrogateError> {
+        Ok(vec![0.0; self.0 - 3])
+    }
+}
