@@ -58,7 +58,7 @@ fn score(kind: &str, model: &Path, data: &Path, out: &Path) -> Vec<serde_json::V
     for r in &records {
         assert_eq!(r["experiment"], kind);
         assert!(r["value"].as_f64().unwrap().is_finite(), "{r}");
-        assert_eq!(r.as_object().unwrap().len(), 10, "the results.json record format: {r}");
+        assert_eq!(r.as_object().unwrap().len(), 11, "the results.json record format: {r}");
     }
     let predictions = out.join("predictions").join(kind);
     assert!(predictions.is_dir(), "{} missing", predictions.display());
