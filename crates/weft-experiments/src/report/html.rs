@@ -138,6 +138,17 @@ pub fn page(
                    which way one seed leans; the command on the right reruns the experiment that decides it.</p>\n",
     );
     body.push_str(&claims_html(summary.claims));
+    let stale = super::published::stale(outputs);
+    if !stale.is_empty() {
+        body.push_str(&format!(
+            "<p class=\"cap\">{}</p>\n<ul>\n{}</ul>\n",
+            inline(super::STALE_CAPTION),
+            stale
+                .iter()
+                .map(|e| format!("<li>{}</li>\n", inline(e)))
+                .collect::<String>()
+        ));
+    }
     body.push_str(
         "<h2 id=\"contents\">Contents</h2>\n<ul>\n<li><a href=\"#claims\">Claims</a></li>\n\
                    <li><a href=\"#families\">Speed against accuracy, by family</a></li>\n\

@@ -242,6 +242,14 @@ fn tables_markdown(
         ));
     }
     s.push('\n');
+    let stale = published::stale(outputs);
+    if !stale.is_empty() {
+        s.push_str(&format!("{STALE_CAPTION}\n\n"));
+        for e in &stale {
+            s.push_str(&format!("- {e}\n"));
+        }
+        s.push('\n');
+    }
     for t in tables {
         s.push_str(&t.markdown());
     }
@@ -284,6 +292,12 @@ pub(crate) fn experiment_times(outputs: &[ExperimentOutput], name: impl Fn(&str)
     };
     format!("experiments' wall time: {each}; {total:.0} s ({human}) in all")
 }
+
+/// What the page and `tables.md` say beneath the claims when some experiment was made
+/// before the publication rules ([`published::stale`]).
+const STALE_CAPTION: &str = "Due for republication: these experiments were made before a publication had to come \
+     from committed code and learned experiments wrote a record per seed; their figures stand as published, but a \
+     reader cannot recompute their spreads or trace them to a commit:";
 
 /// What [`check`] found in a report.
 #[derive(Debug, Clone, PartialEq, Eq)]
