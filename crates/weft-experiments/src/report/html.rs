@@ -108,6 +108,30 @@ fn claims_html(claims: &[super::summary::Claim]) -> String {
     s
 }
 
+/// The claims a newcomer reads first, and the experiments due for republication.
+fn claims_section(summary: &Summary<'_>, outputs: &[ExperimentOutput]) -> String {
+    let mut body = String::new();
+    body.push_str(
+        "<h2 id=\"claims\">The papers' central claims</h2>\n<p class=\"cap\">Each claim is decided from this \
+                   report's records by the rule in <code>weft_experiments::report::summary</code>, and only where its \
+                   models were trained with at least three seeds — otherwise it is not decided, and the verdict says \
+                   which way one seed leans; the command on the right reruns the experiment that decides it.</p>\n",
+    );
+    body.push_str(&claims_html(summary.claims));
+    let stale = super::published::stale(outputs);
+    if !stale.is_empty() {
+        body.push_str(&format!(
+            "<p class=\"cap\">{}</p>\n<ul>\n{}</ul>\n",
+            inline(super::STALE_CAPTION),
+            stale
+                .iter()
+                .map(|e| format!("<li>{}</li>\n", inline(e)))
+                .collect::<String>()
+        ));
+    }
+    body
+}
+
 pub fn page(
     dir: &Path,
     size: Size,
@@ -131,24 +155,7 @@ pub fn page(
         super::experiment_times(outputs, |e| format!("<code>{}</code>", escape(e)))
     ));
     // The summary a newcomer reads first, then a table of contents.
-    body.push_str(
-        "<h2 id=\"claims\">The papers' central claims</h2>\n<p class=\"cap\">Each claim is decided from this \
-                   report's records by the rule in <code>weft_experiments::report::summary</code>, and only where its \
-                   models were trained with at least three seeds — otherwise it is not decided, and the verdict says \
-                   which way one seed leans; the command on the right reruns the experiment that decides it.</p>\n",
-    );
-    body.push_str(&claims_html(summary.claims));
-    let stale = super::published::stale(outputs);
-    if !stale.is_empty() {
-        body.push_str(&format!(
-            "<p class=\"cap\">{}</p>\n<ul>\n{}</ul>\n",
-            inline(super::STALE_CAPTION),
-            stale
-                .iter()
-                .map(|e| format!("<li>{}</li>\n", inline(e)))
-                .collect::<String>()
-        ));
-    }
+    body.push_str(&claims_section(summary, outputs));
     body.push_str(
         "<h2 id=\"contents\">Contents</h2>\n<ul>\n<li><a href=\"#claims\">Claims</a></li>\n\
                    <li><a href=\"#families\">Speed against accuracy, by family</a></li>\n\
