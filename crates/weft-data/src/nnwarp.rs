@@ -102,9 +102,10 @@ fn off_branch_json(off: &[Option<weft_sim::warp::OffBranch>]) -> serde_json::Val
         .iter()
         .zip(off)
         .map(|(m, o)| {
-            let v = o.map_or(serde_json::Value::Null, |o| {
-                serde_json::json!({"frame": o.frame, "inverted": o.inverted, "warp_error": o.warp_error})
-            });
+            let v = o.map_or(
+                serde_json::Value::Null,
+                |o| serde_json::json!({"frame": o.frame, "inverted": o.inverted, "warp_error": o.warp_error}),
+            );
             (material_key(*m).to_string(), v)
         })
         .collect::<serde_json::Map<_, _>>()

@@ -810,7 +810,8 @@ impl BranchWatch {
         let error = warp_rel_error(modal, registered);
         if self.off.is_none() {
             let inverted = inverted_tets(mesh, registered);
-            let jump = error - self.previous_error > BRANCH_JUMP_RISE && error > BRANCH_JUMP_FACTOR * self.previous_error;
+            let jump =
+                error - self.previous_error > BRANCH_JUMP_RISE && error > BRANCH_JUMP_FACTOR * self.previous_error;
             if inverted > 0 || jump {
                 self.off = Some(OffBranch {
                     frame,
@@ -861,7 +862,12 @@ pub fn field_forces(rest: &[f64], masses: &[f64], field: FieldDirection) -> Resu
 /// backward-Euler solve with mass damping `α = 2ω₁` (critical for the first mode, whose
 /// `ω₁` is estimated by the Rayleigh quotient of the deflection) and a time step that
 /// spans ten first-mode relaxation times (τ₁ = α/ω₁² = 2/ω₁) over the ramp.
-fn ramp_pace(u1: &[f64], unit: &[f64], masses: &[f64], settings: &SequenceSettings) -> Result<(f64, crate::LinearSolve)> {
+fn ramp_pace(
+    u1: &[f64],
+    unit: &[f64],
+    masses: &[f64],
+    settings: &SequenceSettings,
+) -> Result<(f64, crate::LinearSolve)> {
     let nodes = masses.len();
     let reach = (0..nodes).map(|i| node(u1, i).norm()).fold(0.0f64, f64::max);
     if !(reach > 0.0) {
@@ -879,7 +885,10 @@ fn ramp_pace(u1: &[f64], unit: &[f64], masses: &[f64], settings: &SequenceSettin
         mass: 2.0 * omega,
         stiffness: 0.0,
     };
-    Ok((settings.stop_displacement / reach, crate::LinearSolve::Dynamic { dt, damping }))
+    Ok((
+        settings.stop_displacement / reach,
+        crate::LinearSolve::Dynamic { dt, damping },
+    ))
 }
 
 /// NNWarp §3.2's training sequence: the body (anchored at `anchors`) under `field`, its

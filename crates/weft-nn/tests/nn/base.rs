@@ -792,7 +792,9 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
 fn nnwarp_runtime_and_training_see_the_same_linear_solve() {
     use weft_nn::nnwarp::{NnWarpSimulation, Standardization, WarpBody, WarpMlp, collect_pairs, hidden_layers};
     use weft_sim::energies::Material;
-    use weft_sim::warp::{FieldDirection, SequenceSettings, field_forces, register_sequence, unit_sphere_normalization};
+    use weft_sim::warp::{
+        FieldDirection, SequenceSettings, field_forces, register_sequence, unit_sphere_normalization,
+    };
     let (beam, anchors) = clamped_small_beam();
     let (center, scale) = unit_sphere_normalization(beam.positions());
     let body = weft_mesh::TetMesh::new(
@@ -801,10 +803,13 @@ fn nnwarp_runtime_and_training_see_the_same_linear_solve() {
     )
     .unwrap();
     let field = FieldDirection::Directional(Vector3::new(0.2, -1.0, 0.4));
-    let (poisson, settings) = (0.35, SequenceSettings {
-        ramp_frames: 6,
-        ..SequenceSettings::default()
-    });
+    let (poisson, settings) = (
+        0.35,
+        SequenceSettings {
+            ramp_frames: 6,
+            ..SequenceSettings::default()
+        },
+    );
     let seq = register_sequence(&body, &anchors, field, poisson, &[Material::NeoHookean], settings).unwrap();
     assert_eq!(seq.error, None);
     let frames = seq.linear.len();

@@ -480,8 +480,16 @@ fn a_settled_training_target_is_full_nonlinear_fem_under_the_same_load() {
     // the end of the ramp (elements inverted, modal warping's error against it jumps from
     // 0.07 to 0.33), and full FEM under the same load collapses with it (below): the
     // detector flags StVK's own collapse, which no warp of a linear solve describes.
-    assert!(seq.off_branch[0].is_none() && seq.off_branch[2].is_none(), "{:?}", seq.off_branch);
-    assert!(seq.off_branch[1].is_some_and(|o| o.inverted > 0), "{:?}", seq.off_branch);
+    assert!(
+        seq.off_branch[0].is_none() && seq.off_branch[2].is_none(),
+        "{:?}",
+        seq.off_branch
+    );
+    assert!(
+        seq.off_branch[1].is_some_and(|o| o.inverted > 0),
+        "{:?}",
+        seq.off_branch
+    );
     let last = seq.linear.len() - 1;
     let rest = unit.flat_positions();
     let masses = weft_mesh::geometry::lumped_masses_tet(unit.positions(), unit.tets(), settings.density);
@@ -504,7 +512,10 @@ fn a_settled_training_target_is_full_nonlinear_fem_under_the_same_load() {
         let mut x = rest.clone();
         fem.solve_from(&[&elastic], None, &load, &mut x, 20).unwrap();
         let full: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
-        assert!(reach(&full) > 1.0, "{m:?}: the load bends the beam well past the linear regime");
+        assert!(
+            reach(&full) > 1.0,
+            "{m:?}: the load bends the beam well past the linear regime"
+        );
         gaps.push((*m, max_diff(&registered[last], &full) / reach(&full)));
     }
     // The registration's tolerance is 1e-6 of the largest target force; the displacements
