@@ -91,6 +91,10 @@ pub struct Manifest {
     pub size: Size,
     pub seed: u64,
     pub code_version: String,
+    /// The revision of what the dataset kind stores ([`revision`]); 0, and absent from
+    /// the file, for a kind never revised, so their manifests keep their bytes.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub revision: u32,
     pub sequences_total: usize,
     pub frames_per_sequence: usize,
     pub split: Split,
@@ -100,6 +104,17 @@ pub struct Manifest {
 }
 
 const FORMAT: &str = "weft-dataset/1";
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
+}
+
+/// The revision of what dataset `name` stores: a change to its generation that makes old
+/// sequences a different dataset bumps it, so a resume or merge refuses to mix them and
+/// the reader refuses an old one (`nnwarp`: [`crate::nnwarp::REVISION`]).
+pub fn revision(name: &str) -> u32 {
+    if name == NNWARP { crate::nnwarp::REVISION } else { 0 }
+}
 
 impl Manifest {
     /// The sequences that stopped early, one line each: index, frames kept, why.
@@ -148,6 +163,7 @@ impl Manifest {
         check("size", self.size.as_str().into(), other.size.as_str().into());
         check("seed", self.seed.to_string(), other.seed.to_string());
         check("code version", self.code_version.clone(), other.code_version.clone());
+        check("revision", self.revision.to_string(), other.revision.to_string());
         check(
             "sequences",
             self.sequences_total.to_string(),
@@ -286,6 +302,7 @@ pub fn generate(spec: &DatasetSpec, out: &Path, options: &GenerateOptions) -> Re
         size: spec.size,
         seed,
         code_version: code_version.clone(),
+        revision: revision(&spec.name),
         sequences_total: spec.sequences,
         frames_per_sequence: spec.stored_frames(),
         split: spec.split,
@@ -576,6 +593,7 @@ mod tests {
             size: Size::Quick,
             seed,
             code_version: "v".into(),
+            revision: 0,
             sequences_total,
             frames_per_sequence,
             split: Split::Frames12Of17,
@@ -586,6 +604,12 @@ mod tests {
         let a = manifest(4, 9, 0);
         assert!(a.differences(&manifest(4, 9, 0)).is_empty());
         assert!(a.same_dataset(&manifest(4, 9, 0)));
+        // A dataset kind revised since (nnwarp's regime, issue 70) is another dataset.
+        let revised = Manifest {
+            revision: 2,
+            ..manifest(4, 9, 0)
+        };
+        assert_eq!(a.differences(&revised), vec!["revision: 0 vs 2"]);
         let d = a.differences(&manifest(2, 3, 0));
         assert_eq!(d, vec!["sequences: 4 vs 2", "stored frames per sequence: 9 vs 3"]);
         assert_eq!(a.differences(&manifest(4, 9, 7)), vec!["seed: 0 vs 7"]);

@@ -25,6 +25,13 @@ use crate::spec::{DatasetSpec, StoredSequence};
 /// The dataset's name.
 pub const NAME: &str = crate::spec::NNWARP;
 
+/// The revision of what the dataset stores (the manifest's `revision`). 2: the linear
+/// frames are solved in the runtime's regime (loads turned into the rest frames by the
+/// previous frame's rotations, `weft_sim::warp::RestFrameSolve`) and every sequence
+/// records where each material's registrations left their branch (`off_branch`); the
+/// unrevised datasets (absent, read as 0) registered plain-load solves (issue 70).
+pub const REVISION: u32 = 2;
+
 /// The materials every linear frame is registered to, in the stored order.
 pub const MATERIALS: [Material; 3] = [Material::CoRotational, Material::StVK, Material::NeoHookean];
 
@@ -86,6 +93,25 @@ fn field_json(field: FieldDirection) -> serde_json::Value {
     }
 }
 
+/// Per material, where its registrations left the sequence's branch
+/// (`weft_sim::warp::OffBranch`), or null: `{"co-rotational": {"frame": 23, "inverted": 2,
+/// "warp_error": [0.04, 0.23]}, "stvk": null, ...}`. The reader drops a material's frames
+/// from `frame` on.
+fn off_branch_json(off: &[Option<weft_sim::warp::OffBranch>]) -> serde_json::Value {
+    MATERIALS
+        .iter()
+        .zip(off)
+        .map(|(m, o)| {
+            let v = o.map_or(
+                serde_json::Value::Null,
+                |o| serde_json::json!({"frame": o.frame, "inverted": o.inverted, "warp_error": o.warp_error}),
+            );
+            (material_key(*m).to_string(), v)
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
+}
+
 /// Generates sequence `i` (seeded by `seed`, the sequence's own seed).
 pub fn sequence(spec: &DatasetSpec, seed: u64, i: usize) -> crate::Result<StoredSequence> {
     let (body, anchors) = training_body(spec)?;
@@ -112,6 +138,7 @@ pub fn sequence(spec: &DatasetSpec, seed: u64, i: usize) -> crate::Result<Stored
     metadata.insert("young".into(), format!("{}", settings.young));
     metadata.insert("anchors".into(), serde_json::to_string(&anchors)?);
     metadata.insert("newton_iterations".into(), seq.newton_iterations.to_string());
+    metadata.insert("off_branch".into(), off_branch_json(&seq.off_branch).to_string());
     metadata.insert(
         "units".into(),
         "linear and per-material displacements [frames, vertices, 3] of the training beam scaled into the unit \

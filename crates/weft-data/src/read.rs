@@ -496,6 +496,9 @@ pub struct WarpDataset {
     /// The array name of the material (`co-rotational`, `stvk`, `neo-hookean`).
     pub material: String,
     pub sequences: Vec<WarpSequence>,
+    /// The material's registered frames left out because they are off the branch their
+    /// sequence started on (the sequences' `off_branch` metadata; docs/DATASETS.md).
+    pub dropped_frames: usize,
 }
 
 fn vec3_of(path: &Path, v: &serde_json::Value, key: &str) -> Result<nalgebra::Vector3<f64>> {
@@ -511,11 +514,23 @@ impl WarpDataset {
     /// Reads every sequence of the dataset in `dir`, keeping `material`'s registration.
     pub fn load(dir: &Path, material: &str) -> Result<Self> {
         let (manifest_path, manifest) = read_manifest(dir, Some("nnwarp"))?;
+        let revision = manifest["revision"].as_u64().unwrap_or(0);
+        if revision != u64::from(crate::nnwarp::REVISION) {
+            return Err(data_error(
+                &manifest_path,
+                format!(
+                    "holds nnwarp revision {revision}, this version reads {} (its linear frames were solved under \
+                     plain loads, not the runtime's; regenerate it)",
+                    crate::nnwarp::REVISION
+                ),
+            ));
+        }
         let rest_path = dir.join("rest.node");
         let body = weft_mesh::io::read_tetgen(&rest_path).map_err(|e| data_error(&rest_path, e.to_string()))?;
         let v = body.num_vertices();
         let mut anchors: Option<Vec<usize>> = None;
         let mut sequences = Vec::new();
+        let mut dropped_frames = 0;
         for_each_listed(dir, &manifest_path, &manifest, |file| {
             let path = &file.path;
             let a: Vec<usize> = file.meta("anchors")?;
@@ -542,13 +557,22 @@ impl WarpDataset {
                 return Err(data_error(path, "linear and registered frames disagree in number"));
             }
             let split = |x: Vec<f64>| x.chunks_exact(3 * v).map(<[f64]>::to_vec).collect::<Vec<_>>();
+            let (mut linear, mut nonlinear) = (split(linear), split(nonlinear));
+            // The material's frames from the first one off the branch on are dropped.
+            let off: serde_json::Value = file.meta("off_branch")?;
+            if let Some(k) = off[material]["frame"].as_u64() {
+                let keep = (k as usize).min(f);
+                dropped_frames += f - keep;
+                linear.truncate(keep);
+                nonlinear.truncate(keep);
+            }
             sequences.push(WarpSequence {
                 index: file.index,
                 split: file.split.to_string(),
                 field,
                 poisson,
-                linear: split(linear),
-                nonlinear: split(nonlinear),
+                linear,
+                nonlinear,
             });
             Ok(())
         })?;
@@ -558,6 +582,7 @@ impl WarpDataset {
             anchors: anchors.ok_or_else(|| data_error(&manifest_path, "the dataset has no sequence"))?,
             material: material.to_string(),
             sequences,
+            dropped_frames,
         })
     }
 
@@ -802,6 +827,7 @@ mod tests {
             anchors: vec![0],
             material: "stvk".into(),
             sequences: order.iter().map(|&i| sequence(i, splits[i])).collect(),
+            dropped_frames: 0,
         }
     }
 

@@ -239,6 +239,59 @@ pub fn rotate_loads_to_rest(rotation_vectors: &[Vector3<f64>], forces: &[f64]) -
     Ok(out)
 }
 
+/// NNWarp's linear regime (§6), the one solve its runtime and its training ramp share:
+/// each frame's load is turned into every node's rest frame by the local rotations of the
+/// previous frame's linear displacement ([`rotate_loads_to_rest`]), then one solve with
+/// the pre-factorised system. Only then is Eq. 7's target `f_int(u) = 𝓡 K ũ` the body
+/// under the actual load (up to the one-frame lag of the rotations and, in a dynamic
+/// solve, the inertia and damping forces): a ramp registered from the plain solve
+/// `K ũ = f` would train the network on shapes under follower loads, `f_int(u) = 𝓡 f`,
+/// that the runtime never asks for (issue 70).
+#[derive(Debug)]
+pub struct RestFrameSolve {
+    linear: crate::PrefactorizedLinear,
+    /// The previous frame's rotation vectors `w_i` (zero at rest).
+    rotations: Vec<Vector3<f64>>,
+}
+
+impl RestFrameSolve {
+    /// Starts at rest: the first frame's load is not rotated.
+    pub fn new(linear: crate::PrefactorizedLinear) -> Self {
+        let nodes = linear.displacements().len() / 3;
+        Self {
+            linear,
+            rotations: vec![Vector3::zeros(); nodes],
+        }
+    }
+
+    pub fn linear(&self) -> &crate::PrefactorizedLinear {
+        &self.linear
+    }
+
+    /// One frame under the world-frame `load`: rotated by the last rotations
+    /// ([`RestFrameSolve::set_rotations`]), then solved. Returns the linear displacements.
+    pub fn step(&mut self, load: &[f64]) -> Result<&[f64]> {
+        let load = rotate_loads_to_rest(&self.rotations, load)?;
+        self.linear.step(&load, &[])?;
+        Ok(self.linear.displacements())
+    }
+
+    /// The rotation vectors of the frame just solved, for the next frame's load. The
+    /// runtime passes the ones its correction fitted (zero at the anchors, whose loads the
+    /// solve ignores); the training ramp fits them with [`NodalGradients::rotation_vectors`].
+    pub fn set_rotations(&mut self, rotations: Vec<Vector3<f64>>) -> Result<()> {
+        if rotations.len() != self.rotations.len() {
+            return Err(Error::LengthMismatch {
+                what: "rotation vectors (one per node)",
+                expected: self.rotations.len(),
+                got: rotations.len(),
+            });
+        }
+        self.rotations = rotations;
+        Ok(())
+    }
+}
+
 /// How [`warped_static_solve`] ended.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WarpedStaticReport {
@@ -672,6 +725,10 @@ pub struct SequenceSettings {
     /// The sequence ends when some node's linear displacement reaches this (m; NNWarp
     /// stops at 2 on the body scaled into the unit sphere) or after `2 · ramp_frames`.
     pub stop_displacement: f64,
+    /// Frames appended after the ramp with the load held at its last value, so the damped
+    /// linear solve settles to the equilibrium `K ũ = 𝓡ᵀ f` (NNWarp §3.2: "until the
+    /// final equilibrium is reached"). The `nnwarp` dataset holds none.
+    pub hold_frames: usize,
     /// Young's modulus (Pa) and density (kg/m³); the modulus only scales the load needed
     /// (NNWarp §5: it acts as a linear amplifier).
     pub young: f64,
@@ -683,9 +740,87 @@ impl Default for SequenceSettings {
         Self {
             ramp_frames: 40,
             stop_displacement: 2.0,
+            hold_frames: 0,
             young: 1e5,
             density: 1000.0,
         }
+    }
+}
+
+/// Where one material's registrations leave the branch of equilibria the sequence
+/// started on (NNWarp Fig. 2): Newton, warm-started from the previous frame, followed the
+/// target onto another branch — a buckled or collapsed shape the warps' rotations do not
+/// describe. This frame and every later one of the material are off the branch (each is
+/// warm-started from the one before).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OffBranch {
+    /// The first frame off the branch.
+    pub frame: usize,
+    /// Tets inverted (`det F ≤ 0`) in its registered shape.
+    pub inverted: usize,
+    /// Modal warping's `rel-error` against the registered shape at the frame before and
+    /// at this one.
+    pub warp_error: [f64; 2],
+}
+
+/// A rise of modal warping's `rel-error` against the registered shape from one frame to
+/// the next beyond both of these (absolute, and as a factor of the previous error) marks
+/// a jump to another branch. Along one branch the error grows smoothly with the load: by
+/// under 0.03 a frame over the quick ramp's 8 frames, while the co-rotational beam's jump
+/// off the branch takes it to 0.23 (issue 70); StVK's genuine material nonlinearity raises
+/// it steadily, never doubling it in one frame once it is above 0.05.
+const BRANCH_JUMP_RISE: f64 = 0.05;
+const BRANCH_JUMP_FACTOR: f64 = 2.0;
+
+/// `rel-error` of `a` against `reference`: the mean node distance over the largest
+/// reference displacement (as `weft_nn::nnwarp::rel_error`).
+fn warp_rel_error(a: &[f64], reference: &[f64]) -> f64 {
+    let n = reference.len() / 3;
+    let largest = (0..n).map(|i| node(reference, i).norm()).fold(0.0f64, f64::max);
+    if largest == 0.0 {
+        return 0.0;
+    }
+    (0..n).map(|i| (node(a, i) - node(reference, i)).norm()).sum::<f64>() / (n as f64 * largest)
+}
+
+/// Tets of `mesh` whose orientation `u` (flat displacements) flips or flattens.
+fn inverted_tets(mesh: &TetMesh, u: &[f64]) -> usize {
+    use weft_mesh::geometry::tet_signed_volume;
+    let rest = mesh.positions();
+    let x = |i: usize| rest[i] + node(u, i);
+    mesh.tets()
+        .iter()
+        .filter(|t| {
+            let v0 = tet_signed_volume(&rest[t[0]], &rest[t[1]], &rest[t[2]], &rest[t[3]]);
+            let v = tet_signed_volume(&x(t[0]), &x(t[1]), &x(t[2]), &x(t[3]));
+            v * v0.signum() <= 0.0
+        })
+        .count()
+}
+
+/// Watches one material's registrations frame by frame for [`OffBranch`].
+#[derive(Debug, Clone, Default)]
+struct BranchWatch {
+    previous_error: f64,
+    off: Option<OffBranch>,
+}
+
+impl BranchWatch {
+    fn observe(&mut self, mesh: &TetMesh, frame: usize, modal: &[f64], registered: &[f64]) {
+        let error = warp_rel_error(modal, registered);
+        if self.off.is_none() {
+            let inverted = inverted_tets(mesh, registered);
+            let jump =
+                error - self.previous_error > BRANCH_JUMP_RISE && error > BRANCH_JUMP_FACTOR * self.previous_error;
+            if inverted > 0 || jump {
+                self.off = Some(OffBranch {
+                    frame,
+                    inverted,
+                    warp_error: [self.previous_error, error],
+                });
+            }
+        }
+        self.previous_error = error;
     }
 }
 
@@ -694,18 +829,25 @@ impl Default for SequenceSettings {
 pub struct RegisteredSequence {
     /// Field acceleration per frame (m/s²; frame 0 is the rest state, 0).
     pub accelerations: Vec<f64>,
-    /// Linear displacements per frame (m, flat).
+    /// Linear displacements per frame (m, flat), solved in NNWarp's runtime regime
+    /// ([`RestFrameSolve`]).
     pub linear: Vec<Vec<f64>>,
     /// Per material (in the order asked), its registered displacements per frame.
     pub nonlinear: Vec<Vec<Vec<f64>>>,
+    /// Per material, where its registrations left the sequence's branch, if they did.
+    pub off_branch: Vec<Option<OffBranch>>,
+    /// The ramp's linear solve (backward Euler, its time step and mass damping), so a
+    /// runtime can replay the sequence.
+    pub solve: crate::LinearSolve,
     /// Newton iterations over all registrations.
     pub newton_iterations: usize,
     /// Why the sequence stopped before reaching the stop displacement, if it did.
     pub error: Option<String>,
 }
 
-/// The unit-acceleration body force of `field` on `mesh` with `masses` (N per m/s²).
-fn unit_field_forces(rest: &[f64], masses: &[f64], field: FieldDirection) -> Result<Vec<f64>> {
+/// The unit-acceleration body force of `field` on `mesh` with `masses` (N per m/s²): the
+/// training ramp's load per unit of `RegisteredSequence::accelerations`.
+pub fn field_forces(rest: &[f64], masses: &[f64], field: FieldDirection) -> Result<Vec<f64>> {
     let f = match field {
         FieldDirection::Directional(d) => crate::energies::ConstantForce::directional(masses, d.into(), 1.0)?,
         FieldDirection::Circular { center, axis } => {
@@ -715,12 +857,48 @@ fn unit_field_forces(rest: &[f64], masses: &[f64], field: FieldDirection) -> Res
     Ok(f.forces().to_vec())
 }
 
+/// The ramp's pace from the static deflection `u1` under the unit field `unit`: the
+/// acceleration at which the linear answer reaches the stop displacement, and the
+/// backward-Euler solve with mass damping `α = 2ω₁` (critical for the first mode, whose
+/// `ω₁` is estimated by the Rayleigh quotient of the deflection) and a time step that
+/// spans ten first-mode relaxation times (τ₁ = α/ω₁² = 2/ω₁) over the ramp.
+fn ramp_pace(
+    u1: &[f64],
+    unit: &[f64],
+    masses: &[f64],
+    settings: &SequenceSettings,
+) -> Result<(f64, crate::LinearSolve)> {
+    let nodes = masses.len();
+    let reach = (0..nodes).map(|i| node(u1, i).norm()).fold(0.0f64, f64::max);
+    if !(reach > 0.0) {
+        return Err(Error::InvalidParameter {
+            name: "force field",
+            value: reach,
+            reason: "moves no node (a field that vanishes on the free nodes)",
+        });
+    }
+    let work: f64 = u1.iter().zip(unit).map(|(u, f)| u * f).sum();
+    let inertia: f64 = (0..nodes).map(|i| masses[i] * node(u1, i).norm_squared()).sum();
+    let omega = (work / inertia).sqrt();
+    let dt = 10.0 * (2.0 / omega) / settings.ramp_frames as f64;
+    let damping = crate::integrators::prefactorized::RayleighDamping {
+        mass: 2.0 * omega,
+        stiffness: 0.0,
+    };
+    Ok((
+        settings.stop_displacement / reach,
+        crate::LinearSolve::Dynamic { dt, damping },
+    ))
+}
+
 /// NNWarp §3.2's training sequence: the body (anchored at `anchors`) under `field`, its
-/// magnitude ramped up; each frame one backward-Euler step of linear elasticity with
-/// mass damping `α = 2ω₁` (critical for the first mode, whose `ω₁` is estimated by the
-/// Rayleigh quotient of the static deflection), so the linear solution creeps through
-/// near-equilibria; each frame then registered (Eq. 6–7) to every material in
-/// `materials`, warm-started from the previous frame.
+/// magnitude ramped up (then held for `hold_frames`); each frame one damped backward-Euler
+/// step of linear elasticity ([`ramp_pace`]), so the linear solution creeps through
+/// near-equilibria. Every frame is solved in the runtime's regime ([`RestFrameSolve`]:
+/// the load turned into each node's rest frame by the previous frame's rotations, as
+/// `NnWarpSimulation` does), then registered (Eq. 6–7) to every material in `materials`,
+/// warm-started from the previous frame, and watched for a jump off the branch
+/// ([`OffBranch`]).
 pub fn register_sequence(
     mesh: &TetMesh,
     anchors: &[usize],
@@ -730,7 +908,7 @@ pub fn register_sequence(
     settings: SequenceSettings,
 ) -> Result<RegisteredSequence> {
     use crate::energies::{LameParameters, Material, TetElasticity};
-    use crate::integrators::prefactorized::{LinearSolve, PrefactorizedLinear, RayleighDamping};
+    use crate::integrators::prefactorized::{LinearSolve, PrefactorizedLinear};
     if settings.ramp_frames == 0 || !(settings.stop_displacement > 0.0) {
         return Err(Error::InvalidParameter {
             name: "sequence settings",
@@ -744,7 +922,7 @@ pub fn register_sequence(
     let linear_energy = TetElasticity::new(mesh, Material::Linear, lame)?;
     let masses = weft_mesh::geometry::lumped_masses_tet(mesh.positions(), mesh.tets(), settings.density);
     let fixed = crate::anchors::fixed_dofs(mesh.num_vertices(), anchors)?;
-    let unit = unit_field_forces(&rest, &masses, field)?;
+    let unit = field_forces(&rest, &masses, field)?;
     let mut statics = PrefactorizedLinear::new(
         &rest,
         &[&linear_energy],
@@ -753,39 +931,14 @@ pub fn register_sequence(
         LinearSolve::Static,
     )?;
     statics.step(&unit, &[])?;
-    let u1 = statics.displacements().to_vec();
-    let reach = (0..mesh.num_vertices())
-        .map(|i| node(&u1, i).norm())
-        .fold(0.0f64, f64::max);
-    if !(reach > 0.0) {
-        return Err(Error::InvalidParameter {
-            name: "force field",
-            value: reach,
-            reason: "moves no node (a field that vanishes on the free nodes)",
-        });
-    }
-    let a_stop = settings.stop_displacement / reach;
-    let work: f64 = u1.iter().zip(&unit).map(|(u, f)| u * f).sum();
-    let inertia: f64 = (0..mesh.num_vertices())
-        .map(|i| masses[i] * node(&u1, i).norm_squared())
-        .sum();
-    let omega = (work / inertia).sqrt();
-    let alpha = 2.0 * omega;
-    // Ten first-mode relaxation times (τ₁ = α/ω₁² = 2/ω₁) over the ramp.
-    let dt = 10.0 * (2.0 / omega) / settings.ramp_frames as f64;
-    let mut dynamic = PrefactorizedLinear::new(
+    let (a_stop, solve) = ramp_pace(statics.displacements(), &unit, &masses, &settings)?;
+    let mut dynamic = RestFrameSolve::new(PrefactorizedLinear::new(
         &rest,
         &[&linear_energy],
         masses,
         fixed.clone(),
-        LinearSolve::Dynamic {
-            dt,
-            damping: RayleighDamping {
-                mass: alpha,
-                stiffness: 0.0,
-            },
-        },
-    )?;
+        solve,
+    )?);
     let gradients = Arc::new(NodalGradients::new(mesh)?);
     let mut registrations = materials
         .iter()
@@ -799,42 +952,57 @@ pub fn register_sequence(
             )
         })
         .collect::<Result<Vec<_>>>()?;
+    let mut watches = vec![BranchWatch::default(); materials.len()];
     let mut out = RegisteredSequence {
         accelerations: vec![0.0],
         linear: vec![vec![0.0; n]],
         nonlinear: vec![vec![vec![0.0; n]]; materials.len()],
+        off_branch: vec![None; materials.len()],
+        solve,
         newton_iterations: 0,
         error: None,
     };
-    for k in 1..=2 * settings.ramp_frames {
-        let a = a_stop * k as f64 / settings.ramp_frames as f64;
+    let (mut a, mut held) = (0.0, None::<usize>);
+    for k in 1.. {
+        match held {
+            None if k <= 2 * settings.ramp_frames => a = a_stop * k as f64 / settings.ramp_frames as f64,
+            None => held = Some(k),
+            Some(_) => {}
+        }
+        if held.is_some_and(|h| k >= h + settings.hold_frames) {
+            break;
+        }
         let forces: Vec<f64> = unit.iter().map(|f| f * a).collect();
-        dynamic.step(&forces, &[])?;
-        let lin = dynamic.displacements().to_vec();
-        let reached = (0..mesh.num_vertices())
-            .map(|i| node(&lin, i).norm())
-            .fold(0.0f64, f64::max);
+        let lin = dynamic.step(&forces)?.to_vec();
+        dynamic.set_rotations(gradients.rotation_vectors(&lin)?)?;
+        let modal = modal_warp(&gradients, &lin)?;
         let mut registered = Vec::with_capacity(materials.len());
-        for (m, reg) in materials.iter().zip(&mut registrations) {
+        for ((m, reg), watch) in materials.iter().zip(&mut registrations).zip(&mut watches) {
             match reg.register(&lin) {
                 Ok((u, report)) => {
                     out.newton_iterations += report.iterations;
+                    watch.observe(mesh, k, &modal, &u);
                     registered.push(u);
                 }
                 Err(e) => {
                     out.error = Some(format!("frame {k}, {}: {e}", m.name()));
+                    out.off_branch = watches.iter().map(|w| w.off).collect();
                     return Ok(out);
                 }
             }
         }
+        let reached = (0..mesh.num_vertices())
+            .map(|i| node(&lin, i).norm())
+            .fold(0.0f64, f64::max);
         out.accelerations.push(a);
         out.linear.push(lin);
         for (store, u) in out.nonlinear.iter_mut().zip(registered) {
             store.push(u);
         }
-        if reached >= settings.stop_displacement {
-            break;
+        if held.is_none() && reached >= settings.stop_displacement {
+            held = Some(k + 1);
         }
     }
+    out.off_branch = watches.iter().map(|w| w.off).collect();
     Ok(out)
 }

@@ -259,13 +259,13 @@ pub struct NnWarpFrame {
 /// training target, `f_int(u) = 𝓡 K ũ`, the nonlinear body under the actual load.
 #[derive(Debug)]
 pub struct NnWarpSimulation {
-    linear: weft_sim::PrefactorizedLinear,
+    /// The linear solve in the rest frames, the one the training ramp registers
+    /// (`weft_sim::warp::register_sequence`).
+    linear: weft_sim::warp::RestFrameSolve,
     warp: NnWarp,
     forces: Vec<f64>,
     frames: usize,
     frame: usize,
-    /// The last frame's local rotation vectors (zero at rest), from its correction.
-    rotations: Vec<Vector3<f64>>,
 }
 
 /// A body for [`NnWarpSimulation::from_body`]: everything NNWarp's runtime needs, without
@@ -355,17 +355,16 @@ impl NnWarpSimulation {
         let (_, scale) = weft_sim::warp::unit_sphere_normalization(mesh.positions());
         let context = WarpContext::with_gradients(mesh, gradients, body.anchors, body.field, body.poisson, scale)?;
         Ok(Self {
-            linear,
+            linear: weft_sim::warp::RestFrameSolve::new(linear),
             warp: NnWarp::new(context, mlp),
             forces: body.forces.to_vec(),
             frames: body.frames.max(1),
             frame: 0,
-            rotations: vec![Vector3::zeros(); mesh.num_vertices()],
         })
     }
 
     pub fn linear(&self) -> &weft_sim::PrefactorizedLinear {
-        &self.linear
+        self.linear.linear()
     }
 
     pub fn warp(&self) -> &NnWarp {
@@ -376,22 +375,33 @@ impl NnWarpSimulation {
     pub fn step(&mut self) -> Result<NnWarpFrame> {
         self.frame += 1;
         let t = std::time::Instant::now();
-        let load: Vec<f64> = match self.linear.mode() {
+        let load: Vec<f64> = match self.linear.linear().mode() {
             weft_sim::LinearSolve::Static => {
                 let s = self.frame.min(self.frames) as f64 / self.frames as f64;
                 self.forces.iter().map(|f| f * s).collect()
             }
             weft_sim::LinearSolve::Dynamic { .. } => self.forces.clone(),
         };
-        // The rotations of the previous frame's linear displacement, which its correction
-        // fitted: the same as `loads_in_rest_frames` on it, without a second fit.
-        let load = weft_sim::warp::rotate_loads_to_rest(&self.rotations, &load)?;
-        self.linear.step(&load, &[])?;
+        self.step_under(&load, t)
+    }
+
+    /// Advances one frame under the world-frame `load` (N, flat) instead of the body's
+    /// own: a load that changes from frame to frame, such as the training ramp's.
+    pub fn step_with_load(&mut self, load: &[f64]) -> Result<NnWarpFrame> {
+        self.frame += 1;
+        self.step_under(load, std::time::Instant::now())
+    }
+
+    /// The frame under `load`, its solve timed from `t`.
+    fn step_under(&mut self, load: &[f64], t: std::time::Instant) -> Result<NnWarpFrame> {
+        self.linear.step(load)?;
         let solve_seconds = t.elapsed().as_secs_f64();
-        let linear = self.linear.displacements().to_vec();
+        let linear = self.linear.linear().displacements().to_vec();
         let t = std::time::Instant::now();
         let (warped, rotations) = self.warp.warp_with_rotations(&linear)?;
-        self.rotations = rotations;
+        // The rotations of this frame's linear displacement, which the correction fitted:
+        // the same as `loads_in_rest_frames` on it, without a second fit.
+        self.linear.set_rotations(rotations)?;
         Ok(NnWarpFrame {
             linear,
             warped,

@@ -782,6 +782,96 @@ fn nnwarp_runtime_rotates_each_load_by_the_previous_frame_and_corrects_it() {
     );
 }
 
+/// Issue 70: the network's inputs at runtime and in training come from the same linear
+/// solve. A training sequence (weft-sim's ramp) replayed by the runtime under the same
+/// loads gives the same linear displacements frame by frame, hence the same inputs as the
+/// trainer reads from the stored sequence. Before the fix the ramp solved `K ũ = f` while
+/// the runtime solves with the loads in the rest frames: the frames differed from the
+/// second one on, and with them the inputs.
+#[test]
+fn nnwarp_runtime_and_training_see_the_same_linear_solve() {
+    use weft_nn::nnwarp::{NnWarpSimulation, Standardization, WarpBody, WarpMlp, collect_pairs, hidden_layers};
+    use weft_sim::energies::Material;
+    use weft_sim::warp::{
+        FieldDirection, SequenceSettings, field_forces, register_sequence, unit_sphere_normalization,
+    };
+    let (beam, anchors) = clamped_small_beam();
+    let (center, scale) = unit_sphere_normalization(beam.positions());
+    let body = weft_mesh::TetMesh::new(
+        beam.positions().iter().map(|p| (p - center) * scale).collect(),
+        beam.tets().to_vec(),
+    )
+    .unwrap();
+    let field = FieldDirection::Directional(Vector3::new(0.2, -1.0, 0.4));
+    let (poisson, settings) = (
+        0.35,
+        SequenceSettings {
+            ramp_frames: 6,
+            ..SequenceSettings::default()
+        },
+    );
+    let seq = register_sequence(&body, &anchors, field, poisson, &[Material::NeoHookean], settings).unwrap();
+    assert_eq!(seq.error, None);
+    let frames = seq.linear.len();
+    assert!(frames > 3, "{frames} frames");
+    // What the trainer reads: the stored sequence's pairs.
+    let dataset = weft_data::WarpDataset {
+        dir: std::path::PathBuf::new(),
+        body: body.clone(),
+        anchors: anchors.clone(),
+        material: "neo-hookean".into(),
+        sequences: vec![weft_data::WarpSequence {
+            index: 0,
+            split: "train".into(),
+            field,
+            poisson,
+            linear: seq.linear.clone(),
+            nonlinear: seq.nonlinear[0].clone(),
+        }],
+        dropped_frames: 0,
+    };
+    let (trained, _) = collect_pairs(&dataset, "train").unwrap();
+    // The runtime on the same body, its solve the ramp's, stepped under the ramp's loads.
+    let (rows, outs) = random_pairs(3, 30);
+    let standardization = Standardization::fit(&rows, &outs).unwrap();
+    let mut params = ParamStore::new(&cpu(), 4);
+    let mlp = WarpMlp::new(&mut params, &hidden_layers("neo-hookean"), &standardization).unwrap();
+    let rest = body.flat_positions();
+    let masses = weft_mesh::geometry::lumped_masses_tet(body.positions(), body.tets(), settings.density);
+    let unit = field_forces(&rest, &masses, field).unwrap();
+    let mut runtime = NnWarpSimulation::from_body(
+        WarpBody {
+            mesh: &body,
+            anchors: &anchors,
+            young: settings.young,
+            poisson,
+            density: settings.density,
+            forces: &unit,
+            solve: seq.solve,
+            field,
+            frames: 1,
+        },
+        mlp.to_node_mlp(standardization).unwrap(),
+    )
+    .unwrap();
+    let free = trained.len() / (frames - 1);
+    for k in 1..frames {
+        let load: Vec<f64> = unit.iter().map(|f| f * seq.accelerations[k]).collect();
+        let frame = runtime.step_with_load(&load).unwrap();
+        let reach = seq.linear[k].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (a, b) in frame.linear.iter().zip(&seq.linear[k]) {
+            assert!((a - b).abs() <= 1e-9 * reach, "frame {k}: runtime {a} vs training {b}");
+        }
+        let inputs = runtime.warp().context().inputs(&frame.linear).unwrap().features;
+        assert_eq!(inputs.len(), free);
+        for (a, b) in inputs.iter().zip(&trained[(k - 1) * free..k * free]) {
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() <= 1e-7 * (1.0 + y.abs()), "frame {k}: input {x} vs {y}");
+            }
+        }
+    }
+}
+
 /// The PCA + MLP roll-out against steps computed by hand: a one-component PCA of two
 /// vertices moving along a known direction, one grasped vertex, and a latent MLP with no
 /// hidden layer and chosen weights, so `z_m = w·[z_{m−2}, z_{m−1}, q_m] + b` and
@@ -1094,6 +1184,7 @@ fn warp_dataset_where_more_data_helps() -> weft_data::WarpDataset {
         anchors,
         material: "neo-hookean".into(),
         sequences,
+        dropped_frames: 0,
     }
 }
 

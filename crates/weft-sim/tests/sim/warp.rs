@@ -22,6 +22,23 @@ fn small_beam() -> TetMesh {
     .unwrap()
 }
 
+/// The small beam scaled into the unit sphere (as the `nnwarp` dataset trains) and its
+/// clamped −x face.
+fn unit_sphere_beam() -> (TetMesh, Vec<usize>) {
+    let mesh = small_beam();
+    let (center, scale) = weft_sim::warp::unit_sphere_normalization(mesh.positions());
+    let unit = TetMesh::new(
+        mesh.positions().iter().map(|p| (p - center) * scale).collect(),
+        mesh.tets().to_vec(),
+    )
+    .unwrap();
+    let x_min = unit.positions().iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
+    let anchors = (0..unit.num_vertices())
+        .filter(|&i| (unit.positions()[i].x - x_min).abs() < 1e-9)
+        .collect();
+    (unit, anchors)
+}
+
 fn random_matrix(rng: &mut TestRng, scale: f64) -> Matrix3<f64> {
     Matrix3::from_fn(|_, _| rng.uniform(-scale, scale))
 }
@@ -324,18 +341,8 @@ fn registration_solves_eq_7_and_tends_to_the_linear_solution_under_small_loads()
 #[test]
 fn a_training_sequence_ramps_to_the_stop_displacement_and_registers_every_frame() {
     use weft_sim::energies::Material;
-    use weft_sim::warp::{SequenceSettings, register_sequence, unit_sphere_normalization};
-    let mesh = small_beam();
-    let (center, scale) = unit_sphere_normalization(mesh.positions());
-    let unit = TetMesh::new(
-        mesh.positions().iter().map(|p| (p - center) * scale).collect(),
-        mesh.tets().to_vec(),
-    )
-    .unwrap();
-    let x_min = unit.positions().iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
-    let anchors: Vec<usize> = (0..unit.num_vertices())
-        .filter(|&i| (unit.positions()[i].x - x_min).abs() < 1e-9)
-        .collect();
+    use weft_sim::warp::{SequenceSettings, register_sequence};
+    let (unit, anchors) = unit_sphere_beam();
     let settings = SequenceSettings {
         ramp_frames: 12,
         ..SequenceSettings::default()
@@ -358,13 +365,23 @@ fn a_training_sequence_ramps_to_the_stop_displacement_and_registers_every_frame(
             .map(|i| Vector3::new(u[3 * i], u[3 * i + 1], u[3 * i + 2]).norm())
             .fold(0.0, f64::max)
     };
-    // The linear answer grows frame by frame and stops once it reaches 2.
+    // The linear answer grows frame by frame and stops once it reaches 2, or after twice
+    // the ramp: with the loads in the rest frames, a bent beam's load turns along its
+    // axis, which the linear solve resists stiffly, so its reach grows ever more slowly.
     for k in 1..frames {
         assert!(reach(&seq.linear[k]) > reach(&seq.linear[k - 1]));
         assert!(seq.accelerations[k] > seq.accelerations[k - 1]);
     }
-    assert!(reach(&seq.linear[frames - 1]) >= 2.0);
+    assert!(
+        reach(&seq.linear[frames - 1]) >= 2.0 || frames == 2 * settings.ramp_frames + 1,
+        "{frames} frames reaching {}",
+        reach(&seq.linear[frames - 1])
+    );
     assert!(reach(&seq.linear[frames - 2]) < 2.0);
+    // Neo-Hookean stays on its branch; the co-rotational registration inverts an element
+    // near twice the ramp's load (frame 18), and is flagged from there.
+    assert_eq!(seq.off_branch[1], None);
+    assert!(seq.off_branch[0].is_none_or(|o| o.frame > settings.ramp_frames && o.inverted > 0));
     // Every material is registered on every frame, anchors at rest, and the registered
     // shapes differ from the linear one by more at the end than at the start.
     for per_material in &seq.nonlinear {
@@ -434,4 +451,78 @@ fn the_registered_warped_static_solve_is_the_nonlinear_equilibrium_under_the_loa
         Err(weft_sim::Error::WarpNotSettled { solves: 3, .. })
     ));
     assert!(loads_in_rest_frames(&grads, &lin, &load[3..]).is_err());
+}
+
+/// Issue 70, NNWarp Fig. 3 ("Eq. (7) yields good approximations of full nonlinear FEM"):
+/// once the training ramp's damped linear solve has settled under its final load, the
+/// registered training target is full nonlinear FEM under that same load, within the
+/// registration's tolerance, for every material. The ramp solves in the runtime's regime
+/// (loads in the rest frames); registered from plain-load solves (`K ũ = f`), the target
+/// is the body under follower loads, `f_int(u) = 𝓡 f`, and misses full FEM by several
+/// per cent of the displacement.
+#[test]
+fn a_settled_training_target_is_full_nonlinear_fem_under_the_same_load() {
+    use weft_sim::energies::{LameParameters, Material, TetElasticity};
+    use weft_sim::warp::{SequenceSettings, field_forces, register_sequence};
+    let (unit, anchors) = unit_sphere_beam();
+    let field = FieldDirection::Directional(Vector3::new(0.0, -1.0, 0.3));
+    let poisson = 0.3;
+    let settings = SequenceSettings {
+        ramp_frames: 8,
+        stop_displacement: 1.0,
+        hold_frames: 60,
+        ..SequenceSettings::default()
+    };
+    let materials = [Material::CoRotational, Material::StVK, Material::NeoHookean];
+    let seq = register_sequence(&unit, &anchors, field, poisson, &materials, settings).unwrap();
+    assert_eq!(seq.error, None);
+    // Co-rotational and Neo-Hookean stay on the branch they start on. StVK collapses at
+    // the end of the ramp (elements inverted, modal warping's error against it jumps from
+    // 0.07 to 0.33), and full FEM under the same load collapses with it (below): the
+    // detector flags StVK's own collapse, which no warp of a linear solve describes.
+    assert!(
+        seq.off_branch[0].is_none() && seq.off_branch[2].is_none(),
+        "{:?}",
+        seq.off_branch
+    );
+    assert!(
+        seq.off_branch[1].is_some_and(|o| o.inverted > 0),
+        "{:?}",
+        seq.off_branch
+    );
+    let last = seq.linear.len() - 1;
+    let rest = unit.flat_positions();
+    let masses = weft_mesh::geometry::lumped_masses_tet(unit.positions(), unit.tets(), settings.density);
+    let load: Vec<f64> = field_forces(&rest, &masses, field)
+        .unwrap()
+        .iter()
+        .map(|f| f * seq.accelerations[last])
+        .collect();
+    let fixed = weft_sim::anchors::fixed_dofs(unit.num_vertices(), &anchors).unwrap();
+    let lame = LameParameters::from_young_poisson(settings.young, poisson).unwrap();
+    let reach = |u: &[f64]| {
+        (0..u.len() / 3)
+            .map(|i| Vector3::new(u[3 * i], u[3 * i + 1], u[3 * i + 2]).norm())
+            .fold(0.0, f64::max)
+    };
+    let mut gaps = Vec::new();
+    for (m, registered) in materials.iter().zip(&seq.nonlinear) {
+        let elastic = TetElasticity::new(&unit, *m, lame).unwrap();
+        let mut fem = weft_sim::integrators::Quasistatic::new(rest.len(), &[&elastic], fixed.clone()).unwrap();
+        let mut x = rest.clone();
+        fem.solve_from(&[&elastic], None, &load, &mut x, 20).unwrap();
+        let full: Vec<f64> = x.iter().zip(&rest).map(|(x, r)| x - r).collect();
+        assert!(
+            reach(&full) > 1.0,
+            "{m:?}: the load bends the beam well past the linear regime"
+        );
+        gaps.push((*m, max_diff(&registered[last], &full) / reach(&full)));
+    }
+    // The registration's tolerance is 1e-6 of the largest target force; the displacements
+    // follow to about that (measured 5e-7 to 8e-7). Registered from the plain solve, the
+    // co-rotational target misses by 0.21 of the reach.
+    assert!(
+        gaps.iter().all(|(_, g)| *g < 1e-5),
+        "training target vs full FEM, max node gap over the reach: {gaps:?}"
+    );
 }
