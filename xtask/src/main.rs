@@ -8,6 +8,7 @@
 mod out;
 
 mod acap;
+mod altconv_diagnostics;
 mod dataset;
 mod evaluate;
 mod mesh;
@@ -68,6 +69,8 @@ enum Command {
     Train(train::TrainCommand),
     /// Score a trained model on any dataset of its kind (another seed or size) without retraining: results.json and predictions.
     Score(score::ScoreArgs),
+    /// Per roll-out step and layer of a trained Alt-ConvLSTM-family model: gate means and shut shares, |C|, |Y|, gradient RMS.
+    AltconvDiagnostics(altconv_diagnostics::AltconvDiagnosticsArgs),
     /// Run a volumetric scene as pre-factorised linear FEM corrected by a trained NNWarp network (VTK per frame).
     Warp(warp::WarpArgs),
 }
@@ -91,6 +94,7 @@ fn main() -> anyhow::Result<()> {
         Command::Evaluate(args) => evaluate::run(args),
         Command::Train(cmd) => train::run(cmd),
         Command::Score(args) => score::run(args),
+        Command::AltconvDiagnostics(args) => altconv_diagnostics::run(args),
         Command::Warp(args) => warp::run(args),
         Command::CheckReport(args) => evaluate::check(args),
         Command::Stability(args) => stability::run(args),

@@ -3,6 +3,7 @@
 
 mod acap;
 mod dataset;
+mod diagnostics;
 mod newcomer;
 mod pipes;
 mod report;

@@ -43,12 +43,14 @@
 //!   once for the fused kernels and the runtime;
 //! - `fused`: a whole teacher-forced sequence and its backward pass as one candle op;
 //! - `training`: [`AltConvTrainingSettings`], [`train_model`], [`score_sequence`];
-//! - `runtime`: [`AltConvRuntime`], the roll-out outside candle.
+//! - `runtime`: [`AltConvRuntime`], the roll-out outside candle;
+//! - `diagnostics`: [`diagnose`], the gates, states and gradients of a roll-out (issue 69).
 //!
 //! Everything public is re-exported here: `weft_nn::altconv::X` is the one path of every
 //! item.
 
 mod cell;
+mod diagnostics;
 mod fused;
 mod model;
 mod runtime;
@@ -56,6 +58,7 @@ mod summary;
 mod training;
 
 pub use crate::Kernels;
+pub use diagnostics::*;
 pub use fused::FusedWorkspace;
 pub use model::*;
 pub use runtime::AltConvRuntime;

@@ -90,12 +90,23 @@ pub(super) struct Cell {
     pub(super) w_o: Option<Tensor>,
 }
 
-/// One cell's recurrent state, each `[B, V, c]`. `y` is Alt-ConvLSTM's accumulation.
+/// One cell's recurrent state, each `[B, V, c]`. `y` is Alt-ConvLSTM's accumulation;
+/// `gates` the activated gates of the step that made it (none in the initial state), kept
+/// for [`super::diagnose`].
 #[derive(Debug, Clone)]
-struct CellState {
+pub(super) struct CellState {
     h: Tensor,
-    c: Tensor,
-    y: Option<Tensor>,
+    pub(super) c: Tensor,
+    pub(super) y: Option<Tensor>,
+    pub(super) gates: Option<Gates>,
+}
+
+/// The activated input, forget and output gates `i_t`, `f_t`, `o_t` of Eq. 5, each `[B, V, c]`.
+#[derive(Debug, Clone)]
+pub(super) struct Gates {
+    pub(super) input: Tensor,
+    pub(super) forget: Tensor,
+    pub(super) output: Tensor,
 }
 
 impl Cell {
@@ -134,6 +145,7 @@ impl Cell {
             h: z.clone(),
             c: z.clone(),
             y: (self.peephole == Peephole::Accumulation).then_some(z),
+            gates: None,
         })
     }
 
@@ -165,7 +177,7 @@ impl Cell {
         let i = candle_nn::ops::sigmoid(&i)?;
         let f = candle_nn::ops::sigmoid(&f)?;
         let candidate = gates.narrow(2, 2 * c, c)?.tanh()?;
-        let cell = ((f * &s.c)? + (i * candidate)?)?;
+        let cell = ((&f * &s.c)? + (&i * candidate)?)?;
         let y = match &s.y {
             Some(y) => {
                 let mut y = if unit == 1.0 {
@@ -189,8 +201,18 @@ impl Cell {
         if let (Some(w), Some(watched)) = (&self.w_o, watched_after) {
             o = (o + adj.apply(watched)?.broadcast_matmul(w)?)?;
         }
-        let h = (candle_nn::ops::sigmoid(&o)? * cell.tanh()?)?;
-        Ok(CellState { h, c: cell, y })
+        let o = candle_nn::ops::sigmoid(&o)?;
+        let h = (&o * cell.tanh()?)?;
+        Ok(CellState {
+            h,
+            c: cell,
+            y,
+            gates: Some(Gates {
+                input: i,
+                forget: f,
+                output: o,
+            }),
+        })
     }
 }
 
@@ -321,6 +343,20 @@ impl AltConvNet {
         steps: usize,
         forced: &dyn Fn(usize) -> bool,
     ) -> Result<Vec<Tensor>> {
+        self.run_observed(adj, drive, truth, steps, forced, &mut |_, _| Ok(()))
+    }
+
+    /// [`AltConvNet::run_forced`], handing every layer's new state to `observe(t, states)`
+    /// after step `t` (the diagnostics read the cells' gates and states from it).
+    pub(super) fn run_observed(
+        &self,
+        adj: &NormalizedAdjacency,
+        drive: &Drive,
+        truth: Option<&Tensor>,
+        steps: usize,
+        forced: &dyn Fn(usize) -> bool,
+        observe: &mut dyn FnMut(usize, &[CellState]) -> Result<()>,
+    ) -> Result<Vec<Tensor>> {
         let (b, frames, v, three) = drive.skinned.dims4()?;
         if three != 3 || v != adj.num_vertices() || drive.initial.dims() != [b, v, 3] {
             return Err(Error::Shape {
@@ -422,6 +458,7 @@ impl AltConvNet {
                 new_states.push(s);
             }
             states = new_states;
+            observe(t, &states)?;
             let prediction = match self.variant {
                 Variant::Alt => states[out]
                     .y

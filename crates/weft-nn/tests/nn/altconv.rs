@@ -745,3 +745,134 @@ fn the_published_altconv_models_load_and_roll_out() {
         }
     }
 }
+
+/// `σ` of the `k`-th gate block (i, f, c̃, o) of cell 0 at step 1 computed by hand: the
+/// state is zero, so for a model without peepholes the gate is `σ(Â_n x_1 W_x + b)` on
+/// the raw input `[X_1, X_1 − X_0, Y_0 − X_0]` (identity scaling).
+fn first_gate_by_hand(
+    params: &ParamStore,
+    adj: &NormalizedAdjacency,
+    s: &SequenceTensors,
+    c: usize,
+    k: usize,
+) -> Vec<f64> {
+    let x = |t: usize| s.drive.skinned.narrow(1, t, 1).unwrap().squeeze(1).unwrap();
+    let (x0, x1) = (x(0), x(1));
+    let input = Tensor::cat(&[&x1, &(&x1 - &x0).unwrap(), &(&s.drive.initial - &x0).unwrap()], 2).unwrap();
+    let vars = params.vars();
+    let w = vars["cell0.wx"].as_tensor().narrow(1, k * c, c).unwrap();
+    let b = vars["cell0.b"].as_tensor().narrow(0, k * c, c).unwrap();
+    let pre = adj
+        .apply(&input)
+        .unwrap()
+        .broadcast_matmul(&w)
+        .unwrap()
+        .broadcast_add(&b)
+        .unwrap();
+    flat(&pre).into_iter().map(|z| 1.0 / (1.0 + (-z).exp())).collect()
+}
+
+#[test]
+fn the_diagnostics_gates_lie_in_the_unit_interval_and_match_a_gate_computed_by_hand() {
+    use weft_nn::altconv::{SHUT_GATE, diagnose};
+    let mesh = sheet(5);
+    let adj = NormalizedAdjacency::new(&mesh).unwrap();
+    let seqs = [sequence(&mesh, 7, 0.0), sequence(&mesh, 7, 1.1)];
+    for variant in Variant::ALL {
+        let mut params = ParamStore::new(&cpu(), 3);
+        let net = AltConvNet::new(&mut params, variant, &[4, 5]).unwrap();
+        // Output-gate biases of cell 0 near logit(0.02), so that part of the gate is shut
+        // and the shut share is neither 0 nor 1.
+        let mut bias = flat(params.vars()["cell0.b"].as_tensor());
+        bias[12..16].copy_from_slice(&[-3.0, -3.9, -4.2, -5.0]);
+        let bias: Vec<f32> = bias.into_iter().map(|b| b as f32).collect();
+        params.vars()["cell0.b"]
+            .set(&Tensor::from_vec(bias, 16, &cpu()).unwrap())
+            .unwrap();
+        let report = diagnose(&net, &params, &adj, &seqs, 6, "synthetic").unwrap();
+        assert_eq!(report.per_step.len(), 6);
+        assert_eq!(report.layers, ["cell0", "cell1", "out"]);
+        for d in &report.per_step {
+            assert!(d.rollout_error_mm.is_finite() && d.rollout_error_mm >= 0.0);
+            for x in &d.layers {
+                for g in [&x.input_gate, &x.forget_gate, &x.output_gate] {
+                    assert!(
+                        (0.0..=1.0).contains(&g.mean) && (0.0..=1.0).contains(&g.shut),
+                        "{variant:?}: {g:?}"
+                    );
+                }
+                assert!(x.cell_abs_mean.is_finite() && x.cell_abs_mean >= 0.0);
+                assert_eq!(x.accumulation_abs_mean.is_some(), variant == Variant::Alt);
+            }
+        }
+        if matches!(variant, Variant::NpDy | Variant::NpY) {
+            let first = &report.per_step[0].layers[0];
+            for (k, stats) in [(0, first.input_gate), (3, first.output_gate)] {
+                let mut by_hand = (0.0, 0.0);
+                for s in &seqs {
+                    let g = first_gate_by_hand(&params, &adj, s, 4, k);
+                    by_hand.0 += g.iter().sum::<f64>() / g.len() as f64 / 2.0;
+                    by_hand.1 += g.iter().filter(|&&v| v < SHUT_GATE).count() as f64 / g.len() as f64 / 2.0;
+                }
+                assert!(
+                    (stats.mean - by_hand.0).abs() < 1e-6,
+                    "{variant:?} gate {k}: {stats:?} against {by_hand:?}"
+                );
+                assert!(
+                    (stats.shut - by_hand.1).abs() < 1e-9,
+                    "{variant:?} gate {k}: {stats:?} against {by_hand:?}"
+                );
+            }
+            assert!(
+                first.output_gate.shut > 0.05 && first.output_gate.shut < 0.95,
+                "{:?}",
+                first.output_gate
+            );
+        }
+    }
+}
+
+#[test]
+fn the_diagnostics_gradient_rms_is_the_autograd_gradient_of_each_roll_out() {
+    use weft_nn::altconv::diagnose;
+    let mesh = sheet(5);
+    let adj = NormalizedAdjacency::new(&mesh).unwrap();
+    let seqs = [
+        lagging_sequence(&mesh, 6, 0.0, 0.6),
+        lagging_sequence(&mesh, 6, 0.7, 0.3),
+    ];
+    for variant in Variant::ALL {
+        let mut params = ParamStore::new(&cpu(), 5);
+        let scaling = Scaling::fit(&seqs, variant, 5).unwrap();
+        let net = AltConvNet::new(&mut params, variant, &[4, 5])
+            .unwrap()
+            .with_scaling(scaling);
+        let report = diagnose(&net, &params, &adj, &seqs, 5, "synthetic").unwrap();
+        // Independently: each sequence's roll-out through autograd, its loss's gradient,
+        // the squares summed per layer, then √(mean over sequences / parameters).
+        let mut sq = std::collections::BTreeMap::<String, (f64, usize)>::new();
+        for s in &seqs {
+            let predictions = net.run_forced(&adj, &s.drive, Some(&s.truth), 5, &|_| false).unwrap();
+            let grads = mean_vertex_error(&predictions, &s.truth).unwrap().backward().unwrap();
+            for (name, var) in params.vars() {
+                let g = flat(grads.get(var.as_tensor()).unwrap());
+                let e = sq.entry(name.split('.').next().unwrap().to_string()).or_default();
+                e.0 += g.iter().map(|v| v * v).sum::<f64>();
+                e.1 += g.len();
+            }
+        }
+        for g in &report.gradients {
+            let (s, n) = sq[&g.layer];
+            assert_eq!(g.parameters * seqs.len(), n, "{variant:?} {}", g.layer);
+            let expected = (s / n as f64).sqrt();
+            assert!(expected > 0.0);
+            assert!(
+                (g.rms - expected).abs() <= 1e-4 * expected,
+                "{variant:?} {}: {} against {expected}",
+                g.layer,
+                g.rms
+            );
+        }
+        assert!(report.gradient_norm > 0.0 && report.gradient_norm.is_finite());
+    }
+}
