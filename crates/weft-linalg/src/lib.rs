@@ -46,6 +46,7 @@
 
 mod cholesky;
 mod error;
+mod krylov;
 mod norms;
 mod ordering;
 mod pattern;
@@ -54,7 +55,8 @@ mod two_domain;
 
 pub use cholesky::{CholeskyFactor, CholeskySolver, Substructuring};
 pub use error::{Error, Result};
-pub use norms::max_abs;
+pub use krylov::{CgOutcome, pcg};
+pub use norms::{dot, max_abs};
 pub use pattern::{SymmetricMatrix, SymmetricPattern};
 pub use rng::SplitMix64;
 

@@ -1,7 +1,7 @@
 //! Max-norms that see NaN. `f64::max` returns the other operand when one is NaN, so a
 //! fold with it silently drops NaN entries: a residual of all NaN would read as 0 and
 //! pass every convergence test. Every max-norm in weft goes through [`max_abs`], which
-//! treats a non-finite entry as +∞.
+//! treats a non-finite entry as +∞. [`dot`] is the one plain inner product.
 
 /// The largest `|v|` over `values`, `+∞` if any value is NaN or infinite, `0` if empty.
 pub fn max_abs<I: IntoIterator<Item = f64>>(values: I) -> f64 {
@@ -29,4 +29,9 @@ mod tests {
         // The pattern this replaces loses the NaN:
         assert_eq!([f64::NAN, 1.0].iter().fold(0.0f64, |m, v| m.max(v.abs())), 1.0);
     }
+}
+
+/// The Euclidean inner product of two equally long vectors.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -45,7 +45,7 @@
 
 use std::time::Instant;
 
-use weft_linalg::CholeskyFactor;
+use weft_linalg::{CholeskyFactor, dot};
 
 use crate::error::{Error, Result};
 use crate::kkt::{Block3, EdgeSystem};
@@ -603,10 +603,6 @@ fn max_cone_step(x: &Cone, c: f64, d: &Cone) -> f64 {
     } else {
         f64::INFINITY
     }
-}
-
-fn dot(u: &[f64], v: &[f64]) -> f64 {
-    u.iter().zip(v).map(|(a, b)| a * b).sum()
 }
 
 fn norm3(v: &[f64]) -> f64 {

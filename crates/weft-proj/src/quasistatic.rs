@@ -601,7 +601,7 @@ impl QuasistaticLayer {
                         z.copy_from_slice(r);
                         f.solve_in_place(z);
                     };
-                    let out = crate::krylov::pcg(
+                    let out = weft_linalg::pcg(
                         &h,
                         precondition,
                         grad_out,

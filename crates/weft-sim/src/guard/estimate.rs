@@ -14,10 +14,22 @@ use crate::integrators::ImplicitEuler;
 /// (docs/GUARD.md): every iterate gives a valid bound, more only tighten it.
 pub const CERTIFICATE_ITERATIONS: usize = 8;
 
+/// Conjugate-gradient iterations at most for the Newton-step estimate (docs/GUARD.md,
+/// Eq. G6); a proposal close to the minimiser needs far fewer.
+pub const NEWTON_ESTIMATE_ITERATIONS: usize = 60;
+
+/// Relative residual the Newton-step estimate's CG solve stops at: the estimate is then
+/// within about this fraction of the exact Newton step's length.
+const NEWTON_ESTIMATE_TOLERANCE: f64 = 1e-2;
+
 /// What the residual at a frame says about its distance from the step's minimiser `x*`.
 ///
-/// With `μ` the step's modulus of strong convexity in the mass metric,
-/// `‖x − x*‖_M ≤ ‖∇E(x)‖_{M⁻¹} / μ` (docs/GUARD.md, Eq. G3).
+/// Two figures (docs/GUARD.md, "The estimate"):
+/// - the **estimate** ([`ErrorEstimate::mm`]): the length of the Newton step from the
+///   frame, `‖A⁻¹ ∇E(x)‖_M` with `A` the step's Hessian there (Eq. G6) — exact to first
+///   order in the distance, which is what the guard's tolerance judges by default;
+/// - the **bound** ([`ErrorEstimate::bound_mm`]): `‖∇E(x)‖_{M⁻¹} / μ` (Eq. G3), a rigorous
+///   upper bound where the step's modulus `μ` is certified positive, `None` elsewhere.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ErrorEstimate {
     /// `‖∇E(x)‖_{M⁻¹}` over the free DOFs (N/√kg).
@@ -27,15 +39,21 @@ pub struct ErrorEstimate {
     /// The certified lower bound on the modulus, `1/Δt² − ρ` (1/s²); not positive where
     /// the negative curvature `ρ` may cancel the mass term.
     pub modulus: f64,
-    /// Whether the strong-convexity condition was certified at the frame (`modulus > 0`).
-    /// When it was not, the estimate below uses `μ = 1/Δt²` (what it would be with a
-    /// positive semi-definite elastic Hessian) and is **not** a bound.
+    /// Whether the strong-convexity condition was certified at the frame (`modulus > 0`),
+    /// so that [`ErrorEstimate::bound_mm`] is a bound.
     pub certified: bool,
-    /// The estimate of `‖x − x*‖_M` (m·√kg).
+    /// The bound of Eq. G3 as a mass-weighted RMS per coordinate (mm), where certified.
+    pub bound_mm: Option<f64>,
+    /// The Newton-step estimate of `‖x − x*‖_M` (m·√kg).
     pub distance: f64,
     /// The same as a mass-weighted RMS per coordinate (mm):
     /// `1000 · distance / √(3 Σ_v m_v)`, which equals M_rms for uniform masses.
     pub mm: f64,
+    /// The step's exact Hessian was indefinite along a CG direction at the frame, so the
+    /// estimate solved with its positive semi-definite projection instead (Eq. G6).
+    pub indefinite: bool,
+    /// CG iterations of the estimate's Newton-step solve.
+    pub cg_iterations: usize,
 }
 
 /// The per-mesh data and scratch of [`ErrorEstimate`]s for one integrator.
@@ -51,6 +69,8 @@ pub(crate) struct Estimator {
     exact: SymmetricMatrix,
     projected: SymmetricMatrix,
     grad: Vec<f64>,
+    /// The Newton-step estimate's solution.
+    step: Vec<f64>,
 }
 
 impl Estimator {
@@ -71,6 +91,7 @@ impl Estimator {
             exact: SymmetricMatrix::zeros(pattern.clone()),
             projected: SymmetricMatrix::zeros(pattern),
             grad: vec![0.0; n],
+            step: vec![0.0; n],
         })
     }
 
@@ -110,32 +131,110 @@ impl Estimator {
             &mut self.grad,
         )?;
         let (mut sq, mut max) = (0.0f64, 0.0f64);
-        for i in (0..x.len()).filter(|&i| self.free[i]) {
-            let g = self.grad[i];
-            sq += g * g / self.dof_mass[i];
-            max = max.max(g.abs());
+        for i in 0..x.len() {
+            if self.free[i] {
+                sq += self.grad[i] * self.grad[i] / self.dof_mass[i];
+                max = max.max(self.grad[i].abs());
+            } else {
+                self.grad[i] = 0.0;
+            }
         }
         // NaN compares false: a non-finite gradient must not read as a zero residual.
         if !sq.is_finite() || self.grad.iter().any(|g| !g.is_finite()) {
-            sq = f64::INFINITY;
-            max = f64::INFINITY;
+            return Ok(Self::non_finite());
         }
         let inv_dt2 = 1.0 / integrator.dt().powi(2);
-        let modulus = inv_dt2 - self.negative_curvature(integrator, x);
+        self.assemble(integrator, x);
+        let modulus = inv_dt2 - self.negative_curvature();
         let certified = modulus > 0.0;
         let residual_m_inv = sq.sqrt();
-        let distance = residual_m_inv / if certified { modulus } else { inv_dt2 };
+        let (distance, indefinite, cg_iterations) = self.newton_step_length(inv_dt2);
         Ok(ErrorEstimate {
             residual_m_inv,
             residual_max: max,
             modulus,
             certified,
+            bound_mm: certified.then(|| self.to_mm(residual_m_inv / modulus)),
             distance,
             mm: self.to_mm(distance),
+            indefinite,
+            cg_iterations,
         })
     }
 
-    /// A certified upper bound `ρ` (1/s²) on how far the potential's Hessian at `x` bends
+    /// The estimate of a frame whose residual is not finite.
+    pub(crate) fn non_finite() -> ErrorEstimate {
+        ErrorEstimate {
+            residual_m_inv: f64::INFINITY,
+            residual_max: f64::INFINITY,
+            modulus: f64::NAN,
+            certified: false,
+            bound_mm: None,
+            distance: f64::INFINITY,
+            mm: f64::INFINITY,
+            indefinite: false,
+            cg_iterations: 0,
+        }
+    }
+
+    /// The potential's exact and projected Hessians at `x`.
+    fn assemble(&mut self, integrator: &ImplicitEuler, x: &[f64]) {
+        self.exact.set_zero();
+        self.projected.set_zero();
+        for t in integrator.terms() {
+            t.add_hessian(x, false, &mut self.exact);
+            t.add_hessian(x, true, &mut self.projected);
+        }
+    }
+
+    /// `‖δ‖_M` for the Newton step `A δ = ∇E(x)`, `A = M/Δt² + H` on the free DOFs
+    /// (Eq. G6), by Jacobi-preconditioned CG from the assembled Hessians: with the exact
+    /// `H` where CG finds `A` positive along every direction it explores, else with the
+    /// projected `H⁺` (positive definite with the mass term; the step Newton itself
+    /// would take). Returns the length, whether the exact `A` was indefinite, and the CG
+    /// iterations spent.
+    fn newton_step_length(&mut self, inv_dt2: f64) -> (f64, bool, usize) {
+        let mut iterations = 0;
+        for (matrix, indefinite) in [(&mut self.exact, false), (&mut self.projected, true)] {
+            for (i, m) in self.dof_mass.iter().enumerate() {
+                matrix.add(i, i, m * inv_dt2);
+            }
+            let fixed: Vec<bool> = self.free.iter().map(|f| !f).collect();
+            matrix.constrain_dofs(&fixed);
+            let diagonal: Vec<f64> = matrix.diagonal().collect();
+            let jacobi = |r: &[f64], z: &mut [f64]| {
+                for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
+                    // A non-positive diagonal (exact `H` only) falls back to the identity
+                    // scale; the preconditioner must stay SPD.
+                    *z = if *d > 0.0 { r / d } else { *r };
+                }
+            };
+            let out = weft_linalg::pcg(
+                matrix,
+                jacobi,
+                &self.grad,
+                &mut self.step,
+                NEWTON_ESTIMATE_TOLERANCE,
+                NEWTON_ESTIMATE_ITERATIONS,
+            );
+            iterations += out.iterations;
+            if !out.negative_curvature {
+                let length = self
+                    .step
+                    .iter()
+                    .zip(&self.dof_mass)
+                    .map(|(d, m)| m * d * d)
+                    .sum::<f64>()
+                    .sqrt();
+                return (length, indefinite, iterations);
+            }
+        }
+        // The projected `A ⪰ M/Δt²` is positive definite: CG cannot find negative
+        // curvature in it unless an entry is not finite.
+        (f64::INFINITY, true, iterations)
+    }
+
+    /// A certified upper bound `ρ` (1/s²) on how far the assembled Hessian of the potential bends
     /// below zero in the mass metric: `H ⪰ −ρ M` on the free DOFs.
     ///
     /// The Hessian is the sum of element Hessians `H_e`; each term's projected assembly
@@ -144,14 +243,8 @@ impl Estimator {
     /// `ρ(M^{−½} N M^{−½}) ≤ ρ(|M^{−½} N M^{−½}|) ≤ max_i (|S| d)_i / d_i` for any positive
     /// `d` (Collatz–Wielandt). A few power iterations on `|S|` make `d` close to its Perron
     /// vector, which makes the bound tight; no factorisation is needed.
-    fn negative_curvature(&mut self, integrator: &ImplicitEuler, x: &[f64]) -> f64 {
-        self.exact.set_zero();
-        self.projected.set_zero();
-        for t in integrator.terms() {
-            t.add_hessian(x, false, &mut self.exact);
-            t.add_hessian(x, true, &mut self.projected);
-        }
-        let n = x.len();
+    fn negative_curvature(&self) -> f64 {
+        let n = self.free.len();
         let pattern = self.exact.pattern().clone();
         // The off-projection part |S| as (row, col, value), free DOFs only.
         let mut entries = Vec::new();

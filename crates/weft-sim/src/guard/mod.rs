@@ -20,20 +20,35 @@ use crate::integrators::ImplicitEuler;
 use crate::scenes::MotionLabel;
 
 use estimate::Estimator;
-pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate};
+pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate, NEWTON_ESTIMATE_ITERATIONS};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 
 /// When a proposal is good enough to pass on.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GuardTolerance {
-    /// The estimate ([`ErrorEstimate::mm`]) is at most `τ` millimetres (mass-weighted RMS
-    /// per coordinate) and, unless [`GuardSettings::accept_unverified`], certified.
+    /// The estimate ([`ErrorEstimate::mm`]), or the bound per
+    /// [`GuardSettings::acceptance`], is at most `τ` millimetres (mass-weighted RMS per
+    /// coordinate).
     Millimetres(f64),
     /// The ground truth's own test: the largest free-DOF residual force is within the
     /// integrator's Newton tolerance, so an accepted proposal is a converged step. The
     /// dial's accurate end.
     GroundTruth,
+}
+
+/// Which figure of the [`ErrorEstimate`] the tolerance judges.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Acceptance {
+    /// The Newton-step estimate ([`ErrorEstimate::mm`], docs/GUARD.md Eq. G6): exact to
+    /// first order in the distance, on every frame, but not a bound.
+    #[default]
+    Estimate,
+    /// The certified bound ([`ErrorEstimate::bound_mm`], Eq. G3): a proposal is accepted
+    /// only where the step's modulus is certified positive and the bound is within `τ`.
+    /// A guarantee, and conservative by the step's condition number.
+    CertifiedBound,
 }
 
 /// How far a rejected proposal is corrected.
@@ -54,9 +69,8 @@ pub enum Correction {
 pub struct GuardSettings {
     pub tolerance: GuardTolerance,
     pub correction: Correction,
-    /// Accept a proposal on an estimate whose strong-convexity condition could not be
-    /// certified (then a guess, not a bound). Off by default: such proposals are corrected.
-    pub accept_unverified: bool,
+    /// Whether `τ` judges the Newton-step estimate or the certified bound.
+    pub acceptance: Acceptance,
     /// A proposal that moves any coordinate farther than this multiple of the accepted
     /// frame's bounding-box diagonal in one step has exploded and is rejected.
     pub explosion_factor: f64,
@@ -78,7 +92,7 @@ impl GuardSettings {
         Self {
             tolerance: GuardTolerance::GroundTruth,
             correction: Correction::ToGroundTruth,
-            accept_unverified: false,
+            acceptance: Acceptance::Estimate,
             explosion_factor: 1.0,
         }
     }
@@ -161,7 +175,7 @@ pub struct GuardTotals {
     pub accepted: usize,
     pub corrected: usize,
     pub rejected: usize,
-    /// Frames whose passed-on estimate was not certified.
+    /// Frames passed on without a certified bound.
     pub unverified: usize,
     pub newton_iterations: usize,
     pub factorizations: usize,
@@ -308,7 +322,7 @@ impl Guard {
             frame,
             outcome: Outcome::Accepted,
             proposal_estimate,
-            estimate: proposal_estimate.unwrap_or_else(unknown_estimate),
+            estimate: proposal_estimate.unwrap_or_else(Estimator::non_finite),
             newton_iterations: 0,
             factorizations: 0,
             proposal_error,
@@ -356,9 +370,10 @@ impl Guard {
     /// Whether `estimate` passes the guard's tolerance.
     fn acceptable(&self, integrator: &ImplicitEuler, estimate: &ErrorEstimate) -> bool {
         match self.settings.tolerance {
-            GuardTolerance::Millimetres(tau) => {
-                estimate.mm <= tau && (estimate.certified || self.settings.accept_unverified)
-            }
+            GuardTolerance::Millimetres(tau) => match self.settings.acceptance {
+                Acceptance::Estimate => estimate.mm <= tau,
+                Acceptance::CertifiedBound => estimate.bound_mm.is_some_and(|b| b <= tau),
+            },
             GuardTolerance::GroundTruth => estimate.residual_max <= integrator.settings.tolerance,
         }
     }
@@ -425,18 +440,6 @@ impl Guard {
         t.unverified += usize::from(!report.estimate.certified);
         t.newton_iterations += report.newton_iterations;
         t.factorizations += report.factorizations;
-    }
-}
-
-/// The estimate of a proposal that was never estimated (rejected outright).
-fn unknown_estimate() -> ErrorEstimate {
-    ErrorEstimate {
-        residual_m_inv: f64::INFINITY,
-        residual_max: f64::INFINITY,
-        modulus: f64::NAN,
-        certified: false,
-        distance: f64::INFINITY,
-        mm: f64::INFINITY,
     }
 }
 

@@ -14,7 +14,7 @@
 
 use std::sync::Arc;
 
-use weft_linalg::{CholeskyFactor, SymmetricMatrix, SymmetricPattern};
+use weft_linalg::{CholeskyFactor, SymmetricMatrix, SymmetricPattern, dot};
 
 use super::{NewtonReport, NewtonSettings, NewtonSolver, Progress, shifted_factor};
 use crate::energy::{Energy, total_gradient};
@@ -62,10 +62,6 @@ fn precondition(factor: &CholeskyFactor, fixed: &[bool], r: &[f64], z: &mut [f64
     z.copy_from_slice(r);
     factor.solve_in_place(z);
     z.iter_mut().zip(fixed).filter(|(_, f)| **f).for_each(|(v, _)| *v = 0.0);
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// What the trust-region subproblem returned.
