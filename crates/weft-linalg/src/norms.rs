@@ -15,6 +15,11 @@ pub fn max_abs<I: IntoIterator<Item = f64>>(values: I) -> f64 {
     m
 }
 
+/// The Euclidean inner product of two equally long vectors.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::max_abs;
@@ -29,9 +34,4 @@ mod tests {
         // The pattern this replaces loses the NaN:
         assert_eq!([f64::NAN, 1.0].iter().fold(0.0f64, |m, v| m.max(v.abs())), 1.0);
     }
-}
-
-/// The Euclidean inner product of two equally long vectors.
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

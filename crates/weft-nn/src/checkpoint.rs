@@ -39,14 +39,29 @@ fn write_safetensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<(
     std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
 }
 
+/// Writes named tensors (a model's non-parameter arrays, e.g. fitted bases) to `path`
+/// through a temporary name.
+pub fn write_tensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<()> {
+    write_safetensors(path, tensors)
+}
+
+/// Reads every tensor of a safetensors file written by [`write_tensors`], on the CPU.
+pub fn read_tensors(path: &Path) -> Result<BTreeMap<String, Tensor>> {
+    read_safetensors_on(path, &candle_core::Device::Cpu)
+}
+
 fn read_safetensors(path: &Path, params: &ParamStore) -> Result<BTreeMap<String, Tensor>> {
+    read_safetensors_on(path, params.device())
+}
+
+fn read_safetensors_on(path: &Path, device: &candle_core::Device) -> Result<BTreeMap<String, Tensor>> {
     if !path.exists() {
         return Err(Error::Checkpoint {
             path: path.display().to_string(),
             reason: "file missing".into(),
         });
     }
-    Ok(candle_core::safetensors::load(path, params.device())
+    Ok(candle_core::safetensors::load(path, device)
         .map_err(|e| Error::Checkpoint {
             path: path.display().to_string(),
             reason: e.to_string(),
@@ -126,7 +141,8 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
 
 /// The kind of model a stored `config.json` belongs to, by the fields only that kind's
 /// configuration has: `drape` (a stamp of `config`, `layer` and the starting weights), `embed`
-/// (`autoencoder`), `altconv` (`variant` and `steps`) or `nnwarp` (`material`).
+/// (`autoencoder`), `altconv` (`variant` and `steps`), `nnwarp` (`material`) or
+/// `inertial-correction` (its `kind`).
 pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
     if config.get("config").is_some() && config.get("layer").is_some() {
         Some("drape")
@@ -136,6 +152,8 @@ pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
         Some("altconv")
     } else if config.get("material").is_some() {
         Some("nnwarp")
+    } else if config.get("kind").and_then(|k| k.as_str()) == Some(crate::inertial_correction::KIND) {
+        Some(crate::inertial_correction::KIND)
     } else {
         None
     }

@@ -21,6 +21,9 @@
 //! **Beside the models:**
 //! - [`pca_simulator`]: the embedding's latent MLP on a PCA subspace ([`pca`]) — the
 //!   linear baseline for reduced simulation;
+//! - [`inertial_correction`]: a learned one-step surrogate for weft-sim's guard — the
+//!   inertial predictor plus a ridge-regressed correction in a PCA subspace of its
+//!   residuals, fitted in closed form (no candle);
 //! - [`ik`]: cloth inverse kinematics in the embedding's latent space (Tan et al. §V-A)
 //!   beside the same potential minimised over every vertex;
 //! - [`metrics`]: the error measures the experiments report (M_RMS, STED, nDCG).
@@ -90,6 +93,7 @@ pub mod error;
 pub mod fast;
 pub mod graph;
 pub mod ik;
+pub mod inertial_correction;
 pub mod layers;
 pub mod metrics;
 pub mod nnwarp;

@@ -76,6 +76,67 @@ impl PositionPca {
         })
     }
 
+    /// The length of a frame (3V).
+    pub fn dim(&self) -> usize {
+        self.mean.len()
+    }
+
+    /// The fit as f64 tensors named `<name>.mean` `[3V]`, `<name>.components` `[k, 3V]`
+    /// and `<name>.variances` `[k]`, for a model directory's safetensors file.
+    pub fn to_tensors(&self, name: &str) -> Result<Vec<(String, candle_core::Tensor)>> {
+        let device = &candle_core::Device::Cpu;
+        let (k, n) = (self.components.len(), self.mean.len());
+        Ok(vec![
+            (
+                format!("{name}.mean"),
+                candle_core::Tensor::from_vec(self.mean.clone(), n, device)?,
+            ),
+            (
+                format!("{name}.components"),
+                candle_core::Tensor::from_vec(self.components.concat(), (k, n), device)?,
+            ),
+            (
+                format!("{name}.variances"),
+                candle_core::Tensor::from_vec(self.variances.clone(), k, device)?,
+            ),
+        ])
+    }
+
+    /// The fit [`PositionPca::to_tensors`] wrote under `name`; `path` names the file in
+    /// errors.
+    pub fn from_tensors(
+        tensors: &std::collections::BTreeMap<String, candle_core::Tensor>,
+        name: &str,
+        path: &str,
+    ) -> Result<Self> {
+        let get = |part: &str| -> Result<Vec<f64>> {
+            let t = tensors
+                .get(&format!("{name}.{part}"))
+                .ok_or_else(|| Error::Checkpoint {
+                    path: path.into(),
+                    reason: format!("no tensor {name}.{part}"),
+                })?;
+            Ok(t.flatten_all()?.to_dtype(candle_core::DType::F64)?.to_vec1::<f64>()?)
+        };
+        let (mean, flat, variances) = (get("mean")?, get("components")?, get("variances")?);
+        let n = mean.len();
+        if n == 0 || flat.len() != variances.len() * n {
+            return Err(Error::Checkpoint {
+                path: path.into(),
+                reason: format!(
+                    "{name}: {} component values for {} components of {n}",
+                    flat.len(),
+                    variances.len()
+                ),
+            });
+        }
+        Ok(Self {
+            mean,
+            components: flat.chunks_exact(n).map(<[f64]>::to_vec).collect(),
+            variances,
+        })
+    }
+
     pub fn num_components(&self) -> usize {
         self.components.len()
     }

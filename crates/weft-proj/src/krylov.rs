@@ -177,4 +177,27 @@ pub(crate) fn minimize(
 mod tests {
     use super::*;
     use weft_linalg::SymmetricPattern;
+
+    #[test]
+    fn block_jacobi_inverts_each_diagonal_block_and_ignores_the_coupling() {
+        // Two vertices: diagonal blocks [[4, 1, 0], [1, 3, 0], [0, 0, 2]] and 5I, coupled by −I.
+        let pattern = std::sync::Arc::new(SymmetricPattern::from_vertex_pairs(2, [(0, 1)]));
+        let mut h = SymmetricMatrix::zeros(pattern);
+        for (i, d) in [4.0, 3.0, 2.0, 5.0, 5.0, 5.0].into_iter().enumerate() {
+            h.add(i, i, d);
+        }
+        h.add(0, 1, 1.0);
+        for c in 0..3 {
+            h.add(c, 3 + c, -1.0);
+        }
+        let m = BlockJacobi::new(&h);
+        let r = [1.0, 2.0, 4.0, 5.0, -10.0, 0.0];
+        let mut z = [0.0; 6];
+        m.apply(&r, &mut z);
+        // [[4, 1], [1, 3]]⁻¹ (1, 2) = (1/11, 7/11); 4/2; (5, −10, 0)/5.
+        let expected = [1.0 / 11.0, 7.0 / 11.0, 2.0, 1.0, -2.0, 0.0];
+        for (a, b) in z.iter().zip(&expected) {
+            assert!((a - b).abs() < 1e-12, "{z:?}");
+        }
+    }
 }

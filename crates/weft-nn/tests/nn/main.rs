@@ -11,4 +11,5 @@
 mod altconv;
 mod base;
 mod drape;
+mod inertial_correction;
 mod projection_ops;

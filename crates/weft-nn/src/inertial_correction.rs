@@ -1,0 +1,500 @@
+//! A learned one-step surrogate for the guarded roll-out (docs/GUARD.md, "A surrogate to
+//! guard"): the inertial predictor `2p_{m−1} − p_{m−2}` plus a learned correction.
+//!
+//! The guard only ever asks for one step from an accepted frame, so what a surrogate
+//! must be good at is the one-step error, and the bar is the inertial predictor's — the
+//! implicit-Euler solver's own start, whose error is the step's `Δt² a_m`. This model is
+//! fitted to exactly that residual,
+//!
+//! ```text
+//! c_m = p_m − (2p_{m−1} − p_{m−2}) = Δt² a_m,       p̂_m = 2p_{m−1} − p_{m−2} + U_c W f_m,
+//! ```
+//!
+//! so it starts from the predictor and can only move away from it where the training
+//! data say so: the ridge weight is chosen on the validation frames from a grid that
+//! includes "no correction", so a kept model is never worse than the predictor there.
+//!
+//! - **Features** `f_m`, all known when frame `m` is asked for: the codes of `p_{m−1}`
+//!   and of the displacement `p_{m−1} − p_{m−2}` in a PCA basis of the training frames
+//!   (the state and `Δt` times the velocity), the controls `q_m` and the grasp's
+//!   acceleration `q_m − 2q_{m−1} + q_{m−2}` (what drives the cloth), standardised, and a
+//!   bias. `Δt² a = Δt² M⁻¹ f(p, v)`: about a state the force is linear in the
+//!   displacement and velocity, which a linear map of their codes represents; gravity
+//!   is the bias.
+//! - **Output**: codes of `c_m` in a PCA basis `U_c` of the training residuals.
+//! - **Fit**: linear least squares with a ridge penalty, closed form (a Cholesky solve
+//!   of the normal equations, nalgebra): deterministic, no seed.
+//!
+//! The model directory holds `config.json` (the scene it is tied to, its `Δt` and mesh,
+//! the settings, the chosen ridge weight, the validation figures of every candidate, the
+//! standardisation and the weights) and `bases.safetensors` (the two PCA bases, f64:
+//! geometry, not network weights).
+
+use std::path::Path;
+
+use nalgebra::DMatrix;
+use weft_data::{ClothDataset, is_train_frame, is_validation_frame};
+
+use crate::error::{Error, Result};
+use crate::pca::PositionPca;
+
+/// The model kind in `config.json`.
+pub const KIND: &str = "inertial-correction";
+
+/// How the correction is fitted.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InertialCorrectionSettings {
+    /// Components of the positions' PCA whose codes are the state features.
+    pub position_components: usize,
+    /// Components of the residuals' PCA the correction lives in.
+    pub correction_components: usize,
+    /// Ridge weights to choose from on validation, relative to the mean diagonal of the
+    /// normal matrix `FᵀF` (so the grid means the same on every scene).
+    pub ridge: Vec<f64>,
+}
+
+impl Default for InertialCorrectionSettings {
+    fn default() -> Self {
+        Self {
+            position_components: 32,
+            correction_components: 32,
+            ridge: vec![1e-8, 1e-6, 1e-4, 1e-2, 1.0],
+        }
+    }
+}
+
+/// One candidate's one-step error on the validation frames.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RidgeScore {
+    /// The relative ridge weight; `None` for no correction (the inertial predictor).
+    pub ridge: Option<f64>,
+    /// M_rms of the predicted frames (mm).
+    pub one_step_mm: f64,
+}
+
+/// A fitted inertial correction (see the module docs).
+#[derive(Debug, Clone)]
+pub struct InertialCorrection {
+    meta: Meta,
+    positions: PositionPca,
+    corrections: PositionPca,
+}
+
+/// Everything of a model but its bases: `config.json`.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Meta {
+    kind: String,
+    scene: String,
+    /// Time step (s) of the frames it was fitted on.
+    dt: f64,
+    num_dofs: usize,
+    /// The grasped vertices, in the order of the controls.
+    grasp: Vec<usize>,
+    settings: InertialCorrectionSettings,
+    /// The chosen relative ridge weight; `None` when no correction beat the predictor.
+    ridge: Option<f64>,
+    validation: Vec<RidgeScore>,
+    feature_mean: Vec<f64>,
+    feature_scale: Vec<f64>,
+    /// `W`, `correction codes × (features + bias)`, row-major.
+    weights: Vec<f64>,
+}
+
+/// The frames a window predicts: `m ≥ 2` with Tan et al.'s split rule (docs/DATASETS.md).
+fn windows(data: &ClothDataset, keep: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for (s, seq) in data.sequences.iter().enumerate() {
+        out.extend((2..seq.num_frames()).filter(|&m| keep(m)).map(|m| (s, m)));
+    }
+    out
+}
+
+/// Training windows: frame `m` a training frame and not a validation one (the inputs
+/// are true frames of any split, as the guard's are accepted frames).
+fn train_windows(data: &ClothDataset) -> Vec<(usize, usize)> {
+    windows(data, |m| is_train_frame(m) && !is_validation_frame(m))
+}
+
+/// The inertial predictor `2p1 − p2` with the grasped vertices at the controls `q`.
+fn inertial(p2: &[f64], p1: &[f64], grasp: &[usize], q: &[f64]) -> Vec<f64> {
+    let mut x: Vec<f64> = p1.iter().zip(p2).map(|(a, b)| 2.0 * a - b).collect();
+    set_grasp(&mut x, grasp, q);
+    x
+}
+
+fn set_grasp(x: &mut [f64], grasp: &[usize], q: &[f64]) {
+    for (g, &v) in grasp.iter().enumerate() {
+        x[3 * v..3 * v + 3].copy_from_slice(&q[3 * g..3 * g + 3]);
+    }
+}
+
+/// The raw (unstandardised) features of a step, without the bias.
+fn raw_features(positions: &PositionPca, p2: &[f64], p1: &[f64], grasp: &[usize], q: &[f64]) -> Vec<f64> {
+    let z1 = positions.encode(p1);
+    let z2 = positions.encode(p2);
+    let mut f: Vec<f64> = z1
+        .iter()
+        .copied()
+        .chain(z1.iter().zip(&z2).map(|(a, b)| a - b))
+        .collect();
+    f.extend_from_slice(q);
+    for (g, &v) in grasp.iter().enumerate() {
+        for k in 0..3 {
+            f.push(q[3 * g + k] - 2.0 * p1[3 * v + k] + p2[3 * v + k]);
+        }
+    }
+    f
+}
+
+/// M_rms of one frame (mm): `1000 · ‖a − b‖ / √(3V)`.
+fn frame_mm(a: &[f64], b: &[f64]) -> f64 {
+    let (sq, _) = crate::metrics::frame_error(a, b, &(0..a.len() / 3).collect::<Vec<_>>());
+    1e3 * (sq / a.len().max(1) as f64).sqrt()
+}
+
+impl InertialCorrection {
+    /// Fits the correction on `data`'s training frames and chooses the ridge weight on its
+    /// validation frames (module docs).
+    pub fn fit(data: &ClothDataset, settings: &InertialCorrectionSettings) -> Result<Self> {
+        let train = train_windows(data);
+        let validation = windows(data, is_validation_frame);
+        if train.is_empty() || validation.is_empty() {
+            return Err(Error::InvalidParameter {
+                name: "dataset",
+                value: format!("{} training and {} validation windows", train.len(), validation.len()),
+                reason: "fitting the correction needs both (sequences of at least 12 frames)",
+            });
+        }
+        if settings.position_components == 0 || settings.correction_components == 0 {
+            return Err(Error::InvalidParameter {
+                name: "inertial correction components",
+                value: format!(
+                    "{} and {}",
+                    settings.position_components, settings.correction_components
+                ),
+                reason: "both bases need at least one component",
+            });
+        }
+        if let Some(r) = settings.ridge.iter().find(|r| !(**r > 0.0 && r.is_finite())) {
+            return Err(Error::InvalidParameter {
+                name: "ridge weight",
+                value: r.to_string(),
+                reason: "must be positive and finite",
+            });
+        }
+        let seq = |s: usize| &data.sequences[s];
+        let frames: Vec<Vec<f64>> = train.iter().map(|&(s, m)| seq(s).frame(m).to_vec()).collect();
+        let positions = PositionPca::fit(&frames, settings.position_components)?;
+        let residuals: Vec<Vec<f64>> = train
+            .iter()
+            .map(|&(s, m)| {
+                let guess = inertial(seq(s).frame(m - 2), seq(s).frame(m - 1), &data.grasp, seq(s).control(m));
+                seq(s).frame(m).iter().zip(&guess).map(|(a, b)| a - b).collect()
+            })
+            .collect();
+        let corrections = PositionPca::fit(&residuals, settings.correction_components)?;
+        let features = |w: &[(usize, usize)]| -> Vec<Vec<f64>> {
+            w.iter()
+                .map(|&(s, m)| {
+                    raw_features(
+                        &positions,
+                        seq(s).frame(m - 2),
+                        seq(s).frame(m - 1),
+                        &data.grasp,
+                        seq(s).control(m),
+                    )
+                })
+                .collect()
+        };
+        let raw = features(&train);
+        let (feature_mean, feature_scale) = standardisation(&raw);
+        let f = design_matrix(&raw, &feature_mean, &feature_scale);
+        let t = DMatrix::from_fn(train.len(), corrections.num_components(), |r, c| {
+            corrections.encode(&residuals[r])[c]
+        });
+        let mut model = Self {
+            meta: Meta {
+                kind: KIND.into(),
+                scene: data.scene.name.clone(),
+                dt: data.scene.dt,
+                num_dofs: 3 * data.rest.num_vertices(),
+                grasp: data.grasp.clone(),
+                settings: settings.clone(),
+                ridge: None,
+                validation: Vec::new(),
+                feature_mean,
+                feature_scale,
+                weights: Vec::new(),
+            },
+            positions,
+            corrections,
+        };
+        model.choose_ridge(data, &f, &t, &validation)?;
+        Ok(model)
+    }
+
+    /// Solves the ridge problem for every candidate weight, scores each (and no
+    /// correction) on the validation windows, and keeps the best.
+    fn choose_ridge(
+        &mut self,
+        data: &ClothDataset,
+        f: &DMatrix<f64>,
+        t: &DMatrix<f64>,
+        validation: &[(usize, usize)],
+    ) -> Result<()> {
+        let normal = f.transpose() * f;
+        let rhs = f.transpose() * t;
+        let scale = normal.diagonal().mean();
+        let mut best: (f64, Option<f64>, Vec<f64>) = (self.validation_mm(data, validation)?, None, Vec::new());
+        self.meta.validation = vec![RidgeScore {
+            ridge: None,
+            one_step_mm: best.0,
+        }];
+        for &r in &self.meta.settings.ridge.clone() {
+            let mut a = normal.clone();
+            for i in 0..a.nrows() {
+                a[(i, i)] += r * scale;
+            }
+            let w = a.cholesky().ok_or(Error::InvalidParameter {
+                name: "ridge weight",
+                value: r.to_string(),
+                reason: "leaves the normal equations singular",
+            })?;
+            // `W` of the model is `codes × features`: the transpose of the solve's.
+            let solved = w.solve(&rhs).transpose();
+            // nalgebra stores column-major: lay the weights out row by row.
+            self.meta.weights = (0..solved.nrows())
+                .flat_map(|i| solved.row(i).iter().copied().collect::<Vec<_>>())
+                .collect();
+            self.meta.ridge = Some(r);
+            let mm = self.validation_mm(data, validation)?;
+            self.meta.validation.push(RidgeScore {
+                ridge: Some(r),
+                one_step_mm: mm,
+            });
+            if mm < best.0 {
+                best = (mm, Some(r), self.meta.weights.clone());
+            }
+        }
+        (self.meta.ridge, self.meta.weights) = (best.1, best.2);
+        Ok(())
+    }
+
+    /// M_rms (mm) of the one-step predictions over `windows` of `data`.
+    fn validation_mm(&self, data: &ClothDataset, windows: &[(usize, usize)]) -> Result<f64> {
+        let errors = self.one_step_errors_at(data, windows)?;
+        Ok((errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt())
+    }
+
+    fn one_step_errors_at(&self, data: &ClothDataset, windows: &[(usize, usize)]) -> Result<Vec<f64>> {
+        windows
+            .iter()
+            .map(|&(s, m)| {
+                let seq = &data.sequences[s];
+                let x = self.predict(seq.frame(m - 2), seq.frame(m - 1), seq.control(m))?;
+                Ok(frame_mm(&x, seq.frame(m)))
+            })
+            .collect()
+    }
+
+    /// Each frame's one-step error (M_rms, mm) on `split` of `data` (`train`,
+    /// `validation` or `test`, Tan et al.'s frame rule), from the true history: the
+    /// figure the guard's acceptance depends on.
+    pub fn one_step_errors(&self, data: &ClothDataset, split: &str) -> Result<Vec<f64>> {
+        self.check_dataset(data)?;
+        self.one_step_errors_at(data, &split_windows(data, split)?)
+    }
+
+    /// Frame `p_m` (flat positions, m) from `p_{m−2}`, `p_{m−1}` and the controls `q_m`
+    /// (3 per grasped vertex, in the model's grasp order).
+    pub fn predict(&self, p2: &[f64], p1: &[f64], q: &[f64]) -> Result<Vec<f64>> {
+        let n = self.meta.num_dofs;
+        if p2.len() != n || p1.len() != n || q.len() != 3 * self.meta.grasp.len() {
+            return Err(Error::Shape {
+                what: "inertial correction input",
+                expected: format!("two frames of {n} and {} controls", 3 * self.meta.grasp.len()),
+                got: format!("{}, {} and {}", p2.len(), p1.len(), q.len()),
+            });
+        }
+        let mut x = inertial(p2, p1, &self.meta.grasp, q);
+        if self.meta.ridge.is_none() {
+            return Ok(x);
+        }
+        let raw = raw_features(&self.positions, p2, p1, &self.meta.grasp, q);
+        let f: Vec<f64> = raw
+            .iter()
+            .zip(&self.meta.feature_mean)
+            .zip(&self.meta.feature_scale)
+            .map(|((v, m), s)| (v - m) / s)
+            .chain(std::iter::once(1.0))
+            .collect();
+        let codes: Vec<f64> = self
+            .meta
+            .weights
+            .chunks_exact(f.len())
+            .map(|w| w.iter().zip(&f).map(|(a, b)| a * b).sum())
+            .collect();
+        let c = self.corrections.decode(&codes);
+        x.iter_mut().zip(&c).for_each(|(a, b)| *a += b);
+        set_grasp(&mut x, &self.meta.grasp, q);
+        if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "inertial correction prediction",
+                index: i,
+            });
+        }
+        Ok(x)
+    }
+
+    /// Drops the correction: the model then proposes the inertial predictor's frame (the
+    /// baseline it is compared with, on the same code path).
+    pub fn disable_correction(&mut self) {
+        self.meta.ridge = None;
+    }
+
+    /// The relative ridge weight chosen on validation; `None` when no correction beat the
+    /// inertial predictor there (the model then is the predictor).
+    pub fn ridge(&self) -> Option<f64> {
+        self.meta.ridge
+    }
+
+    /// Every candidate's validation one-step error, "no correction" first.
+    pub fn validation_scores(&self) -> &[RidgeScore] {
+        &self.meta.validation
+    }
+
+    pub fn scene(&self) -> &str {
+        &self.meta.scene
+    }
+
+    fn check_dataset(&self, data: &ClothDataset) -> Result<()> {
+        let n = 3 * data.rest.num_vertices();
+        if n != self.meta.num_dofs || data.grasp != self.meta.grasp || data.scene.name != self.meta.scene {
+            return Err(Error::Shape {
+                what: "dataset for the inertial correction",
+                expected: format!("scene {} with {} DOFs", self.meta.scene, self.meta.num_dofs),
+                got: format!("scene {} with {n} DOFs", data.scene.name),
+            });
+        }
+        Ok(())
+    }
+
+    /// Writes the model directory `dir` (module docs).
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+            path: dir.display().to_string(),
+            source: e,
+        })?;
+        let mut tensors = std::collections::BTreeMap::new();
+        tensors.extend(self.positions.to_tensors("positions")?);
+        tensors.extend(self.corrections.to_tensors("corrections")?);
+        crate::checkpoint::write_tensors(&dir.join("bases.safetensors"), tensors)?;
+        crate::checkpoint::write_json(&dir.join("config.json"), &self.meta)
+    }
+
+    /// Reads a model directory written by [`InertialCorrection::save`].
+    pub fn load(dir: &Path) -> Result<Self> {
+        crate::checkpoint::check_model_kind(dir, KIND)?;
+        let meta: Meta = crate::checkpoint::read_json(&dir.join("config.json"))?;
+        let arrays = crate::checkpoint::read_tensors(&dir.join("bases.safetensors"))?;
+        let path = dir.display().to_string();
+        let positions = PositionPca::from_tensors(&arrays, "positions", &path)?;
+        let corrections = PositionPca::from_tensors(&arrays, "corrections", &path)?;
+        let features = 2 * positions.num_components() + 6 * meta.grasp.len();
+        if meta.feature_mean.len() != features
+            || meta.feature_scale.len() != features
+            || (meta.ridge.is_some() && meta.weights.len() != corrections.num_components() * (features + 1))
+            || positions.dim() != meta.num_dofs
+            || corrections.dim() != meta.num_dofs
+        {
+            return Err(Error::Checkpoint {
+                path,
+                reason: "the weights, standardisation and bases do not fit together".into(),
+            });
+        }
+        Ok(Self {
+            meta,
+            positions,
+            corrections,
+        })
+    }
+}
+
+/// The windows of `split` (module docs).
+fn split_windows(data: &ClothDataset, split: &str) -> Result<Vec<(usize, usize)>> {
+    Ok(match split {
+        "train" => train_windows(data),
+        "validation" => windows(data, is_validation_frame),
+        "test" => windows(data, |m| !is_train_frame(m)),
+        _ => {
+            return Err(Error::InvalidParameter {
+                name: "split",
+                value: split.into(),
+                reason: "one of train, validation, test",
+            });
+        }
+    })
+}
+
+/// Per-feature mean and standard deviation over the training rows (a constant feature
+/// gets scale 1, so standardising never divides by zero).
+fn standardisation(raw: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let n = raw.len() as f64;
+    let k = raw[0].len();
+    let mean: Vec<f64> = (0..k).map(|j| raw.iter().map(|r| r[j]).sum::<f64>() / n).collect();
+    let scale = (0..k)
+        .map(|j| {
+            let sd = (raw.iter().map(|r| (r[j] - mean[j]).powi(2)).sum::<f64>() / n).sqrt();
+            if sd > 1e-12 * (1.0 + mean[j].abs()) { sd } else { 1.0 }
+        })
+        .collect();
+    (mean, scale)
+}
+
+/// The standardised features with a bias column.
+fn design_matrix(raw: &[Vec<f64>], mean: &[f64], scale: &[f64]) -> DMatrix<f64> {
+    let k = mean.len();
+    DMatrix::from_fn(raw.len(), k + 1, |r, c| {
+        if c == k { 1.0 } else { (raw[r][c] - mean[c]) / scale[c] }
+    })
+}
+
+impl weft_sim::guard::Surrogate for InertialCorrection {
+    fn name(&self) -> &str {
+        KIND
+    }
+    fn num_dofs(&self) -> usize {
+        self.meta.num_dofs
+    }
+    fn scene(&self) -> Option<&str> {
+        Some(&self.meta.scene)
+    }
+    fn dt(&self) -> Option<f64> {
+        Some(self.meta.dt)
+    }
+    fn propose(
+        &mut self,
+        input: &weft_sim::guard::StepInput<'_>,
+    ) -> std::result::Result<Vec<f64>, weft_sim::guard::SurrogateError> {
+        let mut q = vec![f64::NAN; 3 * self.meta.grasp.len()];
+        for &(dof, value) in input.prescribed {
+            if let Some(g) = self.meta.grasp.iter().position(|&v| v == dof / 3) {
+                q[3 * g + dof % 3] = value;
+            }
+        }
+        if let Some(i) = q.iter().position(|v| v.is_nan()) {
+            return Err(Box::new(Error::InvalidParameter {
+                name: "controls",
+                value: format!(
+                    "grasped vertex {} has no prescribed DOF {}",
+                    self.meta.grasp[i / 3],
+                    i % 3
+                ),
+                reason: "the correction was fitted with every grasped DOF prescribed",
+            }));
+        }
+        Ok(self.predict(input.previous, input.current, &q)?)
+    }
+}
