@@ -86,7 +86,10 @@ impl NormalEquations {
         let llt = a.llt(Side::Lower).map_err(|_| Error::NotPositiveDefinite)?;
         let w = llt.solve(self.rhs.as_ref().subrows(0, k));
         let m = self.outputs();
-        let out: Vec<f64> = (0..k).flat_map(|i| (0..m).map(move |j| (i, j))).map(|(i, j)| w[(i, j)]).collect();
+        let out: Vec<f64> = (0..k)
+            .flat_map(|i| (0..m).map(move |j| (i, j)))
+            .map(|(i, j)| w[(i, j)])
+            .collect();
         if out.iter().any(|v| !v.is_finite()) {
             return Err(Error::NonFinite("ridge solution"));
         }
@@ -120,7 +123,10 @@ mod tests {
         // Two identical columns: ΦᵀΦ is singular, the ridge splits the weight evenly.
         let design = [1.0, 1.0, 2.0, 2.0];
         let ne = NormalEquations::new(&design, &[3.0, 6.0], 2, 2, 1).unwrap();
-        assert!(matches!(ne.solve(2, 0.0), Err(Error::NotPositiveDefinite) | Err(Error::NonFinite(_))));
+        assert!(matches!(
+            ne.solve(2, 0.0),
+            Err(Error::NotPositiveDefinite) | Err(Error::NonFinite(_))
+        ));
         let w = ne.solve(2, 1e-9).unwrap();
         assert!((w[0] - 1.5).abs() < 1e-6 && (w[1] - 1.5).abs() < 1e-6, "{w:?}");
         assert!(ne.solve(3, 1.0).is_err());
