@@ -181,7 +181,13 @@ pub(super) fn select(dataset: &LimbDataset, horizon: usize) -> crate::Result<Sel
     // vertex) rather than holding every candidate's weights.
     let study = Study::sweep(
         candidates,
-        |&(k, ridge)| Ok(mean_error_mm(&LinearFilter::fit(&normals, k, ridge)?, &validation, steps)),
+        |&(k, ridge)| {
+            Ok(mean_error_mm(
+                &LinearFilter::fit(&normals, k, ridge)?,
+                &validation,
+                steps,
+            ))
+        },
         |&mm| mm,
     )?;
     let &(k, ridge) = study.chosen();
