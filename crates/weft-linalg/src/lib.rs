@@ -14,6 +14,8 @@
 //! Two small pieces of numerics every crate shares sit here because this is the lowest
 //! crate they all reach: [`max_abs`], the one max-norm, and [`SplitMix64`], the one seeded
 //! pseudo-random generator (weft-sim's scenes and weft-testkit's `TestRng` draw from it).
+//! Dense ridge least squares ([`NormalEquations`]) is here for the same reason: it is
+//! faer, and the experiments' linear baselines fit it.
 //!
 //! faer runs single-threaded here: at weft's sizes two threads made faer 2–6× slower on
 //! this project's 2-core machines (measured when the dependency was chosen) because its `Par`
@@ -50,6 +52,7 @@ mod krylov;
 mod norms;
 mod ordering;
 mod pattern;
+mod ridge;
 mod rng;
 mod two_domain;
 
@@ -58,6 +61,7 @@ pub use error::{Error, Result};
 pub use krylov::{CgOutcome, pcg};
 pub use norms::{dot, max_abs};
 pub use pattern::{SymmetricMatrix, SymmetricPattern};
+pub use ridge::NormalEquations;
 pub use rng::SplitMix64;
 
 #[cfg(test)]

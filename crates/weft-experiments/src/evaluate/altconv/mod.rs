@@ -1,6 +1,7 @@
 //! The `altconv` experiment (Alt-ConvLSTM, seed 001 §5.2, Tables 1–2) on the soft-tissue
-//! datasets `limb` and `limb-jiggle`: Alt-ConvLSTM, the four graph ConvLSTM baselines and
-//! the skinning-only row, each network trained on the dataset's training sequences with
+//! datasets `limb` and `limb-jiggle`: Alt-ConvLSTM, the four graph ConvLSTM baselines, the
+//! skinning-only row and a linear causal filter on skinning's kinematics (`linear-filter`,
+//! fitted on the training split), each network trained on the dataset's training sequences with
 //! three seeds under one recipe per dataset ([`training_config`]; the learning rate chosen
 //! on validation where [`learning_rates`] offers several) and scored on the training motions
 //! (`known`) and on unseen ones (`test`).
@@ -15,20 +16,23 @@
 //! the training loss, the mean over the 20 teacher-forced training steps.
 //!
 //! One file per phase: `studies` (every model trained, the rate chosen on validation),
+//! `linear_filter` (the filter's fit and its taps and ridge chosen on validation),
 //! `scoring` (a model's errors on a split, and [`score_model`] for a model trained
 //! outside the evaluation), `tables` (records, tables, plots, heat maps).
 
+mod linear_filter;
 mod scoring;
 mod studies;
 mod tables;
 
 use weft_data::LimbDataset;
-use weft_nn::altconv::{AltConvNet, AltConvTrainingSettings, Recipe, Variant};
+use weft_nn::altconv::{AltConvTrainingSettings, Recipe, Variant};
 use weft_nn::graph::NormalizedAdjacency;
 
 use crate::error::Context;
 use crate::evaluate::context::{EvalContext, generate_dataset_frames, ground_truth_seconds};
 use crate::records::ExperimentOutput;
+use tables::Method;
 use weft_data::Size;
 
 pub use scoring::score_model;
@@ -183,14 +187,18 @@ fn run_scene(ctx: &EvalContext, out: &mut ExperimentOutput, scene: &str, seeds: 
         serde_json::to_string(&recipe.recipe)?,
         rates,
     ));
-    // Skinning has no seeds: one run, no spread.
-    let mut methods: Vec<(String, Vec<AltConvNet>)> = vec![(SKINNING.into(), Vec::new())];
+    // Skinning and the linear filter have no seeds: one run each, no spread.
+    let filter = linear_filter::fit_row(out, scene, &dataset, horizon).context("the linear filter")?;
+    let mut methods: Vec<(String, Method)> = vec![
+        (SKINNING.into(), Method::Skinning),
+        (linear_filter::LINEAR_FILTER.into(), Method::Filter(filter)),
+    ];
     for (variant, models) in &trained.models {
         let nets = models
             .iter()
             .map(|(_, dir)| Ok(weft_nn::altconv::load_model(dir, &device)?.2))
             .collect::<crate::Result<Vec<_>>>()?;
-        methods.push((variant.name().into(), nets));
+        methods.push((variant.name().into(), Method::Nets(nets)));
     }
     let scoring = tables::SceneScoring {
         ctx,

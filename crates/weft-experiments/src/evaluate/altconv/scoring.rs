@@ -9,6 +9,7 @@ use weft_data::{LimbDataset, LimbSequence};
 use weft_nn::altconv::{AltConvNet, score_sequence};
 use weft_nn::graph::NormalizedAdjacency;
 
+use super::linear_filter::LinearFilter;
 use super::{SKINNING, WINDOWS};
 use crate::error::Context;
 use crate::evaluate::context::{EvalContext, Scoring};
@@ -41,15 +42,30 @@ pub(super) fn window(steps: &[Vec<f64>], n: usize) -> (f64, f64) {
     mean_sd(steps[..n].iter().flatten().copied())
 }
 
+/// The per-vertex Euclidean distances between two flat `3V` surfaces (their units).
+pub(super) fn vertex_distances<'a>(a: &'a [f64], b: &'a [f64]) -> impl Iterator<Item = f64> + 'a {
+    a.chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
+}
+
 /// The mean per-vertex distance (mm) between two sets of roll-outs (each sequence's
 /// surfaces flattened `[steps, V, 3]`, metres).
 pub(super) fn mean_distance_mm(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    let d = a.iter().zip(b).flat_map(|(a, b)| {
-        a.chunks_exact(3)
-            .zip(b.chunks_exact(3))
-            .map(|(p, q)| 1e3 * ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
-    });
-    mean_sd(d).0
+    mean_sd(
+        a.iter()
+            .zip(b)
+            .flat_map(|(a, b)| vertex_distances(a, b).map(|d| 1e3 * d)),
+    )
+    .0
+}
+
+/// What predicts a surface: the skinning row, a trained network or the linear filter.
+#[derive(Clone, Copy)]
+pub(super) enum Predictor<'a> {
+    Skinning,
+    Net(&'a AltConvNet),
+    Filter(&'a LinearFilter),
 }
 
 /// The largest per-vertex error over the first `n` steps (mm).
@@ -57,9 +73,9 @@ pub(super) fn peak(steps: &[Vec<f64>], n: usize) -> f64 {
     steps[..n].iter().flatten().copied().fold(0.0, f64::max)
 }
 
-/// Scores `net` (or skinning, when `None`) on `sequences` over `horizon` steps.
+/// Scores `predictor` on `sequences` over `horizon` steps.
 pub(super) fn score(
-    net: Option<&AltConvNet>,
+    predictor: Predictor,
     adj: &NormalizedAdjacency,
     sequences: &[&LimbSequence],
     horizon: usize,
@@ -70,7 +86,11 @@ pub(super) fn score(
     let mut last = None;
     let mut surfaces = Vec::with_capacity(sequences.len());
     for (k, s) in sequences.iter().enumerate() {
-        let e = score_sequence(net, adj, s, horizon)?;
+        let e = match predictor {
+            Predictor::Skinning => score_sequence(None, adj, s, horizon)?,
+            Predictor::Net(net) => score_sequence(Some(net), adj, s, horizon)?,
+            Predictor::Filter(filter) => filter.score_sequence(s, horizon),
+        };
         seconds += e.rollout_seconds;
         for t in 0..horizon {
             single[t].extend(e.single[t].iter().map(|e| 1e3 * e));
@@ -152,7 +172,10 @@ pub fn score_model(scoring: &Scoring) -> crate::Result<ExperimentOutput> {
         data_dir.display(),
         sequences.len()
     ));
-    for (method, model) in [(SKINNING, None), (config.variant.name(), Some(&net))] {
+    for (method, model) in [
+        (SKINNING, Predictor::Skinning),
+        (config.variant.name(), Predictor::Net(&net)),
+    ] {
         let e = score(model, &adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?;
         let timing = Timing {
             seconds_per_frame: Some(e.seconds_per_frame),

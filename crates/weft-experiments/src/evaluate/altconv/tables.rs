@@ -11,7 +11,8 @@ use weft_data::{LimbDataset, LimbSequence};
 use weft_nn::altconv::AltConvNet;
 use weft_nn::graph::NormalizedAdjacency;
 
-use super::scoring::{Errors, mean_distance_mm, peak, percentile, score, window, write_predictions};
+use super::linear_filter::LinearFilter;
+use super::scoring::{Errors, Predictor, mean_distance_mm, peak, percentile, score, window, write_predictions};
 use super::{SKINNING, WINDOWS};
 use crate::error::Context;
 use crate::evaluate::context::EvalContext;
@@ -174,16 +175,36 @@ impl MethodRuns<'_> {
     }
 }
 
+/// A row of the tables: what predicts its surfaces.
+pub(super) enum Method {
+    Skinning,
+    /// The linear filter, fitted and chosen on the training and validation splits.
+    Filter(LinearFilter),
+    /// A network variant's models, one per seed.
+    Nets(Vec<AltConvNet>),
+}
+
+impl Method {
+    /// One predictor per run: the seeds' models, or the one deterministic row.
+    fn predictors(&self) -> Vec<Predictor<'_>> {
+        match self {
+            Method::Skinning => vec![Predictor::Skinning],
+            Method::Filter(f) => vec![Predictor::Filter(f)],
+            Method::Nets(nets) => nets.iter().map(Predictor::Net).collect(),
+        }
+    }
+}
+
 /// A method's last roll-out step on the first test sequence: (method, surface, errors).
 pub(super) type Heat = (String, Vec<f64>, Vec<f64>);
 
-/// Every method (skinning first; its models, one per seed) scored on the known and the
+/// Every method (skinning first; a network's models, one per seed) scored on the known and the
 /// unseen motions: records, per-step plots, the paper's Tables 1 and 2 beside ours, and
 /// the test predictions; returns the heat maps' data.
 pub(super) fn score_splits(
     s: &SceneScoring,
     out: &mut ExperimentOutput,
-    methods: &[(String, Vec<AltConvNet>)],
+    methods: &[(String, Method)],
 ) -> crate::Result<Vec<Heat>> {
     let (scene, horizon) = (s.scene, s.horizon);
     let mut tables_rows: HashMap<&str, Vec<Vec<String>>> = HashMap::new();
@@ -200,21 +221,23 @@ pub(super) fn score_splits(
         }
         // The skinning row's roll-out surfaces (the first method scored).
         let mut skinned: Option<Vec<Vec<f64>>> = None;
-        for (method, nets) in methods {
-            let runs: Vec<Errors> = if nets.is_empty() {
-                vec![score(None, s.adj, &sequences, horizon).with_context(|| format!("scoring {method}"))?]
-            } else {
-                nets.iter()
-                    .map(|n| score(Some(n), s.adj, &sequences, horizon).with_context(|| format!("scoring {method}")))
-                    .collect::<crate::Result<Vec<_>>>()?
-            };
+        for (method, model) in methods {
+            let runs: Vec<Errors> = model
+                .predictors()
+                .into_iter()
+                .map(|p| score(p, s.adj, &sequences, horizon).with_context(|| format!("scoring {method}")))
+                .collect::<crate::Result<Vec<_>>>()?;
             let e = &runs[0];
             let method_runs = MethodRuns {
                 scene,
                 method,
                 split,
                 runs: &runs,
-                seeds: if nets.is_empty() { &[] } else { &s.seeds[..runs.len()] },
+                seeds: match model {
+                    Method::Nets(_) => &s.seeds[..runs.len()],
+                    // Deterministic: one run, no spread, as skinning.
+                    Method::Skinning | Method::Filter(_) => &[],
+                },
                 timing: Timing::new(e.seconds_per_frame, s.gt),
             };
             method_runs.records(out, s, &mut skinned);
