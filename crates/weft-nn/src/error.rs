@@ -16,6 +16,9 @@ pub enum Error {
     /// The physics (L_phys and its gradient) failed.
     #[error(transparent)]
     Sim(#[from] weft_sim::Error),
+    /// A dense or sparse solve failed (a fit's normal equations).
+    #[error(transparent)]
+    Linalg(#[from] weft_linalg::Error),
     /// Writing a mesh file failed.
     #[error(transparent)]
     Mesh(#[from] weft_mesh::Error),

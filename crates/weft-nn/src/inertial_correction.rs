@@ -22,8 +22,8 @@
 //!   displacement and velocity, which a linear map of their codes represents; gravity
 //!   is the bias.
 //! - **Output**: codes of `c_m` in a PCA basis `U_c` of the training residuals.
-//! - **Fit**: linear least squares with a ridge penalty, closed form (a Cholesky solve
-//!   of the normal equations, nalgebra): deterministic, no seed.
+//! - **Fit**: linear least squares with a ridge penalty, closed form
+//!   ([`weft_linalg::NormalEquations`]): deterministic, no seed.
 //!
 //! The model directory holds `config.json` (the scene it is tied to, its `Δt` and mesh,
 //! the settings, the chosen ridge weight, the validation figures of every candidate, the
@@ -32,7 +32,6 @@
 
 use std::path::Path;
 
-use nalgebra::DMatrix;
 use weft_data::{ClothDataset, is_train_frame, is_validation_frame};
 
 use crate::error::{Error, Result};
@@ -210,10 +209,10 @@ impl InertialCorrection {
         };
         let raw = features(&train);
         let (feature_mean, feature_scale) = standardisation(&raw);
-        let f = design_matrix(&raw, &feature_mean, &feature_scale);
-        let t = DMatrix::from_fn(train.len(), corrections.num_components(), |r, c| {
-            corrections.encode(&residuals[r])[c]
-        });
+        let design = design_matrix(&raw, &feature_mean, &feature_scale);
+        let k = corrections.num_components();
+        let targets: Vec<f64> = residuals.iter().flat_map(|c| corrections.encode(c)).collect();
+        let normal = weft_linalg::NormalEquations::new(&design, &targets, train.len(), feature_mean.len() + 1, k)?;
         let mut model = Self {
             meta: Meta {
                 kind: KIND.into(),
@@ -231,7 +230,7 @@ impl InertialCorrection {
             positions,
             corrections,
         };
-        model.choose_ridge(data, &f, &t, &validation)?;
+        model.choose_ridge(data, &normal, &validation)?;
         Ok(model)
     }
 
@@ -240,33 +239,22 @@ impl InertialCorrection {
     fn choose_ridge(
         &mut self,
         data: &ClothDataset,
-        f: &DMatrix<f64>,
-        t: &DMatrix<f64>,
+        normal: &weft_linalg::NormalEquations,
         validation: &[(usize, usize)],
     ) -> Result<()> {
-        let normal = f.transpose() * f;
-        let rhs = f.transpose() * t;
-        let scale = normal.diagonal().mean();
+        let (features, codes) = (normal.features(), normal.outputs());
+        let scale = normal.mean_diagonal(features);
         let mut best: (f64, Option<f64>, Vec<f64>) = (self.validation_mm(data, validation)?, None, Vec::new());
         self.meta.validation = vec![RidgeScore {
             ridge: None,
             one_step_mm: best.0,
         }];
         for &r in &self.meta.settings.ridge.clone() {
-            let mut a = normal.clone();
-            for i in 0..a.nrows() {
-                a[(i, i)] += r * scale;
-            }
-            let w = a.cholesky().ok_or(Error::InvalidParameter {
-                name: "ridge weight",
-                value: r.to_string(),
-                reason: "leaves the normal equations singular",
-            })?;
-            // `W` of the model is `codes × features`: the transpose of the solve's.
-            let solved = w.solve(&rhs).transpose();
-            // nalgebra stores column-major: lay the weights out row by row.
-            self.meta.weights = (0..solved.nrows())
-                .flat_map(|i| solved.row(i).iter().copied().collect::<Vec<_>>())
+            // `features × codes` row-major; the model keeps `codes × features`.
+            let w = normal.solve(features, r * scale)?;
+            self.meta.weights = (0..codes)
+                .flat_map(|c| (0..features).map(move |f| (f, c)))
+                .map(|(f, c)| w[f * codes + c])
                 .collect();
             self.meta.ridge = Some(r);
             let mm = self.validation_mm(data, validation)?;
@@ -453,12 +441,17 @@ fn standardisation(raw: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
     (mean, scale)
 }
 
-/// The standardised features with a bias column.
-fn design_matrix(raw: &[Vec<f64>], mean: &[f64], scale: &[f64]) -> DMatrix<f64> {
-    let k = mean.len();
-    DMatrix::from_fn(raw.len(), k + 1, |r, c| {
-        if c == k { 1.0 } else { (raw[r][c] - mean[c]) / scale[c] }
-    })
+/// The standardised features with a bias column, row-major.
+fn design_matrix(raw: &[Vec<f64>], mean: &[f64], scale: &[f64]) -> Vec<f64> {
+    raw.iter()
+        .flat_map(|r| {
+            r.iter()
+                .zip(mean)
+                .zip(scale)
+                .map(|((v, m), s)| (v - m) / s)
+                .chain(std::iter::once(1.0))
+        })
+        .collect()
 }
 
 impl weft_sim::guard::Surrogate for InertialCorrection {
