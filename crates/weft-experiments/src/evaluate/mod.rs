@@ -13,6 +13,7 @@ mod concurrent_env;
 pub mod context;
 pub mod drape;
 pub mod embed;
+pub mod guarded;
 pub mod nnwarp;
 pub mod proj;
 pub mod sim;
@@ -31,7 +32,7 @@ use weft_data::Size;
 use weft_data::files::write_json;
 
 /// Experiments `evaluate` runs, in order.
-pub const EXPERIMENTS: [&str; 6] = ["sim", "proj", "embed", "nnwarp", "altconv", "drape"];
+pub const EXPERIMENTS: [&str; 7] = ["sim", "proj", "embed", "nnwarp", "altconv", "drape", "guarded"];
 
 /// How an evaluation runs: the command line's `cargo xtask evaluate` options.
 #[derive(Debug, Clone)]
@@ -154,6 +155,7 @@ pub fn run(args: &EvaluateOptions) -> crate::Result<()> {
             "nnwarp" => nnwarp::run(&ctx)?,
             "altconv" => altconv::run(&ctx)?,
             "drape" => drape::run(&ctx)?,
+            "guarded" => guarded::run(&ctx)?,
             other => unreachable!("experiment {other} listed but not dispatched"),
         };
         // The experiment may have set the seconds of work it read back from earlier runs.

@@ -1,0 +1,349 @@
+//! Experiment `guarded`: learned proposals checked by the step's physics (issue 73,
+//! docs/GUARD.md), on `sheet-ms`.
+//!
+//! 1. The one-step surrogate: weft-nn's inertial correction is fitted on the `sheet-ms`
+//!    dataset's training frames (the embed experiment's dataset, shared), its ridge weight
+//!    chosen on the validation frames; its one-step error on the test frames is reported
+//!    beside the inertial predictor's, from the true history.
+//! 2. A held-out sequence: the built-in `sheet-ms` scene (its own seed, not one of the
+//!    dataset's) simulated by today's solver, the ground truth, timed per frame.
+//! 3. The estimate's honesty on it: from the truth's history, each surrogate's proposal,
+//!    its Newton-step estimate and certified bound against the true distance to the
+//!    truth's frame (Spearman's rank correlation; bound violations where certified).
+//! 4. The dial: each surrogate stepped under the guard at the truth's tolerance, at
+//!    τ = 0.1, 0.3, 1 and 3 mm, and unguarded (every proposal passed on) — M_rms against
+//!    the ground truth, frames accepted, Newton iterations and wall time per frame beside
+//!    the ground truth's. Each is a point on the cloth family's Pareto plot.
+
+use std::time::Instant;
+
+use weft_data::ClothDataset;
+use weft_nn::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
+use weft_sim::guard::{Guard, GuardSettings, InertialPredictor, Surrogate};
+use weft_sim::{ClothScene, ClothSimulation};
+
+use super::context::EvalContext;
+use crate::error::Context;
+use crate::records::{Curve, ExperimentOutput, Table, Timing};
+use weft_data::Size;
+
+const SCENE: &str = "sheet-ms";
+
+/// The dial's tolerances (mm) and their names in the records.
+const TOLERANCES: [(f64, &str); 4] = [
+    (0.1, "tau-100um"),
+    (0.3, "tau-300um"),
+    (1.0, "tau-1000um"),
+    (3.0, "tau-3000um"),
+];
+
+/// A guard setting of the dial: its name in the records and the settings (`None`:
+/// unguarded, every proposal passed on).
+fn dial() -> crate::Result<Vec<(String, Option<GuardSettings>)>> {
+    let mut out = vec![("truth-tolerance".to_string(), Some(GuardSettings::ground_truth()))];
+    for (tau, name) in TOLERANCES {
+        out.push((name.to_string(), Some(GuardSettings::millimetres(tau)?)));
+    }
+    out.push(("unguarded".into(), None));
+    Ok(out)
+}
+
+/// Spearman's rank correlation of two equally long samples (ties ranked by order).
+pub fn rank_correlation(a: &[f64], b: &[f64]) -> f64 {
+    let ranks = |v: &[f64]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
+        let mut r = vec![0.0; v.len()];
+        for (rank, i) in idx.into_iter().enumerate() {
+            r[i] = rank as f64;
+        }
+        r
+    };
+    let (ra, rb) = (ranks(a), ranks(b));
+    let n = a.len() as f64;
+    let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
+    1.0 - 6.0 * d2 / (n * (n * n - 1.0)).max(f64::MIN_POSITIVE)
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// The surrogates of the run, fresh for each roll-out.
+fn surrogates(model: &InertialCorrection, dofs: usize) -> Vec<(&'static str, Box<dyn Surrogate>)> {
+    vec![
+        ("inertial", Box::new(InertialPredictor::new(dofs))),
+        ("inertial-correction", Box::new(model.clone())),
+    ]
+}
+
+pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
+    let mut out = ExperimentOutput::new("guarded", ctx.size);
+    let data_dir = ctx.out.join("embed").join("data").join(SCENE);
+    out.failures
+        .extend(super::context::generate_dataset(ctx, SCENE, &data_dir).with_context(|| format!("dataset {SCENE}"))?);
+    let data = ClothDataset::load(&data_dir)?;
+    let clock = Instant::now();
+    let model = InertialCorrection::fit(&data, &InertialCorrectionSettings::default())?;
+    let fit_seconds = clock.elapsed().as_secs_f64();
+    model.save(&ctx.out.join("guarded").join("models").join(SCENE))?;
+    let mut inertial = model.clone();
+    inertial.disable_correction();
+    for (method, m) in [("inertial", &inertial), ("inertial-correction", &model)] {
+        let errors = m.one_step_errors(&data, "test")?;
+        out.record(SCENE, method, "one-step-m-rms", rms(&errors), "mm", Timing::default());
+        out.split("test");
+    }
+    out.notes.push(format!(
+        "guarded: the inertial correction fitted on {} ({} sequences) in {fit_seconds:.1} s; ridge {:?} chosen on \
+         validation from {:?} (one-step M_rms, mm)",
+        data.name,
+        data.sequences.len(),
+        model.ridge(),
+        model
+            .validation_scores()
+            .iter()
+            .map(|s| (s.ridge, (s.one_step_mm * 1e3).round() / 1e3))
+            .collect::<Vec<_>>()
+    ));
+    let scene = held_out_scene(ctx.size)?;
+    let truth = ground_truth(ctx, &scene)?;
+    out.notes.push(format!(
+        "guarded: held-out roll-out of the built-in {SCENE} ({} vertices, {} frames, Δt = {} s); ground truth {:.3} s \
+         and {:.2} Newton iterations per frame",
+        truth.frames[0].len() / 3,
+        truth.frames.len() - 1,
+        scene.dt,
+        truth.seconds_per_frame,
+        truth.iterations_per_frame
+    ));
+    for (name, surrogate) in surrogates(&model, truth.frames[0].len()) {
+        estimate_honesty(&mut out, &scene, &truth, name, surrogate)?;
+    }
+    let mut rows = Vec::new();
+    for (setting, settings) in dial()? {
+        for (name, surrogate) in surrogates(&model, truth.frames[0].len()) {
+            let method = format!("{name}-{setting}");
+            rows.push(guarded_rollout(&mut out, &scene, &truth, &method, surrogate, settings)?);
+        }
+    }
+    out.tables.push(Table {
+        title: format!("Guarded roll-outs of {SCENE}"),
+        caption: format!(
+            "Each surrogate stepped under the guard (docs/GUARD.md) on the held-out sequence; M_rms against today's \
+             solver at its own tolerance (the ground truth, {:.3} s per frame), the share of frames passed on \
+             without Newton, Newton iterations per frame and the wall time per frame split into proposal, guard \
+             and correction.",
+            truth.seconds_per_frame
+        ),
+        header: [
+            "method",
+            "M_rms (mm)",
+            "worst frame (mm)",
+            "accepted",
+            "Newton / frame",
+            "s / frame (proposal + guard + correction)",
+            "speed-up",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    });
+    Ok(out)
+}
+
+/// The built-in scene of the held-out roll-out, at the run's size.
+fn held_out_scene(size: Size) -> crate::Result<ClothScene> {
+    let mut scene = ClothScene::builtin(SCENE, size == Size::Quick)?;
+    if size != Size::Quick {
+        // 60 frames cover the wrinkling start, the costliest regime of the sheet
+        // (docs/DATASETS.md), at a run time of tens of minutes for the whole dial.
+        scene.frames = scene.frames.min(60);
+    }
+    Ok(scene)
+}
+
+/// Today's solver's frames of the held-out scene, rest state first, with its cost.
+struct GroundTruth {
+    frames: Vec<Vec<f64>>,
+    seconds_per_frame: f64,
+    iterations_per_frame: f64,
+}
+
+fn ground_truth(ctx: &EvalContext, scene: &ClothScene) -> crate::Result<GroundTruth> {
+    let mut sim = ClothSimulation::new(scene.clone(), None)?;
+    let mut frames = vec![sim.integrator().positions().to_vec()];
+    let bar = weft_data::files::progress_bar(ctx.quiet, scene.frames as u64, "guarded: ground truth", "frames")?;
+    let (clock, mut iterations) = (Instant::now(), 0);
+    for _ in 0..scene.frames {
+        let f = sim.step()?;
+        iterations += f.report.newton.iterations;
+        frames.push(f.positions);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let n = scene.frames.max(1) as f64;
+    Ok(GroundTruth {
+        frames,
+        seconds_per_frame: clock.elapsed().as_secs_f64() / n,
+        iterations_per_frame: iterations as f64 / n,
+    })
+}
+
+/// One step from the truth's history on every frame: the proposal's Newton-step estimate
+/// and certified bound against its true distance to the truth's frame (docs/GUARD.md).
+fn estimate_honesty(
+    out: &mut ExperimentOutput,
+    scene: &ClothScene,
+    truth: &GroundTruth,
+    name: &str,
+    surrogate: Box<dyn Surrogate>,
+) -> crate::Result<()> {
+    let mut sim = ClothSimulation::new(scene.clone(), None)?;
+    let mut guard = Guard::new(sim.integrator(), &scene.name, surrogate, GuardSettings::ground_truth())?;
+    let (mut estimates, mut distances, mut errors) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut certified, mut violations) = (0usize, 0usize);
+    for m in 1..truth.frames.len() {
+        let previous = &truth.frames[m.saturating_sub(2)];
+        sim.integrator_mut().set_state(&truth.frames[m - 1], previous)?;
+        let prescribed = sim.prescribed_at(m);
+        let integrator = sim.integrator();
+        let input = weft_sim::guard::StepInput {
+            frame: m,
+            dt: integrator.dt(),
+            current: integrator.positions(),
+            previous: integrator.previous_positions(),
+            prescribed: &prescribed,
+        };
+        let mut x = guard
+            .surrogate_mut()
+            .propose(&input)
+            .map_err(|e| crate::Error::Failed(format!("guarded: {name} at frame {m}: {e}")))?;
+        integrator.constrain(&prescribed, &mut x);
+        let e = guard.estimate(integrator, &x)?;
+        let at_truth = guard.estimate(integrator, &truth.frames[m])?;
+        let d = guard.mass_norm(&x, &truth.frames[m]);
+        estimates.push(e.distance);
+        distances.push(d);
+        errors.push(
+            1e3 * (x
+                .iter()
+                .zip(&truth.frames[m])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / x.len() as f64)
+                .sqrt(),
+        );
+        if let (true, true) = (e.certified, at_truth.certified) {
+            certified += 1;
+            // The truth is the minimiser only to its tolerance: its own bound covers that.
+            let bound = e.residual_m_inv / e.modulus + at_truth.residual_m_inv / at_truth.modulus;
+            violations += usize::from(d > bound);
+        }
+    }
+    let frames = distances.len();
+    let split = "held-out";
+    for (metric, value, unit) in [
+        ("one-step-m-rms", rms(&errors), "mm"),
+        (
+            "estimate-rank-correlation",
+            rank_correlation(&estimates, &distances),
+            "1",
+        ),
+        (
+            "estimate-ratio-median",
+            median(
+                estimates
+                    .iter()
+                    .zip(&distances)
+                    .map(|(e, d)| e / d.max(f64::MIN_POSITIVE)),
+            ),
+            "1",
+        ),
+        ("certified-share", certified as f64 / frames.max(1) as f64, "1"),
+        ("bound-violations", violations as f64, "count"),
+    ] {
+        out.record(SCENE, name, metric, value, unit, Timing::default());
+        out.split(split);
+    }
+    Ok(())
+}
+
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// One guarded (or unguarded) roll-out of the held-out scene; records its figures and
+/// returns its table row.
+fn guarded_rollout(
+    out: &mut ExperimentOutput,
+    scene: &ClothScene,
+    truth: &GroundTruth,
+    method: &str,
+    surrogate: Box<dyn Surrogate>,
+    settings: Option<GuardSettings>,
+) -> crate::Result<Vec<String>> {
+    let mut sim = ClothSimulation::new(scene.clone(), None)?;
+    // Unguarded: a tolerance no estimate exceeds, so every finite proposal passes on.
+    let s = match settings {
+        Some(s) => s,
+        None => GuardSettings::millimetres(f64::MAX)?,
+    };
+    let mut guard = Guard::new(sim.integrator(), &scene.name, surrogate, s)?;
+    let (mut errors, mut split) = (Vec::new(), [0.0f64; 3]);
+    for reference in &truth.frames[1..] {
+        let f = sim.step_guarded(&mut guard, Some(reference))?;
+        let r = f.report;
+        errors.push(r.error.map_or(f64::NAN, |e| e.m_rms_mm));
+        split[0] += r.seconds.proposal;
+        split[1] += r.seconds.guard;
+        split[2] += r.seconds.correction;
+    }
+    let t = *guard.totals();
+    let n = t.frames.max(1) as f64;
+    let seconds = split.iter().sum::<f64>() / n;
+    let m_rms = rms(&errors);
+    let worst = errors.iter().fold(0.0f64, |a, b| a.max(*b));
+    out.record(
+        SCENE,
+        method,
+        "m-rms",
+        m_rms,
+        "mm",
+        Timing::new(seconds, truth.seconds_per_frame),
+    );
+    for (metric, value, unit) in [
+        ("max-frame-m-rms", worst, "mm"),
+        ("accepted-share", t.accepted as f64 / n, "1"),
+        ("newton-iterations-per-frame", t.newton_iterations as f64 / n, "count"),
+        ("guard-seconds-per-frame", split[1] / n, "s"),
+    ] {
+        out.record(SCENE, method, metric, value, unit, Timing::default());
+    }
+    if method.ends_with("unguarded") || method.ends_with("tau-1000um") {
+        out.curves.push(Curve {
+            scene: SCENE.into(),
+            method: method.into(),
+            frames: (1..=errors.len()).map(|f| f as f64).collect(),
+            error_mm: errors.clone(),
+            error_mm_sd: Vec::new(),
+        });
+    }
+    Ok(vec![
+        method.to_string(),
+        format!("{m_rms:.3}"),
+        format!("{worst:.3}"),
+        format!("{}/{}", t.accepted, t.frames),
+        format!("{:.2}", t.newton_iterations as f64 / n),
+        format!(
+            "{:.4} ({:.4} + {:.4} + {:.4})",
+            seconds,
+            split[0] / n,
+            split[1] / n,
+            split[2] / n
+        ),
+        format!("{:.1}×", truth.seconds_per_frame / seconds.max(f64::MIN_POSITIVE)),
+    ])
+}
