@@ -9,7 +9,6 @@
 //! taken over the mean of the windows given; [`calibrate_ephys`] puts `λ_ephys ‖∇L_ephys‖`
 //! at a stated ratio of the largest weighted gradient among the other terms.
 
-
 use super::training::{EmbedData, EmbedModel, FrameRef, LossWeights};
 use crate::error::{Error, Result};
 

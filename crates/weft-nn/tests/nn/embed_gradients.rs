@@ -6,8 +6,8 @@
 use candle_core::{Tensor, Var};
 use weft_nn::Kernels;
 use weft_nn::embed::{
-    EmbedData, EmbedModel, EmbedTrainingSettings, FrameRef, calibrate_ephys, decoder_gradient_norms,
-    decoder_gradients, decoder_parameters,
+    EmbedData, EmbedModel, EmbedTrainingSettings, FrameRef, calibrate_ephys, decoder_gradient_norms, decoder_gradients,
+    decoder_parameters,
 };
 use weft_testkit::TestRng;
 

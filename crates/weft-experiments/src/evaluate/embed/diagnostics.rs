@@ -55,7 +55,12 @@ fn spread(windows: &[FrameRef], limit: Option<usize>) -> Vec<FrameRef> {
 /// starting weights and at stage 1's `best` and `last` checkpoints, over `windows` of the
 /// training windows (all without a limit), each with λ_ephys calibrated to `ratio`
 /// ([`weft_nn::embed::calibrate_ephys`]).
-pub fn gradient_log(model_dir: &Path, data_dir: &Path, windows: Option<usize>, ratio: f64) -> crate::Result<GradientLog> {
+pub fn gradient_log(
+    model_dir: &Path,
+    data_dir: &Path,
+    windows: Option<usize>,
+    ratio: f64,
+) -> crate::Result<GradientLog> {
     let dataset = ClothDataset::load(data_dir)?;
     let normalization = weft_nn::checkpoint::read_json(&model_dir.join("normalization.json"))?;
     let data = EmbedData::with_normalization(dataset, normalization)?;
@@ -98,10 +103,9 @@ pub fn near_grasp(data: &EmbedData, fraction: f64) -> crate::Result<(f64, Vec<bo
         )));
     }
     let rest = data.dataset.rest.positions();
-    let (lo, hi) = rest.iter().fold(
-        (rest[0], rest[0]),
-        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-    );
+    let (lo, hi) = rest
+        .iter()
+        .fold((rest[0], rest[0]), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
     let radius = fraction * (hi - lo).norm();
     let near = rest
         .iter()
@@ -257,7 +261,10 @@ pub fn mphys_floor_of(data: &EmbedData, ranks: &[usize], near_fraction: f64) -> 
     Ok(FloorReport {
         scene: data.dataset.name.clone(),
         training_frames: training.len(),
-        scored_frames: windows(&data.test_frames).iter().map(|w| w.len().saturating_sub(2)).sum(),
+        scored_frames: windows(&data.test_frames)
+            .iter()
+            .map(|w| w.len().saturating_sub(2))
+            .sum(),
         near_fraction,
         near_radius_m: radius,
         near_vertices,
@@ -308,8 +315,17 @@ mod tests {
             }
         }
         weft_testkit::assert_close!(two.m_phys, truth.m_phys, rtol = 1e-6, atol = 0.0);
-        assert_eq!(eight, &FloorRow { rank: Some(8), ..two.clone() });
-        assert!((one.m_phys - truth.m_phys).abs() > 0.1 * truth.m_phys, "{one:?} vs {truth:?}");
+        assert_eq!(
+            eight,
+            &FloorRow {
+                rank: Some(8),
+                ..two.clone()
+            }
+        );
+        assert!(
+            (one.m_phys - truth.m_phys).abs() > 0.1 * truth.m_phys,
+            "{one:?} vs {truth:?}"
+        );
     }
 
     /// A rank-0 PCA projects every frame onto the training frames' mean: the predecessors
