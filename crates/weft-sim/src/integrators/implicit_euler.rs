@@ -307,7 +307,7 @@ impl ImplicitEuler {
     /// `"inertia"`, then each potential term's gradient under the term's name
     /// ([`Energy::name`]). [`ImplicitEuler::m_phys_parts`] squares their sums; this keeps
     /// them apart so a residual can be split by energy term and by region of the mesh
-    /// (docs/EMBEDDING.md, "The M_phys floor").
+    /// (docs/EMBEDDING.md, "Gradient norms and the M_phys floor").
     pub fn l_phys_forces(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Vec<(&'static str, Vec<f64>)>> {
         let inertia = self.history_inertia(prev2, prev1, p)?;
         let all = crate::energy::with_extra(&self.terms, &[&inertia]);
