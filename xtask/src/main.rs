@@ -10,6 +10,7 @@ mod out;
 mod acap;
 mod altconv_diagnostics;
 mod dataset;
+mod embed_diagnostics;
 mod evaluate;
 mod mesh;
 mod project;
@@ -71,6 +72,9 @@ enum Command {
     Score(score::ScoreArgs),
     /// Per roll-out step and layer of a trained Alt-ConvLSTM-family model: gate means and shut shares, |C|, |Y|, gradient RMS.
     AltconvDiagnostics(altconv_diagnostics::AltconvDiagnosticsArgs),
+    /// PB-loss diagnostics of the embedding (issue 71): each loss term's gradient norm on the decoder with λ_ephys calibrated from them, and the M_phys floor of PCA projections.
+    #[command(subcommand)]
+    EmbedDiagnostics(embed_diagnostics::EmbedDiagnosticsCommand),
     /// Run a volumetric scene as pre-factorised linear FEM corrected by a trained NNWarp network (VTK per frame).
     Warp(warp::WarpArgs),
 }
@@ -95,6 +99,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(cmd) => train::run(cmd),
         Command::Score(args) => score::run(args),
         Command::AltconvDiagnostics(args) => altconv_diagnostics::run(args),
+        Command::EmbedDiagnostics(cmd) => embed_diagnostics::run(cmd),
         Command::Warp(args) => warp::run(args),
         Command::CheckReport(args) => evaluate::check(args),
         Command::Stability(args) => stability::run(args),

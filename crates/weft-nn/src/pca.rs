@@ -145,6 +145,17 @@ impl PositionPca {
         &self.variances
     }
 
+    /// The PCA of the leading `k` components (all of them when `k` is larger): what
+    /// [`PositionPca::fit`] with `k` returns on the same frames, without a second fit.
+    pub fn truncated(&self, k: usize) -> Self {
+        let k = k.min(self.components.len());
+        Self {
+            mean: self.mean.clone(),
+            components: self.components[..k].to_vec(),
+            variances: self.variances[..k].to_vec(),
+        }
+    }
+
     /// The code of frame `x`: its coordinates along the directions.
     pub fn encode(&self, x: &[f64]) -> Vec<f64> {
         self.components
@@ -206,5 +217,13 @@ mod tests {
             assert!(y.iter().zip(x).all(|(a, b)| (a - b).abs() < 1e-12));
         }
         assert!(PositionPca::fit(&[], 2).is_err());
+        // Truncating the full fit is the fit of fewer components.
+        let two = full.truncated(2);
+        assert_eq!(two.num_components(), 2);
+        assert_eq!(two.variances(), pca.variances());
+        for x in &frames {
+            assert_eq!(two.decode(&two.encode(x)), pca.decode(&pca.encode(x)));
+        }
+        assert_eq!(full.truncated(99).num_components(), 3);
     }
 }

@@ -4,6 +4,7 @@
 mod acap;
 mod dataset;
 mod diagnostics;
+mod embed_diagnostics;
 mod newcomer;
 mod pipes;
 mod report;

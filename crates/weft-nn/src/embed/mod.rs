@@ -7,16 +7,20 @@
 //!   hand-written backward passes (the model's default [`crate::Kernels`]);
 //! - `training`: the three training stages (§VI-A) on a cloth dataset ([`EmbedData`],
 //!   [`EmbedModel`], [`train_model`]);
-//! - `runtime`: the latent roll-out simulation (§V-B, [`LatentRollout`]).
+//! - `runtime`: the latent roll-out simulation (§V-B, [`LatentRollout`]);
+//! - `gradients`: each loss term's gradient norm on the decoder and λ_ephys calibrated
+//!   from them ([`decoder_gradient_norms`], [`calibrate_ephys`]; issue 71).
 //!
 //! Everything public is re-exported here: `weft_nn::embed::X` is the one path of every
 //! item; the files are how the code is read, not part of the API.
 
 mod fused;
+mod gradients;
 mod model;
 mod runtime;
 mod training;
 
+pub use gradients::*;
 pub use model::*;
 pub use runtime::*;
 pub use training::*;

@@ -645,20 +645,39 @@ impl EmbedModel {
         ephys: f64,
         frozen: Option<&FrozenAutoencoder>,
     ) -> Result<(Tensor, LossTerms)> {
-        let device = self.autoencoder_params.device();
         let w = LossWeights {
             ephys,
             ..self.config.weights
         };
+        let (total, terms, _) = self.loss_graph(data, batch, stage, w, frozen)?;
+        Ok((total, terms))
+    }
+
+    /// The losses of `stage` on `batch` under the weights `w`: the weighted total as a
+    /// graph, the terms' values, and each term evaluated (unweighted, as a graph of its
+    /// own) — [`super::decoder_gradient_norms`] differentiates them one at a time. A term
+    /// whose weight is 0 is left out of the total, and `L_ephys` / `L_mphys` are not
+    /// evaluated at all (the `no-pb` baseline never calls `L_phys`).
+    pub(super) fn loss_graph(
+        &self,
+        data: &EmbedData,
+        batch: &[FrameRef],
+        stage: u8,
+        w: LossWeights,
+        frozen: Option<&FrozenAutoencoder>,
+    ) -> Result<(Tensor, LossTerms, Vec<(&'static str, Tensor)>)> {
+        let device = self.autoencoder_params.device();
         let (b1, b2) = (predecessors(batch, 1), predecessors(batch, 2));
         let scalar = |t: &Tensor| -> Result<f64> { Ok(t.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?) };
         let mut terms = LossTerms::default();
         let mut total = Tensor::zeros((), candle_core::DType::F32, device)?;
-        let mut add = |t: Tensor, weight: f64, slot: &mut f64| -> Result<()> {
+        let mut graphs = Vec::new();
+        let mut add = |name: &'static str, t: Tensor, weight: f64, slot: &mut f64| -> Result<()> {
             *slot = scalar(&t)?;
             if weight != 0.0 {
-                total = (&total + (t * weight)?)?;
+                total = (&total + (&t * weight)?)?;
             }
+            graphs.push((name, t));
             Ok(())
         };
         let lphys = data.lphys_op();
@@ -679,7 +698,7 @@ impl EmbedModel {
                 let q = data.control_batch(batch, device)?;
                 let predicted = self.simulator.step(z2, z1, &q)?;
                 let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
-                add(sim, w.sim, &mut terms.sim)?;
+                add("sim", sim, w.sim, &mut terms.sim)?;
                 ((&z * 0.5)? + (predicted * 0.5)?)?
             } else {
                 z.clone()
@@ -693,16 +712,16 @@ impl EmbedModel {
                 _ => (self.autoencoder.decode(&z_used)?, None),
             };
             let recon = (&y - &x)?.sqr()?.sum((1, 2))?.mean_all()?;
-            add(recon, w.recon, &mut terms.recon)?;
+            add("recon", recon, w.recon, &mut terms.recon)?;
             let p = data.decoder_op(batch).apply(&y)?;
             let truth = data.position_batch(batch, device)?;
             let vert = (&p - &truth)?.sqr()?.sum((1, 2))?.mean_all()?;
-            add(vert, w.vert, &mut terms.vert)?;
+            add("vert", vert, w.vert, &mut terms.vert)?;
             if let Some((y1, y2)) = decoded {
                 let p1 = data.decoder_op(&b1).apply(&y1)?;
                 let p2 = data.decoder_op(&b2).apply(&y2)?;
                 let ephys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
-                add(ephys, w.ephys, &mut terms.ephys)?;
+                add("ephys", ephys, w.ephys, &mut terms.ephys)?;
             }
         } else {
             // Stage 2: the autoencoder is frozen (its codes are detached).
@@ -716,7 +735,7 @@ impl EmbedModel {
             let q = data.control_batch(batch, device)?;
             let predicted = self.simulator.step(&z2, &z1, &q)?;
             let sim = (&predicted - &z)?.sqr()?.sum(1)?.mean_all()?;
-            add(sim, w.sim, &mut terms.sim)?;
+            add("sim", sim, w.sim, &mut terms.sim)?;
             if w.mphys != 0.0 {
                 let p = self.positions(data, batch, &predicted)?;
                 // The predecessors' positions carry no gradient to the simulator.
@@ -728,11 +747,11 @@ impl EmbedModel {
                 };
                 let (p1, p2) = (decoded(&b1, &z1)?, decoded(&b2, &z2)?);
                 let mphys = (lphys.apply(&p2, &p1, &p)?.mean_all()? * phys_scale)?;
-                add(mphys, w.mphys, &mut terms.mphys)?;
+                add("mphys", mphys, w.mphys, &mut terms.mphys)?;
             }
         }
         terms.total = scalar(&total)?;
-        Ok((total, terms))
+        Ok((total, terms, graphs))
     }
 }
 
@@ -761,7 +780,7 @@ fn predecessors(batch: &[FrameRef], k: usize) -> Vec<FrameRef> {
 /// in `L_mphys`). Stage 2 trains the latent simulator only, so these are constants of the
 /// stage; recomputing them per batch was most of a stage-2 step.
 #[derive(Debug)]
-struct FrozenAutoencoder {
+pub(super) struct FrozenAutoencoder {
     codes: std::collections::HashMap<(usize, usize), Tensor>,
     positions: std::collections::HashMap<(usize, usize), Tensor>,
 }

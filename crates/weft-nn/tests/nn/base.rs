@@ -462,13 +462,13 @@ fn cloth_potential_op_is_the_elastic_terms_and_its_gradient_matches_finite_diffe
 }
 
 /// The quick `sheet-ms` simulated for `frames` frames, as an in-memory dataset.
-fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
+pub(crate) fn quick_sheet_dataset(frames: usize) -> weft_data::ClothDataset {
     weft_data::ClothDataset::simulate("sheet-ms", ClothScene::builtin("sheet-ms", true).unwrap(), frames).unwrap()
 }
 
 /// The embedding's default configuration with a one-convolution, 8-wide autoencoder: the
 /// size the quick sheet's tests train and differentiate.
-fn small_embed_config() -> weft_nn::embed::EmbedTrainingSettings {
+pub(crate) fn small_embed_config() -> weft_nn::embed::EmbedTrainingSettings {
     weft_nn::embed::EmbedTrainingSettings {
         autoencoder: AutoencoderSettings {
             conv_layers: 1,

@@ -5,11 +5,14 @@
 //!   embedding's and NNWarp's training;
 //! - `altconv`: Alt-ConvLSTM and its ConvLSTM baselines — the fused kernels and the
 //!   runtime against the autograd reference;
+//! - `embed_gradients`: the embedding's per-term decoder gradients against finite
+//!   differences and autograd, and λ_ephys calibrated from their norms (issue 71);
 //! - `drape`: Geng et al.'s pose → cloth training with the projection layers;
 //! - `projection_ops`: the projection layers as candle ops against finite differences.
 
 mod altconv;
 mod base;
 mod drape;
+mod embed_gradients;
 mod inertial_correction;
 mod projection_ops;

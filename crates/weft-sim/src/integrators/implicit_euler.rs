@@ -302,6 +302,28 @@ impl ImplicitEuler {
         })
     }
 
+    /// The forces `∂L_phys/∂p_m` sums, each on its own over every DOF (grasped ones
+    /// included; N): the inertial force `M(p_m − 2p_{m−1} + p_{m−2})/Δt²` first, named
+    /// `"inertia"`, then each potential term's gradient under the term's name
+    /// ([`Energy::name`]). [`ImplicitEuler::m_phys_parts`] squares their sums; this keeps
+    /// them apart so a residual can be split by energy term and by region of the mesh
+    /// (docs/EMBEDDING.md, "Gradient norms and the M_phys floor").
+    pub fn l_phys_forces(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Vec<(&'static str, Vec<f64>)>> {
+        let inertia = self.history_inertia(prev2, prev1, p)?;
+        let all = crate::energy::with_extra(&self.terms, &[&inertia]);
+        // `with_extra` puts the extra terms last; the inertia is reported first.
+        let mut out: Vec<(&'static str, Vec<f64>)> = all
+            .iter()
+            .map(|t| {
+                let mut g = vec![0.0; p.len()];
+                t.add_gradient(p, &mut g);
+                (t.name(), g)
+            })
+            .collect();
+        out.rotate_right(1);
+        Ok(out)
+    }
+
     fn history_inertia(&self, prev2: &[f64], prev1: &[f64], p: &[f64]) -> Result<Inertia> {
         let n = self.current.len();
         for (what, v) in [("p_{m-2}", prev2), ("p_{m-1}", prev1), ("p_m", p)] {

@@ -721,6 +721,20 @@ fn l_phys_gradient_is_exact_and_vanishes_on_simulated_frames() {
     assert_eq!(still.inertial, 0.0);
     weft_testkit::assert_close!(still.total, still.potential, rtol = 1e-12, atol = 0.0);
     assert!(ie.m_phys_parts(p2, &p1[1..], p).is_err());
+    // The forces one by one: the inertia first (M(p − 2p₁ + p₂)/Δt² by hand), then every
+    // potential term by name; together they are ∂L_phys/∂p_m.
+    let forces = ie.l_phys_forces(p2, p1, p).unwrap();
+    let names: Vec<&str> = forces.iter().map(|(n, _)| *n).collect();
+    let mut expected = vec!["inertia"];
+    expected.extend(ie.terms().iter().map(|t| t.name()));
+    assert_eq!(names, expected);
+    for i in 0..p.len() {
+        let by_hand = ie.masses()[i / 3] * (p[i] - 2.0 * p1[i] + p2[i]) / dt2;
+        weft_testkit::assert_close!(forces[0].1[i], by_hand, rtol = 1e-12, atol = 1e-9);
+        let sum: f64 = forces.iter().map(|(_, f)| f[i]).sum();
+        weft_testkit::assert_close!(sum, g[i], rtol = 1e-9, atol = 1e-9);
+    }
+    assert!(ie.l_phys_forces(p2, p1, &p[1..]).is_err());
 }
 
 #[test]

@@ -9,11 +9,13 @@
 //! One file per phase: `data` the scenes' datasets and frame sets, `studies` what is
 //! chosen on the validation windows (the first scene's schedule, budgets and stage-3
 //! studies, each scene's λ_ephys), `scoring` training and scoring one model and the
-//! metrics, `tables` the paper's tables, the plots and the records. This module holds the
+//! metrics, `tables` the paper's tables, the plots and the records, `diagnostics` issue 71's
+//! gradient norms and M_phys floor (`cargo xtask embed-diagnostics`). This module holds the
 //! experiment's entry, its types and the loop over the scenes. The networks and their
 //! training are weft-nn's (`weft_nn::embed`), not this module's.
 
 mod data;
+mod diagnostics;
 mod scoring;
 mod studies;
 mod tables;
@@ -28,6 +30,10 @@ use super::context::EvalContext;
 use crate::records::{Curve, ExperimentOutput, Scatter};
 use weft_data::Size;
 
+pub use diagnostics::{
+    CheckpointNorms, FloorReport, FloorRow, GradientLog, RegionResidual, gradient_log, mphys_floor, mphys_floor_of,
+    near_grasp, projected_residual,
+};
 pub use scoring::score_model;
 use studies::{budget_candidates, fine_tune_candidates, schedule_candidates, stage_3_budget_candidates};
 
