@@ -354,17 +354,18 @@ mod tests {
     /// (`docs/results/experiments/*.json`) is the committed one: `results.json` byte for
     /// byte and `tables.md` but for the assembly time in its first paragraph. Restructuring
     /// the experiments, the records or the report cannot change a published figure without
-    /// failing here.
+    /// failing here. (An experiment not published yet is left out, as the published report
+    /// leaves it out; `check-report --published` lists it.)
     #[test]
     fn the_published_report_rebuilds_from_its_experiment_outputs_unchanged() {
         let published = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/results");
         let outputs: Vec<crate::records::ExperimentOutput> = EXPERIMENTS
             .iter()
-            .map(|e| {
-                let bytes = std::fs::read(published.join("experiments").join(format!("{e}.json"))).unwrap();
-                serde_json::from_slice(&bytes).unwrap()
-            })
+            .map(|e| published.join("experiments").join(format!("{e}.json")))
+            .filter(|p| p.exists())
+            .map(|p| serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap())
             .collect();
+        assert!(outputs.len() >= 6, "the six papers' experiments are published");
         let dir = std::env::temp_dir().join(format!("weft-rebuild-published-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
