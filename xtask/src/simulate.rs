@@ -50,6 +50,38 @@ pub struct SimulateArgs {
     /// one factorisation and a few solves); docs/CLOTH.md, "Inexact steps"
     #[arg(long)]
     pub newton_factorizations: Option<usize>,
+    /// Cloth scenes only: a surrogate model directory (`cargo xtask train
+    /// inertial-correction`) proposing every frame under the guard (docs/GUARD.md); writes
+    /// `guard.json` with each frame's outcome, estimate, Newton iterations and times.
+    #[arg(long)]
+    pub surrogate: Option<PathBuf>,
+    /// With --surrogate: the guard's tolerance, in mm (mass-weighted RMS per coordinate)
+    /// or `truth` for the ground truth's own convergence test [default: truth].
+    #[arg(long, requires = "surrogate")]
+    pub tolerance: Option<String>,
+    /// With --surrogate and a tolerance in mm: accept a proposal only on the certified bound
+    /// (a guarantee, where the step's convexity is certified) instead of the Newton-step
+    /// estimate.
+    #[arg(long, requires = "surrogate")]
+    pub certified: bool,
+}
+
+/// The guard's settings from `--tolerance` and `--certified`.
+fn guard_settings(tolerance: Option<&str>, certified: bool) -> anyhow::Result<weft_sim::guard::GuardSettings> {
+    use weft_sim::guard::{Acceptance, GuardSettings};
+    let mut s = match tolerance {
+        None | Some("truth") => GuardSettings::ground_truth(),
+        Some(t) => {
+            let mm: f64 = t
+                .parse()
+                .map_err(|_| anyhow::anyhow!("--tolerance {t:?}: a number of millimetres or `truth`"))?;
+            GuardSettings::millimetres(mm)?
+        }
+    };
+    if certified {
+        s.acceptance = Acceptance::CertifiedBound;
+    }
+    Ok(s)
 }
 
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
@@ -66,6 +98,27 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     };
     overrides.apply(&mut loaded.scene)?;
     let out = &args.out;
+    if let Some(dir) = &args.surrogate {
+        let settings = guard_settings(args.tolerance.as_deref(), args.certified)?;
+        let surrogate = weft_nn::inertial_correction::load_surrogate(dir)?;
+        let run = weft_data::simulate::simulate_guarded_into(&loaded, surrogate, settings, out, args.quiet)?;
+        let t = &run.totals;
+        eprintln!(
+            "{} under the guard ({}): {} frames in {:.1} s ({:.1} ms/frame); {} accepted, {} corrected, {} rejected; \
+             {} Newton iterations → {}",
+            run.scene,
+            run.surrogate,
+            t.frames,
+            run.total_seconds,
+            1e3 * run.total_seconds / t.frames.max(1) as f64,
+            t.accepted,
+            t.corrected,
+            t.rejected,
+            t.newton_iterations,
+            out.display()
+        );
+        return Ok(());
+    }
     let run = simulate_into(&loaded, out, args.obj, args.quiet)?;
     let (rec, stats) = (&run.recording, SimulateStats::new(&run.recording));
     eprintln!(

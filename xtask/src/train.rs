@@ -28,6 +28,27 @@ pub enum TrainCommand {
     /// the inextensibility or the quasistatic layer (fixed or learned μ).
     #[command(after_help = weft_nn::config_help::DRAPE)]
     Drape(DrapeArgs),
+    /// A one-step surrogate for guarded roll-outs (docs/GUARD.md): the inertial predictor
+    /// plus a ridge-regressed correction, fitted in closed form on a cloth dataset's training
+    /// frames, the ridge weight chosen on its validation frames. Run it with
+    /// `cargo xtask simulate SCENE --surrogate OUT --tolerance MM`.
+    InertialCorrection(InertialCorrectionArgs),
+}
+
+#[derive(Args)]
+pub struct InertialCorrectionArgs {
+    /// A cloth dataset directory written by `cargo xtask dataset` (the scene the surrogate
+    /// will run on).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Where the model is written (`config.json`, `bases.safetensors`); must not hold one.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Settings (JSON: `position_components`, `correction_components`, `ridge` — the
+    /// candidate ridge weights relative to the mean squared feature); default 32, 32,
+    /// [1e-8, 1e-6, 1e-4, 1e-2, 1].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
 }
 
 /// Flags every `train` command takes.
@@ -214,6 +235,11 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
                 train_examples: a.train_examples,
             };
             say(DrapeJob::new(a.common.params(&a.data, &a.out), drape)?)
+        }
+        TrainCommand::InertialCorrection(a) => {
+            let lines = weft_nn::inertial_correction::fit_directory(&a.data, &a.out, a.config.as_deref())?;
+            lines.iter().for_each(|line| eprintln!("{line}"));
+            Ok(())
         }
     }
 }

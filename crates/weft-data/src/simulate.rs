@@ -165,6 +165,74 @@ pub fn simulate_into(loaded: &LoadedScene, out: &Path, obj: bool, quiet: bool) -
     Ok(SimulateReport { recording, what })
 }
 
+/// What [`simulate_guarded_into`] ran: the guard's per-frame reports and totals
+/// (`guard.json`).
+#[derive(Debug, Serialize)]
+pub struct GuardedRun {
+    pub scene: String,
+    pub surrogate: String,
+    pub settings: weft_sim::guard::GuardSettings,
+    pub vertices: usize,
+    pub total_seconds: f64,
+    pub totals: weft_sim::guard::GuardTotals,
+    pub per_frame: Vec<weft_sim::guard::GuardReport>,
+}
+
+/// Runs the cloth scene `loaded` with `surrogate` proposing every frame under a guard of
+/// `settings` (docs/GUARD.md) and writes `out`: `scene.toml`, `rest.obj`,
+/// `frames.safetensors` (`positions` `[F + 1, V, 3]` in m, rest state first) and
+/// `guard.json` ([`GuardedRun`]). Only cloth scenes have a guard today; another kind is
+/// refused by name.
+pub fn simulate_guarded_into(
+    loaded: &LoadedScene,
+    surrogate: Box<dyn weft_sim::guard::Surrogate>,
+    settings: weft_sim::guard::GuardSettings,
+    out: &Path,
+    quiet: bool,
+) -> Result<GuardedRun> {
+    let AnyScene::Cloth(scene) = &loaded.scene else {
+        return Err(Error::Invalid(format!(
+            "scene {}: a guarded roll-out needs a cloth scene (implicit Euler); volumes and soft tissue have no guard \
+             yet",
+            loaded.scene.name()
+        )));
+    };
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let mut sim = weft_sim::ClothSimulation::new(scene.clone(), loaded.base_dir.as_deref())?;
+    let mut guard = weft_sim::guard::Guard::new(sim.integrator(), &scene.name, surrogate, settings)?;
+    write_text(&out.join("scene.toml"), &loaded.scene.to_toml()?)?;
+    let mesh = sim.mesh();
+    weft_mesh::io::write_obj(&out.join("rest.obj"), mesh.positions(), mesh.faces())?;
+    let v = mesh.num_vertices();
+    let mut positions = sim.integrator().positions().to_vec();
+    let bar = progress_bar(quiet, scene.frames as u64, &scene.name, "frames")?;
+    let (clock, mut per_frame) = (std::time::Instant::now(), Vec::new());
+    for _ in 0..scene.frames {
+        let f = sim.step_guarded(&mut guard, None)?;
+        positions.extend_from_slice(&f.positions);
+        per_frame.push(f.report);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let f = positions.len() / (3 * v);
+    write_safetensors(
+        &out.join("frames.safetensors"),
+        &[crate::files::Array::f64("positions", vec![f, v, 3], &positions)],
+        Default::default(),
+    )?;
+    let run = GuardedRun {
+        scene: scene.name.clone(),
+        surrogate: guard.surrogate().name().to_string(),
+        settings,
+        vertices: v,
+        total_seconds: clock.elapsed().as_secs_f64(),
+        totals: *guard.totals(),
+        per_frame,
+    };
+    write_json(&out.join("guard.json"), &run)?;
+    Ok(run)
+}
+
 /// The surface written per frame with `obj`, as (faces, surface vertex → recorded vertex)
 /// and the body's size in words.
 type Surface = (Vec<[usize; 3]>, Vec<usize>, String);

@@ -410,6 +410,74 @@ impl InertialCorrection {
     }
 }
 
+/// `cargo xtask train inertial-correction`: fits the correction on the cloth dataset in
+/// `data` (settings from the JSON file `config`, else the defaults) and writes the model
+/// directory `out`, which must not hold a model yet. Returns the lines to print: the chosen
+/// ridge weight, every candidate's validation error and the test one-step errors beside
+/// the inertial predictor's.
+pub fn fit_directory(data: &Path, out: &Path, config: Option<&Path>) -> Result<Vec<String>> {
+    if out.join("config.json").exists() {
+        return Err(Error::Checkpoint {
+            path: out.display().to_string(),
+            reason: "already holds a model; choose another --out or remove it".into(),
+        });
+    }
+    let settings: InertialCorrectionSettings = match config {
+        Some(c) => crate::checkpoint::read_json(c)?,
+        None => InertialCorrectionSettings::default(),
+    };
+    let dataset = ClothDataset::load(data).map_err(|e| Error::Load {
+        path: data.display().to_string(),
+        source: Box::new(e.into()),
+    })?;
+    let clock = std::time::Instant::now();
+    let model = InertialCorrection::fit(&dataset, &settings)?;
+    model.save(out)?;
+    let mut inertial = model.clone();
+    inertial.disable_correction();
+    let rms = |v: Vec<f64>| (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    let mut lines = vec![format!(
+        "{}: inertial correction fitted in {:.1} s on {} sequences; ridge {} (chosen on validation) → {}",
+        dataset.name,
+        clock.elapsed().as_secs_f64(),
+        dataset.sequences.len(),
+        model
+            .ridge()
+            .map_or("none: no correction beat the inertial predictor".into(), |r| format!(
+                "{r:e}"
+            )),
+        out.display()
+    )];
+    for s in model.validation_scores() {
+        let name = s.ridge.map_or("no correction".into(), |r| format!("ridge {r:e}"));
+        lines.push(format!("  validation one-step M_rms, {name}: {:.3} mm", s.one_step_mm));
+    }
+    lines.push(format!(
+        "  test one-step M_rms: {:.3} mm corrected, {:.3} mm inertial predictor",
+        rms(model.one_step_errors(&dataset, "test")?),
+        rms(inertial.one_step_errors(&dataset, "test")?)
+    ));
+    Ok(lines)
+}
+
+/// The surrogate stored in the model directory `dir`, for weft-sim's guard: the inertial
+/// correction is the one model kind that proposes frames under the guard today; a
+/// directory of another kind (the embedding, NNWarp, the limb or drape models) is refused
+/// by name rather than misread.
+pub fn load_surrogate(dir: &Path) -> Result<Box<dyn weft_sim::guard::Surrogate>> {
+    let config: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
+    match crate::checkpoint::stored_model_kind(&config) {
+        Some(KIND) => Ok(Box::new(InertialCorrection::load(dir)?)),
+        other => Err(Error::Checkpoint {
+            path: dir.display().to_string(),
+            reason: format!(
+                "holds {}, not a surrogate the guard can step (`{KIND}`: `cargo xtask train {KIND}`)",
+                other.map_or_else(|| "no model weft knows".to_string(), |k| format!("a `{k}` model"))
+            ),
+        }),
+    }
+}
+
 /// The windows of `split` (module docs).
 fn split_windows(data: &ClothDataset, split: &str) -> Result<Vec<(usize, usize)>> {
     Ok(match split {
