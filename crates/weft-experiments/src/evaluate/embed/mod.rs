@@ -241,8 +241,9 @@ struct SceneResults {
 
 /// The format of a scene's kept results. A file of an older format is remade from its
 /// models' kept scores (nothing retrains): 1 holds every seed's long roll-out, where 0
-/// held the first seed's.
-const SCENE_FORMAT: u32 = 1;
+/// held the first seed's; 2 holds a record per seed of every learned figure
+/// (`records::record_over_seeds`), where 1 held only their mean and spread.
+const SCENE_FORMAT: u32 = 2;
 
 /// What a scene's kept file gives a later run.
 #[derive(Debug)]
