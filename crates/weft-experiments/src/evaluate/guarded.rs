@@ -14,6 +14,10 @@
 //!    τ = 0.1, 0.3, 1 and 3 mm, and unguarded (every proposal passed on) — M_rms against
 //!    the ground truth, frames accepted, Newton iterations and wall time per frame beside
 //!    the ground truth's. Each is a point on the cloth family's Pareto plot.
+//! 5. No drift: the inertial correction over [`LONG_FRAMES`] frames (the scene's program
+//!    repeated past the dataset's length) at τ = 1 mm, each passed-on frame measured
+//!    against its own step's minimiser (Newton from the same accepted history to the
+//!    truth's tolerance), beside the unguarded roll-out's distance from the truth.
 
 use std::time::Instant;
 
@@ -28,6 +32,12 @@ use crate::records::{Curve, ExperimentOutput, Table, Timing};
 use weft_data::Size;
 
 const SCENE: &str = "sheet-ms";
+
+/// Frames of the no-drift roll-out (issue 73, target 3).
+pub const LONG_FRAMES: usize = 1000;
+
+/// The no-drift roll-out's tolerance (mm).
+const LONG_TOLERANCE_MM: f64 = 1.0;
 
 /// The dial's tolerances (mm) and their names in the records.
 const TOLERANCES: [(f64, &str); 4] = [
@@ -127,6 +137,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             rows.push(guarded_rollout(&mut out, &scene, &truth, &method, surrogate, settings)?);
         }
     }
+    no_drift(ctx, &mut out, &scene, &model)?;
     out.tables.push(Table {
         title: format!("Guarded roll-outs of {SCENE}"),
         caption: format!(
@@ -346,4 +357,89 @@ fn guarded_rollout(
         ),
         format!("{:.1}×", truth.seconds_per_frame / seconds.max(f64::MIN_POSITIVE)),
     ])
+}
+
+/// The no-drift roll-out (module docs, 5): per frame, the guarded frame's M_rms from its own
+/// step's minimiser, and the unguarded roll-out's from the truth; recorded as curves, the
+/// worst frame and the frames beyond τ.
+fn no_drift(
+    ctx: &EvalContext,
+    out: &mut ExperimentOutput,
+    scene: &ClothScene,
+    model: &InertialCorrection,
+) -> crate::Result<()> {
+    let mut scene = scene.clone();
+    scene.frames = LONG_FRAMES;
+    let truth = ground_truth(ctx, &scene)?;
+    let settings = GuardSettings::millimetres(LONG_TOLERANCE_MM)?;
+    let mut sim = ClothSimulation::new(scene.clone(), None)?;
+    let mut check = ClothSimulation::new(scene.clone(), None)?;
+    let mut guard = Guard::new(sim.integrator(), &scene.name, Box::new(model.clone()), settings)?;
+    let mut unguarded_sim = ClothSimulation::new(scene.clone(), None)?;
+    let loose = GuardSettings::millimetres(f64::MAX)?;
+    let mut unguarded = Guard::new(unguarded_sim.integrator(), &scene.name, Box::new(model.clone()), loose)?;
+    let bar = weft_data::files::progress_bar(ctx.quiet, LONG_FRAMES as u64, "guarded: no drift", "frames")?;
+    let (mut step_errors, mut drift, mut guarded_drift) = (Vec::new(), Vec::new(), Vec::new());
+    for m in 1..=LONG_FRAMES {
+        let history = (
+            sim.integrator().positions().to_vec(),
+            sim.integrator().previous_positions().to_vec(),
+        );
+        let f = sim.step_guarded(&mut guard, Some(&truth.frames[m]))?;
+        // The step's minimiser from the same accepted history, to the truth's tolerance.
+        check.integrator_mut().set_state(&history.0, &history.1)?;
+        let prescribed = check.prescribed_at(m);
+        let integrator = check.integrator_mut();
+        let mut x = integrator.inertial_start(&prescribed)?;
+        let tight = integrator.settings;
+        integrator.solve_step_from(&prescribed, &mut x, &tight)?;
+        let sq: f64 = f.positions.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
+        step_errors.push(1e3 * (sq / x.len() as f64).sqrt());
+        guarded_drift.push(f.report.error.map_or(f64::NAN, |e| e.m_rms_mm));
+        let u = unguarded_sim.step_guarded(&mut unguarded, Some(&truth.frames[m]))?;
+        drift.push(u.report.error.map_or(f64::NAN, |e| e.m_rms_mm));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let beyond = step_errors.iter().filter(|e| **e > LONG_TOLERANCE_MM).count();
+    let method = "inertial-correction-tau-1000um-long";
+    for (metric, value, unit) in [
+        (
+            "max-step-error",
+            step_errors.iter().fold(0.0f64, |a, b| a.max(*b)),
+            "mm",
+        ),
+        ("frames-beyond-tolerance", beyond as f64, "count"),
+        (
+            "accepted-share",
+            guard.totals().accepted as f64 / LONG_FRAMES as f64,
+            "1",
+        ),
+        ("final-m-rms", *guarded_drift.last().unwrap_or(&f64::NAN), "mm"),
+    ] {
+        out.record(SCENE, method, metric, value, unit, Timing::default());
+    }
+    out.record(
+        SCENE,
+        "inertial-correction-unguarded-long",
+        "final-m-rms",
+        *drift.last().unwrap_or(&f64::NAN),
+        "mm",
+        Timing::default(),
+    );
+    let frames: Vec<f64> = (1..=LONG_FRAMES).map(|f| f as f64).collect();
+    for (name, errors) in [
+        ("guarded-step-error", step_errors),
+        ("guarded-from-truth", guarded_drift),
+        ("unguarded-from-truth", drift),
+    ] {
+        out.curves.push(Curve {
+            scene: format!("{SCENE}-long"),
+            method: name.into(),
+            frames: frames.clone(),
+            error_mm: errors,
+            error_mm_sd: Vec::new(),
+        });
+    }
+    Ok(())
 }
