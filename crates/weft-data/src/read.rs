@@ -237,6 +237,17 @@ impl ClothDataset {
         })
     }
 
+    /// Frame `m` of sequence `s`'s grasp as prescribed DOFs `(dof, value)` (m), as the
+    /// integrator takes them: what replays a stored sequence step by step.
+    pub fn prescribed_at(&self, s: usize, m: usize) -> Vec<(usize, f64)> {
+        let q = self.sequences[s].control(m);
+        self.grasp
+            .iter()
+            .enumerate()
+            .flat_map(|(g, &v)| (0..3).map(move |k| (3 * v + k, q[3 * g + k])))
+            .collect()
+    }
+
     /// `frame` (`3V` values, metres) with its grasped vertices moved to the control
     /// positions `q` (`3G` values in the order of [`ClothDataset::grasp`]): the
     /// configuration at which a method's frame is judged against the controls it was given.

@@ -59,7 +59,7 @@ mod two_domain;
 pub use cholesky::{CholeskyFactor, CholeskySolver, Substructuring};
 pub use error::{Error, Result};
 pub use krylov::{CgOutcome, pcg};
-pub use norms::{dot, max_abs};
+pub use norms::{dot, max_abs, rank_correlation};
 pub use pattern::{SymmetricMatrix, SymmetricPattern};
 pub use ridge::NormalEquations;
 pub use rng::SplitMix64;

@@ -28,15 +28,10 @@ fn replay(
     let mut integrator = sim.into_integrator();
     let mut guard = Guard::new(&integrator, &data.scene.name, surrogate, settings)?;
     let (mut errors, mut seconds) = (Vec::new(), 0.0);
-    for seq in &data.sequences {
+    for (s, seq) in data.sequences.iter().enumerate() {
         integrator.set_state(seq.frame(0), seq.frame(0))?;
         for m in 1..seq.num_frames().min(frames + 1) {
-            let prescribed: Vec<(usize, f64)> = data
-                .grasp
-                .iter()
-                .enumerate()
-                .flat_map(|(g, &v)| (0..3).map(move |k| (3 * v + k, seq.control(m)[3 * g + k])))
-                .collect();
+            let prescribed = data.prescribed_at(s, m);
             let r = guard.step(&mut integrator, m, &prescribed, Some(seq.frame(m)))?;
             errors.push(r.error.map_or(f64::NAN, |e| e.m_rms_mm));
             seconds += r.seconds.proposal + r.seconds.guard + r.seconds.correction;

@@ -58,23 +58,6 @@ fn dial() -> crate::Result<Vec<(String, Option<GuardSettings>)>> {
     Ok(out)
 }
 
-/// Spearman's rank correlation of two equally long samples (ties ranked by order).
-pub fn rank_correlation(a: &[f64], b: &[f64]) -> f64 {
-    let ranks = |v: &[f64]| {
-        let mut idx: Vec<usize> = (0..v.len()).collect();
-        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
-        let mut r = vec![0.0; v.len()];
-        for (rank, i) in idx.into_iter().enumerate() {
-            r[i] = rank as f64;
-        }
-        r
-    };
-    let (ra, rb) = (ranks(a), ranks(b));
-    let n = a.len() as f64;
-    let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
-    1.0 - 6.0 * d2 / (n * (n * n - 1.0)).max(f64::MIN_POSITIVE)
-}
-
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
@@ -258,7 +241,7 @@ fn estimate_honesty(
         ("one-step-m-rms", rms(&errors), "mm"),
         (
             "estimate-rank-correlation",
-            rank_correlation(&estimates, &distances),
+            weft_linalg::rank_correlation(&estimates, &distances),
             "1",
         ),
         (

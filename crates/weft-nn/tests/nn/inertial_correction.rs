@@ -149,12 +149,7 @@ fn under_the_guard_a_mismatch_is_a_typed_error_and_proposals_are_checked() {
     let mut model = model;
     let (mut corrected, mut inertial) = (Vec::new(), Vec::new());
     for m in (2..60).filter(|&m| is_validation_frame(m)) {
-        let prescribed: Vec<(usize, f64)> = data
-            .grasp
-            .iter()
-            .enumerate()
-            .flat_map(|(g, &v)| (0..3).map(move |k| (3 * v + k, seq.control(m)[3 * g + k])))
-            .collect();
+        let prescribed = data.prescribed_at(0, m);
         let input = StepInput {
             frame: m,
             dt: scene.dt,

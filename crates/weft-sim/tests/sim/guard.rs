@@ -175,23 +175,6 @@ fn estimate_bounds_the_distance_to_the_step_minimiser_wherever_certified() {
     );
 }
 
-/// Spearman's rank correlation of two equally long samples (no ties expected).
-fn rank_correlation(a: &[f64], b: &[f64]) -> f64 {
-    let ranks = |v: &[f64]| {
-        let mut idx: Vec<usize> = (0..v.len()).collect();
-        idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
-        let mut r = vec![0.0; v.len()];
-        for (rank, i) in idx.into_iter().enumerate() {
-            r[i] = rank as f64;
-        }
-        r
-    };
-    let (ra, rb) = (ranks(a), ranks(b));
-    let n = a.len() as f64;
-    let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
-    1.0 - 6.0 * d2 / (n * (n * n - 1.0))
-}
-
 #[test]
 fn the_newton_step_estimate_tracks_the_true_distance() {
     // Proposals from the truth's history: the inertial predictor's and the truth moved
@@ -245,7 +228,7 @@ fn the_newton_step_estimate_tracks_the_true_distance() {
             distances.push(d);
         }
     }
-    let rho = rank_correlation(&estimates, &distances);
+    let rho = weft_linalg::rank_correlation(&estimates, &distances);
     assert!(
         rho >= 0.9,
         "rank correlation {rho:.3} of the estimate with the true distance"
