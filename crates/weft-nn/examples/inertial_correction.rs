@@ -48,6 +48,35 @@ fn replay(
     ))
 }
 
+/// One-step errors (M_rms, mm) of the correction and the predictor on the built-in scene
+/// of the dataset's name (its own seed: a sequence the fit never saw), frame by frame.
+fn held_out(data: &ClothDataset, model: &InertialCorrection, frames: usize) -> Result<(), Box<dyn std::error::Error>> {
+    let mut scene = weft_sim::ClothScene::builtin(&data.scene.name, data.rest.num_vertices() < 1000)?;
+    scene.frames = frames;
+    let mut sim = ClothSimulation::new(scene, None)?;
+    let mut truth = vec![sim.integrator().positions().to_vec()];
+    let mut controls = vec![Vec::new()];
+    for _ in 0..frames {
+        let f = sim.step()?;
+        truth.push(f.positions);
+        controls.push(f.controls);
+    }
+    let mm = |a: &[f64], b: &[f64]| {
+        1e3 * (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+    };
+    for m in 1..truth.len() {
+        let p2 = &truth[m.saturating_sub(2)];
+        let x = model.predict(p2, &truth[m - 1], &controls[m])?;
+        let i: Vec<f64> = truth[m - 1].iter().zip(p2).map(|(a, b)| 2.0 * a - b).collect();
+        println!(
+            "  held-out frame {m}: corrected {:.3} mm, inertial {:.3} mm",
+            mm(&x, &truth[m]),
+            mm(&i, &truth[m])
+        );
+    }
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::args()
         .nth(1)
@@ -78,6 +107,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rms(&i)
         );
     }
+    held_out(&data, &model, frames.min(60))?;
     let n = 3 * data.rest.num_vertices();
     for tau in [0.1, 0.3, 1.0] {
         let s = GuardSettings::millimetres(tau)?;

@@ -22,6 +22,9 @@
 //!   displacement and velocity, which a linear map of their codes represents; gravity
 //!   is the bias.
 //! - **Output**: codes of `c_m` in a PCA basis `U_c` of the training residuals.
+//! - **Range**: each predicted code is clipped to its training range widened by a quarter,
+//!   so a state unlike any training frame cannot drive the correction beyond what training
+//!   saw (an out-of-range input once moved a frame by 0.33 m before this clip).
 //! - **Fit**: linear least squares with a ridge penalty, closed form
 //!   ([`weft_linalg::NormalEquations`]): deterministic, no seed.
 //!
@@ -99,15 +102,26 @@ struct Meta {
     feature_scale: Vec<f64>,
     /// `W`, `correction codes × (features + bias)`, row-major.
     weights: Vec<f64>,
+    /// Each correction code's range over the training residuals, widened by a quarter on
+    /// each side: a prediction is clipped to it, so inputs unlike any training frame cannot
+    /// drive the correction beyond what training saw (the guard judges the result either way).
+    code_range: Vec<(f64, f64)>,
 }
 
-/// The frames a window predicts: `m ≥ 2` with Tan et al.'s split rule (docs/DATASETS.md).
+/// The frames a window predicts: `m ≥ 1` with Tan et al.'s split rule (docs/DATASETS.md).
+/// Frame 1 is predicted from the initial state held still (`p_{−1} = p_0`), as the guard
+/// asks for it.
 fn windows(data: &ClothDataset, keep: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for (s, seq) in data.sequences.iter().enumerate() {
-        out.extend((2..seq.num_frames()).filter(|&m| keep(m)).map(|m| (s, m)));
+        out.extend((1..seq.num_frames()).filter(|&m| keep(m)).map(|m| (s, m)));
     }
     out
+}
+
+/// `(p_{m−2}, p_{m−1})` of window `m` of `seq` (`p_{−1} = p_0`).
+fn history(seq: &weft_data::ClothSequence, m: usize) -> (&[f64], &[f64]) {
+    (seq.frame(m.saturating_sub(2)), seq.frame(m - 1))
 }
 
 /// Training windows: frame `m` a training frame and not a validation one (the inputs
@@ -189,7 +203,8 @@ impl InertialCorrection {
         let residuals: Vec<Vec<f64>> = train
             .iter()
             .map(|&(s, m)| {
-                let guess = inertial(seq(s).frame(m - 2), seq(s).frame(m - 1), &data.grasp, seq(s).control(m));
+                let (p2, p1) = history(seq(s), m);
+                let guess = inertial(p2, p1, &data.grasp, seq(s).control(m));
                 seq(s).frame(m).iter().zip(&guess).map(|(a, b)| a - b).collect()
             })
             .collect();
@@ -197,13 +212,8 @@ impl InertialCorrection {
         let features = |w: &[(usize, usize)]| -> Vec<Vec<f64>> {
             w.iter()
                 .map(|&(s, m)| {
-                    raw_features(
-                        &positions,
-                        seq(s).frame(m - 2),
-                        seq(s).frame(m - 1),
-                        &data.grasp,
-                        seq(s).control(m),
-                    )
+                    let (p2, p1) = history(seq(s), m);
+                    raw_features(&positions, p2, p1, &data.grasp, seq(s).control(m))
                 })
                 .collect()
         };
@@ -211,7 +221,16 @@ impl InertialCorrection {
         let (feature_mean, feature_scale) = standardisation(&raw);
         let design = design_matrix(&raw, &feature_mean, &feature_scale);
         let k = corrections.num_components();
-        let targets: Vec<f64> = residuals.iter().flat_map(|c| corrections.encode(c)).collect();
+        let codes: Vec<Vec<f64>> = residuals.iter().map(|c| corrections.encode(c)).collect();
+        let code_range = (0..k)
+            .map(|j| {
+                let (lo, hi) = codes.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+                    (lo.min(c[j]), hi.max(c[j]))
+                });
+                (lo - 0.25 * (hi - lo), hi + 0.25 * (hi - lo))
+            })
+            .collect();
+        let targets: Vec<f64> = codes.concat();
         let normal = weft_linalg::NormalEquations::new(&design, &targets, train.len(), feature_mean.len() + 1, k)?;
         let mut model = Self {
             meta: Meta {
@@ -226,6 +245,7 @@ impl InertialCorrection {
                 feature_mean,
                 feature_scale,
                 weights: Vec::new(),
+                code_range,
             },
             positions,
             corrections,
@@ -281,7 +301,8 @@ impl InertialCorrection {
             .iter()
             .map(|&(s, m)| {
                 let seq = &data.sequences[s];
-                let x = self.predict(seq.frame(m - 2), seq.frame(m - 1), seq.control(m))?;
+                let (p2, p1) = history(seq, m);
+                let x = self.predict(p2, p1, seq.control(m))?;
                 Ok(frame_mm(&x, seq.frame(m)))
             })
             .collect()
@@ -322,7 +343,8 @@ impl InertialCorrection {
             .meta
             .weights
             .chunks_exact(f.len())
-            .map(|w| w.iter().zip(&f).map(|(a, b)| a * b).sum())
+            .zip(&self.meta.code_range)
+            .map(|(w, (lo, hi))| w.iter().zip(&f).map(|(a, b)| a * b).sum::<f64>().clamp(*lo, *hi))
             .collect();
         let c = self.corrections.decode(&codes);
         x.iter_mut().zip(&c).for_each(|(a, b)| *a += b);
@@ -394,6 +416,7 @@ impl InertialCorrection {
         if meta.feature_mean.len() != features
             || meta.feature_scale.len() != features
             || (meta.ridge.is_some() && meta.weights.len() != corrections.num_components() * (features + 1))
+            || meta.code_range.len() != corrections.num_components()
             || positions.dim() != meta.num_dofs
             || corrections.dim() != meta.num_dofs
         {
