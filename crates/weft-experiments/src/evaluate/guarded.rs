@@ -117,7 +117,13 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
     for (setting, settings) in dial()? {
         for (name, surrogate) in surrogates(&model, truth.frames[0].len()) {
             let method = format!("{name}-{setting}");
-            rows.push(guarded_rollout(&mut out, &scene, &truth, &method, surrogate, settings)?);
+            let run = Rollout {
+                scene: &scene,
+                truth: &truth,
+                method: &method,
+                predictions: &ctx.out.join("predictions").join("guarded").join(SCENE),
+            };
+            rows.push(guarded_rollout(&mut out, &run, surrogate, settings)?);
         }
     }
     no_drift(ctx, &mut out, &scene, &model)?;
@@ -269,16 +275,25 @@ fn median(values: impl Iterator<Item = f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
-/// One guarded (or unguarded) roll-out of the held-out scene; records its figures and
-/// returns its table row.
+/// What one roll-out of the dial runs on and where its frames go.
+struct Rollout<'a> {
+    scene: &'a ClothScene,
+    truth: &'a GroundTruth,
+    /// The records' method name.
+    method: &'a str,
+    /// `OUT/predictions/guarded/<scene>`: the frames beside the ground truth's.
+    predictions: &'a std::path::Path,
+}
+
+/// One guarded (or unguarded) roll-out of the held-out scene; records its figures, writes
+/// its frames beside the ground truth's and returns its table row.
 fn guarded_rollout(
     out: &mut ExperimentOutput,
-    scene: &ClothScene,
-    truth: &GroundTruth,
-    method: &str,
+    run: &Rollout<'_>,
     surrogate: Box<dyn Surrogate>,
     settings: Option<GuardSettings>,
 ) -> crate::Result<Vec<String>> {
+    let (scene, truth, method) = (run.scene, run.truth, run.method);
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     // Unguarded: a tolerance no estimate exceeds, so every finite proposal passes on.
     let s = match settings {
@@ -286,15 +301,17 @@ fn guarded_rollout(
         None => GuardSettings::millimetres(f64::MAX)?,
     };
     let mut guard = Guard::new(sim.integrator(), &scene.name, surrogate, s)?;
-    let (mut errors, mut split) = (Vec::new(), [0.0f64; 3]);
+    let (mut errors, mut split, mut positions) = (Vec::new(), [0.0f64; 3], Vec::new());
     for reference in &truth.frames[1..] {
         let f = sim.step_guarded(&mut guard, Some(reference))?;
+        positions.extend_from_slice(&f.positions);
         let r = f.report;
         errors.push(r.error.map_or(f64::NAN, |e| e.m_rms_mm));
         split[0] += r.seconds.proposal;
         split[1] += r.seconds.guard;
         split[2] += r.seconds.correction;
     }
+    write_frames(run, &positions)?;
     let t = *guard.totals();
     let n = t.frames.max(1) as f64;
     let seconds = split.iter().sum::<f64>() / n;
@@ -424,5 +441,28 @@ fn no_drift(
             error_mm_sd: Vec::new(),
         });
     }
+    Ok(())
+}
+
+/// `positions` (the roll-out's frames after the rest state) and the ground truth's, as
+/// `[frames, vertices, 3]` in metres, to `<predictions>/<method>.safetensors`.
+fn write_frames(run: &Rollout<'_>, positions: &[f64]) -> crate::Result<()> {
+    std::fs::create_dir_all(run.predictions)?;
+    let truth: Vec<f64> = run.truth.frames[1..].concat();
+    let v = run.truth.frames[0].len() / 3;
+    let f = truth.len() / (3 * v).max(1);
+    let mut meta = std::collections::HashMap::new();
+    meta.insert(
+        "units".into(),
+        "positions and ground_truth [frames, vertices, 3] in metres, frames 1.. of the held-out roll-out".into(),
+    );
+    weft_data::files::write_safetensors(
+        &run.predictions.join(format!("{}.safetensors", run.method)),
+        &[
+            weft_data::files::Array::f64("positions", vec![f, v, 3], positions),
+            weft_data::files::Array::f64("ground_truth", vec![f, v, 3], &truth),
+        ],
+        meta,
+    )?;
     Ok(())
 }
