@@ -11,18 +11,20 @@
 //! accepted, Newton iterations and the M_rms against the truth.
 //!
 //! ```sh
-//! cargo run --release -p weft-sim --example guard_sheet -- [--scene sheet-ms] [--full]
+//! cargo run --release -p weft-sim --example guard_sheet -- [--scene sheet-ms] [--full] \
+//!     [--frames N] [--preconditioner jacobi|lagged-cholesky]
 //! ```
 //! Defaults: the quick `sheet-ms` (9 × 9, 30 frames); `--full` the standard-size scene
 //! (slow; one-step figures only, and no dense eigen-decomposition for the exact modulus),
-//! `--frames N` its first N frames.
+//! `--frames N` its first N frames; the estimate's CG preconditioner is the guard's
+//! default (the lagged Cholesky factor).
 
 use std::sync::Arc;
 
 use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use weft_sim::ImplicitEuler;
 use weft_sim::energy::{Energy, checked_pairs};
-use weft_sim::guard::{Acceptance, Correction, Guard, GuardSettings, InertialPredictor};
+use weft_sim::guard::{Acceptance, Correction, EstimatePreconditioner, Guard, GuardSettings, InertialPredictor};
 use weft_sim::rng::SplitMix64;
 use weft_sim::{ClothScene, ClothSimulation};
 
@@ -66,15 +68,24 @@ fn exact_modulus(integrator: &ImplicitEuler, x: &[f64]) -> Result<f64, Box<dyn s
     Ok(a.symmetric_eigen().eigenvalues.min())
 }
 
-fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dyn std::error::Error>> {
+fn one_step_figures(
+    scene: &ClothScene,
+    truth: &[Vec<f64>],
+    preconditioner: EstimatePreconditioner,
+) -> Result<(), Box<dyn std::error::Error>> {
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     let predictor = InertialPredictor::for_integrator(sim.integrator());
-    let mut guard = Guard::new(
-        sim.integrator(),
-        &scene.name,
-        Box::new(predictor),
-        GuardSettings::ground_truth(),
-    )?;
+    let settings = GuardSettings {
+        preconditioner,
+        ..GuardSettings::ground_truth()
+    };
+    let mut guard = Guard::new(sim.integrator(), &scene.name, Box::new(predictor), settings)?;
+    // The noisy proposals get a guard of their own, so that the inertial proposals' lagged
+    // factor follows one trajectory, as in a guarded roll-out.
+    let predictor = InertialPredictor::for_integrator(sim.integrator());
+    let mut noisy_guard = Guard::new(sim.integrator(), &scene.name, Box::new(predictor), settings)?;
+    // Wall time and factorisations of the inertial proposals' estimates.
+    let (mut estimate_seconds, mut estimates, mut factorizations) = (0.0, 0usize, 0usize);
     let noise = [0.1, 1.0, 5.0];
     let (mut err, mut est, mut own, mut certified) = (Vec::new(), Vec::new(), Vec::new(), 0usize);
     let (mut ratio, mut bound_ratio, mut indefinite, mut cg) = (Vec::new(), Vec::new(), 0usize, Vec::new());
@@ -88,7 +99,10 @@ fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dy
         let prescribed = sim.prescribed_at(m);
         let integrator = sim.integrator_mut();
         let mut x = integrator.inertial_start(&prescribed)?;
+        let clock = std::time::Instant::now();
         let e = guard.estimate(integrator, &x)?;
+        estimate_seconds += clock.elapsed().as_secs_f64();
+        (estimates, factorizations) = (estimates + 1, factorizations + e.factorizations);
         err.push(m_rms_mm(&x, &truth[m]));
         est.push(e.mm);
         certified += usize::from(e.certified);
@@ -109,14 +123,18 @@ fn one_step_figures(scene: &ClothScene, truth: &[Vec<f64>]) -> Result<(), Box<dy
         own.push(integrator.solve_step_from(&prescribed, &mut x, &settings)?.iterations as f64);
         for (k, &mm) in noise.iter().enumerate() {
             let mut x = noisy(&truth[m], integrator.fixed(), mm, &mut rng);
-            let e = guard.estimate(integrator, &x)?;
+            let e = noisy_guard.estimate(integrator, &x)?;
             let truth_distance = guard.mass_norm(&x, &truth[m]);
             ratio_noisy[k].push(e.distance / truth_distance);
             from_noisy[k].push(integrator.solve_step_from(&prescribed, &mut x, &settings)?.iterations as f64);
         }
     }
     let frames = truth.len() - 1;
-    println!("{}: {frames} frames, one step from the truth's history", scene.name);
+    println!(
+        "{}: {frames} frames, one step from the truth's history; preconditioner {preconditioner:?}: {:.1} ms per estimate of an inertial proposal, {factorizations} factorisations in {estimates}",
+        scene.name,
+        1e3 * estimate_seconds / estimates.max(1) as f64
+    );
     println!(
         "  inertial predictor: one-step error {:.3} mm mean (max {:.3}), estimate {:.3} mm mean; certified on {certified}/{frames}",
         mean(&err),
@@ -207,15 +225,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(f) = args.iter().position(|a| a == "--frames").and_then(|i| args.get(i + 1)) {
         scene.frames = f.parse()?;
     }
+    let preconditioner = match args.iter().position(|a| a == "--preconditioner").and_then(|i| args.get(i + 1)) {
+        None => EstimatePreconditioner::default(),
+        Some(p) if p == "jacobi" => EstimatePreconditioner::Jacobi,
+        Some(p) if p == "lagged-cholesky" => EstimatePreconditioner::LaggedCholesky,
+        Some(p) => return Err(format!("--preconditioner {p}: expected jacobi or lagged-cholesky").into()),
+    };
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     let mut truth = vec![sim.integrator().positions().to_vec()];
     let mut iterations = 0;
+    let clock = std::time::Instant::now();
     for _ in 0..scene.frames {
         let f = sim.step()?;
         iterations += f.report.newton.iterations;
         truth.push(f.positions);
     }
-    one_step_figures(&scene, &truth)?;
+    println!(
+        "ground truth: {:.1} ms per frame, {:.2} Newton iterations per frame",
+        1e3 * clock.elapsed().as_secs_f64() / scene.frames.max(1) as f64,
+        iterations as f64 / scene.frames.max(1) as f64
+    );
+    one_step_figures(&scene, &truth, preconditioner)?;
     if !quick {
         return Ok(());
     }

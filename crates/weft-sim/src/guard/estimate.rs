@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use weft_linalg::{SymmetricMatrix, SymmetricPattern};
+use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
 use crate::energy::{Energy, checked_pairs};
 use crate::error::Result;
@@ -18,9 +18,33 @@ pub const CERTIFICATE_ITERATIONS: usize = 8;
 /// Eq. G6); a proposal close to the minimiser needs far fewer.
 pub const NEWTON_ESTIMATE_ITERATIONS: usize = 60;
 
-/// Relative residual the Newton-step estimate's CG solve stops at: the estimate is then
-/// within about this fraction of the exact Newton step's length.
+/// Relative residual the Newton-step estimate's CG solve stops at, with the Jacobi
+/// preconditioner (whose iterations are capped) and with a Cholesky factor (whose
+/// iterations are a few triangular solves each). A residual of 1 % can still leave the
+/// step's length several per cent off where the residual lies along the soft modes the
+/// factor captures; a tenth of that costs the lagged factor one or two iterations.
 const NEWTON_ESTIMATE_TOLERANCE: f64 = 1e-2;
+const NEWTON_ESTIMATE_TOLERANCE_FACTORED: f64 = 1e-3;
+
+/// CG iterations beyond which a lagged factor is deemed too far from the current step's
+/// matrix: the next estimate factorises afresh (docs/GUARD.md, "The preconditioner").
+pub const REFRESH_AFTER_ITERATIONS: usize = 8;
+
+/// How the Newton-step estimate's CG solve (Eq. G6) is preconditioned.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EstimatePreconditioner {
+    /// The diagonal of the step's matrix: no factorisation, but on a large wrinkling
+    /// sheet [`NEWTON_ESTIMATE_ITERATIONS`] of CG stop far short of the Newton step, and
+    /// the estimate reads low (CG's iterates grow monotonically in length from zero).
+    Jacobi,
+    /// A Cholesky factor of the projected step matrix `M/Δt² + H⁺` from an earlier frame,
+    /// refreshed when CG needs more than [`REFRESH_AFTER_ITERATIONS`] with it or does not
+    /// converge. The step matrix changes little from frame to frame, so one
+    /// factorisation serves many estimates, each a few triangular solves.
+    #[default]
+    LaggedCholesky,
+}
 
 /// What the residual at a frame says about its distance from the step's minimiser `x*`.
 ///
@@ -54,6 +78,9 @@ pub struct ErrorEstimate {
     pub indefinite: bool,
     /// CG iterations of the estimate's Newton-step solve.
     pub cg_iterations: usize,
+    /// Numeric factorisations the estimate made for its preconditioner (0 when the
+    /// lagged factor served, or with [`EstimatePreconditioner::Jacobi`]).
+    pub factorizations: usize,
 }
 
 /// The per-mesh data and scratch of [`ErrorEstimate`]s for one integrator.
@@ -71,10 +98,17 @@ pub(crate) struct Estimator {
     grad: Vec<f64>,
     /// The Newton-step estimate's solution.
     step: Vec<f64>,
+    preconditioner: EstimatePreconditioner,
+    /// The symbolic analysis of the step matrix's pattern, made at the first
+    /// factorisation.
+    cholesky: Option<CholeskySolver>,
+    /// The last factor of the projected step matrix, and whether it is due for a refresh.
+    lagged: Option<CholeskyFactor>,
+    stale: bool,
 }
 
 impl Estimator {
-    pub(crate) fn new(integrator: &ImplicitEuler) -> Result<Self> {
+    pub(crate) fn new(integrator: &ImplicitEuler, preconditioner: EstimatePreconditioner) -> Result<Self> {
         let n = integrator.positions().len();
         let terms: Vec<&dyn Energy> = integrator.terms().iter().map(|t| t.as_ref()).collect();
         let pairs = checked_pairs(n, &terms)?;
@@ -92,6 +126,10 @@ impl Estimator {
             projected: SymmetricMatrix::zeros(pattern),
             grad: vec![0.0; n],
             step: vec![0.0; n],
+            preconditioner,
+            cholesky: None,
+            lagged: None,
+            stale: false,
         })
     }
 
@@ -148,7 +186,7 @@ impl Estimator {
         let modulus = inv_dt2 - self.negative_curvature();
         let certified = modulus > 0.0;
         let residual_m_inv = sq.sqrt();
-        let (distance, indefinite, cg_iterations) = self.newton_step_length(inv_dt2);
+        let (distance, indefinite, cg_iterations, factorizations) = self.newton_step_length(inv_dt2)?;
         Ok(ErrorEstimate {
             residual_m_inv,
             residual_max: max,
@@ -159,6 +197,7 @@ impl Estimator {
             mm: self.to_mm(distance),
             indefinite,
             cg_iterations,
+            factorizations,
         })
     }
 
@@ -174,6 +213,7 @@ impl Estimator {
             mm: f64::INFINITY,
             indefinite: false,
             cg_iterations: 0,
+            factorizations: 0,
         }
     }
 
@@ -188,33 +228,96 @@ impl Estimator {
     }
 
     /// `‖δ‖_M` for the Newton step `A δ = ∇E(x)`, `A = M/Δt² + H` on the free DOFs
-    /// (Eq. G6), by Jacobi-preconditioned CG from the assembled Hessians: with the exact
-    /// `H` where CG finds `A` positive along every direction it explores, else with the
-    /// projected `H⁺` (positive definite with the mass term; the step Newton itself
-    /// would take). Returns the length, whether the exact `A` was indefinite, and the CG
-    /// iterations spent.
-    fn newton_step_length(&mut self, inv_dt2: f64) -> (f64, bool, usize) {
-        let mut iterations = 0;
-        for (matrix, indefinite) in [(&mut self.exact, false), (&mut self.projected, true)] {
+    /// (Eq. G6), by preconditioned CG from the assembled Hessians: with the exact `H` where
+    /// CG finds `A` positive along every direction it explores, else with the projected
+    /// `H⁺` (positive definite with the mass term; the step Newton itself would take).
+    /// Returns the length, whether the exact `A` was indefinite, the CG iterations and
+    /// the factorisations spent.
+    fn newton_step_length(&mut self, inv_dt2: f64) -> Result<(f64, bool, usize, usize)> {
+        let fixed: Vec<bool> = self.free.iter().map(|f| !f).collect();
+        for matrix in [&mut self.exact, &mut self.projected] {
             for (i, m) in self.dof_mass.iter().enumerate() {
                 matrix.add(i, i, m * inv_dt2);
             }
-            let fixed: Vec<bool> = self.free.iter().map(|f| !f).collect();
             matrix.constrain_dofs(&fixed);
+        }
+        if self.preconditioner == EstimatePreconditioner::Jacobi {
+            let (length, indefinite, iterations, _) = self.solve_with(None);
+            return Ok((length, indefinite, iterations, 0));
+        }
+        let mut factorizations = 0;
+        if self.lagged.is_none() || self.stale {
+            self.refactorize()?;
+            factorizations += 1;
+        }
+        let (mut length, mut indefinite, mut iterations, converged) = self.solve_with_lagged();
+        if !converged && factorizations == 0 {
+            // The lagged factor is too far from this frame's matrix to reach the Newton
+            // step within the cap: a fresh one does, in a few iterations.
+            self.refactorize()?;
+            factorizations += 1;
+            let again = self.solve_with_lagged();
+            (length, indefinite) = (again.0, again.1);
+            iterations += again.2;
+        }
+        self.stale = iterations > REFRESH_AFTER_ITERATIONS;
+        Ok((length, indefinite, iterations, factorizations))
+    }
+
+    /// [`Self::solve_with`] the lagged factor (Jacobi if its factorisation failed).
+    fn solve_with_lagged(&mut self) -> (f64, bool, usize, bool) {
+        let lagged = self.lagged.take();
+        let out = self.solve_with(lagged.as_ref());
+        self.lagged = lagged;
+        out
+    }
+
+    /// Factorises the projected step matrix as the preconditioner of later estimates.
+    fn refactorize(&mut self) -> Result<()> {
+        let solver = match self.cholesky.take() {
+            Some(s) => s,
+            None => CholeskySolver::new(self.projected.pattern().clone())?,
+        };
+        let factor = solver.factorize(&self.projected);
+        self.cholesky = Some(solver);
+        // A factor that fails (a non-finite entry) leaves the Jacobi fallback in place.
+        self.lagged = factor.ok();
+        self.stale = false;
+        Ok(())
+    }
+
+    /// CG on the exact step matrix, then on the projected one if the exact one is
+    /// indefinite, preconditioned by `factor` (Jacobi without one): the step's length,
+    /// whether the exact matrix was indefinite, the iterations, and whether the last
+    /// solve converged.
+    fn solve_with(&mut self, factor: Option<&CholeskyFactor>) -> (f64, bool, usize, bool) {
+        let mut iterations = 0;
+        for (matrix, indefinite) in [(&self.exact, false), (&self.projected, true)] {
             let diagonal: Vec<f64> = matrix.diagonal().collect();
-            let jacobi = |r: &[f64], z: &mut [f64]| {
-                for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
-                    // A non-positive diagonal (exact `H` only) falls back to the identity
-                    // scale; the preconditioner must stay SPD.
-                    *z = if *d > 0.0 { r / d } else { *r };
+            let precondition = |r: &[f64], z: &mut [f64]| match factor {
+                Some(f) => {
+                    z.copy_from_slice(r);
+                    f.solve_in_place(z);
                 }
+                None => {
+                    for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
+                        // A non-positive diagonal (exact `H` only) falls back to the
+                        // identity scale; the preconditioner must stay SPD.
+                        *z = if *d > 0.0 { r / d } else { *r };
+                    }
+                }
+            };
+            let tolerance = if factor.is_some() {
+                NEWTON_ESTIMATE_TOLERANCE_FACTORED
+            } else {
+                NEWTON_ESTIMATE_TOLERANCE
             };
             let out = weft_linalg::pcg(
                 matrix,
-                jacobi,
+                precondition,
                 &self.grad,
                 &mut self.step,
-                NEWTON_ESTIMATE_TOLERANCE,
+                tolerance,
                 NEWTON_ESTIMATE_ITERATIONS,
             );
             iterations += out.iterations;
@@ -226,12 +329,12 @@ impl Estimator {
                     .map(|(d, m)| m * d * d)
                     .sum::<f64>()
                     .sqrt();
-                return (length, indefinite, iterations);
+                return (length, indefinite, iterations, out.converged);
             }
         }
         // The projected `A ⪰ M/Δt²` is positive definite: CG cannot find negative
         // curvature in it unless an entry is not finite.
-        (f64::INFINITY, true, iterations)
+        (f64::INFINITY, true, iterations, false)
     }
 
     /// A certified upper bound `ρ` (1/s²) on how far the assembled Hessian of the potential bends

@@ -20,7 +20,9 @@ use crate::integrators::ImplicitEuler;
 use crate::scenes::MotionLabel;
 
 use estimate::Estimator;
-pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate, NEWTON_ESTIMATE_ITERATIONS};
+pub use estimate::{
+    CERTIFICATE_ITERATIONS, ErrorEstimate, EstimatePreconditioner, NEWTON_ESTIMATE_ITERATIONS, REFRESH_AFTER_ITERATIONS,
+};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 
 /// When a proposal is good enough to pass on.
@@ -74,6 +76,9 @@ pub struct GuardSettings {
     /// A proposal that moves any coordinate farther than this multiple of the accepted
     /// frame's bounding-box diagonal in one step has exploded and is rejected.
     pub explosion_factor: f64,
+    /// How the estimate's Newton-step solve is preconditioned.
+    #[serde(default)]
+    pub preconditioner: EstimatePreconditioner,
 }
 
 impl GuardSettings {
@@ -94,6 +99,7 @@ impl GuardSettings {
             correction: Correction::ToGroundTruth,
             acceptance: Acceptance::Estimate,
             explosion_factor: 1.0,
+            preconditioner: EstimatePreconditioner::default(),
         }
     }
 
@@ -162,6 +168,8 @@ pub struct GuardReport {
     /// Newton iterations and numeric factorisations of the correction (0 if accepted).
     pub newton_iterations: usize,
     pub factorizations: usize,
+    /// Numeric factorisations of the estimates' preconditioner in this frame.
+    pub estimate_factorizations: usize,
     /// The proposal's and the passed-on frame's true errors, when a reference was given.
     pub proposal_error: Option<TrueError>,
     pub error: Option<TrueError>,
@@ -179,6 +187,7 @@ pub struct GuardTotals {
     pub unverified: usize,
     pub newton_iterations: usize,
     pub factorizations: usize,
+    pub estimate_factorizations: usize,
 }
 
 /// One guarded frame of a cloth scene ([`crate::ClothSimulation::step_guarded`]).
@@ -238,7 +247,7 @@ impl Guard {
         }
         Ok(Self {
             settings,
-            estimator: Estimator::new(integrator)?,
+            estimator: Estimator::new(integrator, settings.preconditioner)?,
             surrogate,
             totals: GuardTotals::default(),
         })
@@ -325,6 +334,7 @@ impl Guard {
             estimate: proposal_estimate.unwrap_or_else(Estimator::non_finite),
             newton_iterations: 0,
             factorizations: 0,
+            estimate_factorizations: proposal_estimate.map_or(0, |e| e.factorizations),
             proposal_error,
             error: None,
             seconds,
@@ -411,6 +421,7 @@ impl Guard {
             report.factorizations += newton.factorizations;
             let clock = Instant::now();
             report.estimate = self.estimator.estimate(integrator, x)?;
+            report.estimate_factorizations += report.estimate.factorizations;
             report.seconds.guard += clock.elapsed().as_secs_f64();
             // The modulus at the solution may be below the proposal's: then the loose
             // solve did not meet τ, and the second attempt solves to the truth's tolerance.
@@ -440,6 +451,7 @@ impl Guard {
         t.unverified += usize::from(!report.estimate.certified);
         t.newton_iterations += report.newton_iterations;
         t.factorizations += report.factorizations;
+        t.estimate_factorizations += report.estimate_factorizations;
     }
 }
 
