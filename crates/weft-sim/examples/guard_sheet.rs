@@ -12,12 +12,13 @@
 //!
 //! ```sh
 //! cargo run --release -p weft-sim --example guard_sheet -- [--scene sheet-ms] [--full] \
-//!     [--frames N] [--preconditioner jacobi|lagged-cholesky]
+//!     [--frames N] [--preconditioner jacobi|lagged-cholesky] [--projection never|when-indefinite|always]
 //! ```
 //! Defaults: the quick `sheet-ms` (9 × 9, 30 frames); `--full` the standard-size scene
 //! (slow; one-step figures only, and no dense eigen-decomposition for the exact modulus),
 //! `--frames N` its first N frames; the estimate's CG preconditioner is the guard's
-//! default (the lagged Cholesky factor).
+//! default (the lagged Cholesky factor); `--projection` the Hessian projection of the
+//! one-step figures' Newton solves (default: the ground truth's).
 
 use std::sync::Arc;
 
@@ -25,6 +26,7 @@ use weft_linalg::{SymmetricMatrix, SymmetricPattern};
 use weft_sim::ImplicitEuler;
 use weft_sim::energy::{Energy, checked_pairs};
 use weft_sim::guard::{Acceptance, Correction, EstimatePreconditioner, Guard, GuardSettings, InertialPredictor};
+use weft_sim::newton::HessianProjection;
 use weft_sim::rng::SplitMix64;
 use weft_sim::{ClothScene, ClothSimulation};
 
@@ -72,6 +74,7 @@ fn one_step_figures(
     scene: &ClothScene,
     truth: &[Vec<f64>],
     preconditioner: EstimatePreconditioner,
+    projection: Option<HessianProjection>,
 ) -> Result<(), Box<dyn std::error::Error>> {
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     let predictor = InertialPredictor::for_integrator(sim.integrator());
@@ -91,6 +94,8 @@ fn one_step_figures(
     let (mut ratio, mut bound_ratio, mut indefinite, mut cg) = (Vec::new(), Vec::new(), 0usize, Vec::new());
     let mut from_noisy = vec![Vec::new(); noise.len()];
     let mut ratio_noisy = vec![Vec::new(); noise.len()];
+    // How far from the truth's frame each solve from a noisy start landed (mm).
+    let mut landed = vec![Vec::new(); noise.len()];
     let mut rng = SplitMix64::new(73);
     let (mut modulus, mut certified_modulus) = (Vec::new(), Vec::new());
     for m in 1..truth.len() {
@@ -106,7 +111,7 @@ fn one_step_figures(
         err.push(m_rms_mm(&x, &truth[m]));
         est.push(e.mm);
         certified += usize::from(e.certified);
-        indefinite += usize::from(e.indefinite);
+        indefinite += usize::from(e.projected);
         cg.push(e.cg_iterations as f64);
         let d = guard.mass_norm(&x, &truth[m]);
         ratio.push(e.distance / d);
@@ -119,7 +124,10 @@ fn one_step_figures(
             modulus.push(exact_modulus(integrator, &x)? / inv_dt2);
         }
         certified_modulus.push(e.modulus / inv_dt2);
-        let settings = integrator.settings;
+        let mut settings = integrator.settings;
+        if let Some(p) = projection {
+            settings.projection = p;
+        }
         own.push(integrator.solve_step_from(&prescribed, &mut x, &settings)?.iterations as f64);
         for (k, &mm) in noise.iter().enumerate() {
             let mut x = noisy(&truth[m], integrator.fixed(), mm, &mut rng);
@@ -127,6 +135,7 @@ fn one_step_figures(
             let truth_distance = guard.mass_norm(&x, &truth[m]);
             ratio_noisy[k].push(e.distance / truth_distance);
             from_noisy[k].push(integrator.solve_step_from(&prescribed, &mut x, &settings)?.iterations as f64);
+            landed[k].push(m_rms_mm(&x, &truth[m]));
         }
     }
     let frames = truth.len() - 1;
@@ -164,8 +173,9 @@ fn one_step_figures(
     );
     for (k, mm) in noise.iter().enumerate() {
         println!(
-            "    from the truth + {mm} mm noise: {:.2} iterations; estimate / true distance {:.2} mean (min {:.2})",
+            "    from the truth + {mm} mm noise: {:.2} iterations, landing {:.4} mm from the truth's frame; estimate / true distance {:.2} mean (min {:.2})",
             mean(&from_noisy[k]),
+            mean(&landed[k]),
             mean(&ratio_noisy[k]),
             ratio_noisy[k].iter().fold(f64::INFINITY, |a, b| a.min(*b))
         );
@@ -225,7 +235,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(f) = args.iter().position(|a| a == "--frames").and_then(|i| args.get(i + 1)) {
         scene.frames = f.parse()?;
     }
-    let preconditioner = match args.iter().position(|a| a == "--preconditioner").and_then(|i| args.get(i + 1)) {
+    let preconditioner = match args
+        .iter()
+        .position(|a| a == "--preconditioner")
+        .and_then(|i| args.get(i + 1))
+    {
         None => EstimatePreconditioner::default(),
         Some(p) if p == "jacobi" => EstimatePreconditioner::Jacobi,
         Some(p) if p == "lagged-cholesky" => EstimatePreconditioner::LaggedCholesky,
@@ -245,7 +259,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         1e3 * clock.elapsed().as_secs_f64() / scene.frames.max(1) as f64,
         iterations as f64 / scene.frames.max(1) as f64
     );
-    one_step_figures(&scene, &truth, preconditioner)?;
+    // The Newton solves of the one-step figures with another Hessian projection than
+    // the ground truth's (which made the truth's frames).
+    let projection = match args
+        .iter()
+        .position(|a| a == "--projection")
+        .and_then(|i| args.get(i + 1))
+    {
+        None => None,
+        Some(p) if p == "never" => Some(HessianProjection::Never),
+        Some(p) if p == "when-indefinite" => Some(HessianProjection::WhenIndefinite),
+        Some(p) if p == "always" => Some(HessianProjection::Always),
+        Some(p) => return Err(format!("--projection {p}: expected never, when-indefinite or always").into()),
+    };
+    one_step_figures(&scene, &truth, preconditioner, projection)?;
     if !quick {
         return Ok(());
     }

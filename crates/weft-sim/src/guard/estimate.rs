@@ -26,9 +26,10 @@ pub const NEWTON_ESTIMATE_ITERATIONS: usize = 60;
 const NEWTON_ESTIMATE_TOLERANCE: f64 = 1e-2;
 const NEWTON_ESTIMATE_TOLERANCE_FACTORED: f64 = 1e-3;
 
-/// CG iterations beyond which a lagged factor is deemed too far from the current step's
-/// matrix: the next estimate factorises afresh (docs/GUARD.md, "The preconditioner").
-pub const REFRESH_AFTER_ITERATIONS: usize = 8;
+/// CG iterations a lagged factor is given before the estimate factorises afresh; more than
+/// half of them also refreshes the factor for the next estimate (docs/GUARD.md, "The
+/// preconditioner").
+pub const LAGGED_FACTOR_ITERATIONS: usize = 16;
 
 /// How the Newton-step estimate's CG solve (Eq. G6) is preconditioned.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -39,9 +40,11 @@ pub enum EstimatePreconditioner {
     /// the estimate reads low (CG's iterates grow monotonically in length from zero).
     Jacobi,
     /// A Cholesky factor of the projected step matrix `M/Δt² + H⁺` from an earlier frame,
-    /// refreshed when CG needs more than [`REFRESH_AFTER_ITERATIONS`] with it or does not
-    /// converge. The step matrix changes little from frame to frame, so one
-    /// factorisation serves many estimates, each a few triangular solves.
+    /// preconditioning CG on that matrix (the estimate is then the projected Newton
+    /// step's length), refreshed when CG does not converge within
+    /// [`LAGGED_FACTOR_ITERATIONS`] with it. Where the step matrix changes little from frame to
+    /// frame one factorisation serves many estimates, each a few triangular solves; on a
+    /// wrinkling sheet most frames need their own.
     #[default]
     LaggedCholesky,
 }
@@ -73,9 +76,11 @@ pub struct ErrorEstimate {
     /// The same as a mass-weighted RMS per coordinate (mm):
     /// `1000 · distance / √(3 Σ_v m_v)`, which equals M_rms for uniform masses.
     pub mm: f64,
-    /// The step's exact Hessian was indefinite along a CG direction at the frame, so the
-    /// estimate solved with its positive semi-definite projection instead (Eq. G6).
-    pub indefinite: bool,
+    /// The estimate is the length of the Newton step with the positive semi-definite
+    /// projection `H⁺` of the Hessian, not the exact `H` (Eq. G6): always with the
+    /// lagged Cholesky preconditioner; with Jacobi where CG found the exact step matrix
+    /// indefinite.
+    pub projected: bool,
     /// CG iterations of the estimate's Newton-step solve.
     pub cg_iterations: usize,
     /// Numeric factorisations the estimate made for its preconditioner (0 when the
@@ -102,7 +107,8 @@ pub(crate) struct Estimator {
     /// The symbolic analysis of the step matrix's pattern, made at the first
     /// factorisation.
     cholesky: Option<CholeskySolver>,
-    /// The last factor of the projected step matrix, and whether it is due for a refresh.
+    /// The last factor of the projected step matrix, and whether the next estimate
+    /// factorises afresh instead of trying it.
     lagged: Option<CholeskyFactor>,
     stale: bool,
 }
@@ -186,7 +192,7 @@ impl Estimator {
         let modulus = inv_dt2 - self.negative_curvature();
         let certified = modulus > 0.0;
         let residual_m_inv = sq.sqrt();
-        let (distance, indefinite, cg_iterations, factorizations) = self.newton_step_length(inv_dt2)?;
+        let (distance, projected, cg_iterations, factorizations) = self.newton_step_length(inv_dt2)?;
         Ok(ErrorEstimate {
             residual_m_inv,
             residual_max: max,
@@ -195,7 +201,7 @@ impl Estimator {
             bound_mm: certified.then(|| self.to_mm(residual_m_inv / modulus)),
             distance,
             mm: self.to_mm(distance),
-            indefinite,
+            projected,
             cg_iterations,
             factorizations,
         })
@@ -211,7 +217,7 @@ impl Estimator {
             bound_mm: None,
             distance: f64::INFINITY,
             mm: f64::INFINITY,
-            indefinite: false,
+            projected: false,
             cg_iterations: 0,
             factorizations: 0,
         }
@@ -228,11 +234,13 @@ impl Estimator {
     }
 
     /// `‖δ‖_M` for the Newton step `A δ = ∇E(x)`, `A = M/Δt² + H` on the free DOFs
-    /// (Eq. G6), by preconditioned CG from the assembled Hessians: with the exact `H` where
-    /// CG finds `A` positive along every direction it explores, else with the projected
-    /// `H⁺` (positive definite with the mass term; the step Newton itself would take).
-    /// Returns the length, whether the exact `A` was indefinite, the CG iterations and
-    /// the factorisations spent.
+    /// (Eq. G6), by preconditioned CG from the assembled Hessians. With Jacobi, on the
+    /// exact `H` where CG finds `A` positive along every direction it explores, else on
+    /// the projected `H⁺` (positive definite with the mass term). With the lagged factor,
+    /// on the projected `A`, the matrix it is a factor of: CG on the exact `A` with it
+    /// spends tens of iterations before it meets the negative curvature of a wrinkling
+    /// sheet. Returns the length, whether it is the projected step's, the CG iterations
+    /// and the factorisations spent.
     fn newton_step_length(&mut self, inv_dt2: f64) -> Result<(f64, bool, usize, usize)> {
         let fixed: Vec<bool> = self.free.iter().map(|f| !f).collect();
         for matrix in [&mut self.exact, &mut self.projected] {
@@ -242,34 +250,55 @@ impl Estimator {
             matrix.constrain_dofs(&fixed);
         }
         if self.preconditioner == EstimatePreconditioner::Jacobi {
-            let (length, indefinite, iterations, _) = self.solve_with(None);
-            return Ok((length, indefinite, iterations, 0));
+            let (length, projected, iterations, _) = self.solve_jacobi();
+            return Ok((length, projected, iterations, 0));
         }
-        let mut factorizations = 0;
-        if self.lagged.is_none() || self.stale {
-            self.refactorize()?;
-            factorizations += 1;
+        let mut iterations = 0;
+        let mut lagged_failed = false;
+        if let (Some(lagged), false) = (&self.lagged, self.stale) {
+            let out = solve_projected(
+                &self.projected,
+                lagged,
+                &self.grad,
+                &mut self.step,
+                LAGGED_FACTOR_ITERATIONS,
+            );
+            if out.converged {
+                self.stale = 2 * out.iterations > LAGGED_FACTOR_ITERATIONS;
+                return Ok((self.m_length(), true, out.iterations, 0));
+            }
+            iterations += out.iterations;
+            lagged_failed = true;
         }
-        let (mut length, mut indefinite, mut iterations, converged) = self.solve_with_lagged();
-        if !converged && factorizations == 0 {
-            // The lagged factor is too far from this frame's matrix to reach the Newton
-            // step within the cap: a fresh one does, in a few iterations.
-            self.refactorize()?;
-            factorizations += 1;
-            let again = self.solve_with_lagged();
-            (length, indefinite) = (again.0, again.1);
-            iterations += again.2;
-        }
-        self.stale = iterations > REFRESH_AFTER_ITERATIONS;
-        Ok((length, indefinite, iterations, factorizations))
+        // No factor yet, or the last one is too far from this frame's matrix: a fresh
+        // one solves the step in an iteration or two. Where a lagged factor just failed,
+        // the next frame factorises at once rather than spend the iterations again.
+        self.refactorize()?;
+        self.stale = lagged_failed;
+        let factorizations = 1;
+        let Some(fresh) = &self.lagged else {
+            // The factorisation failed (a non-finite entry): Jacobi, as without one.
+            let (length, projected, more, _) = self.solve_jacobi();
+            return Ok((length, projected, iterations + more, factorizations));
+        };
+        let out = solve_projected(
+            &self.projected,
+            fresh,
+            &self.grad,
+            &mut self.step,
+            NEWTON_ESTIMATE_ITERATIONS,
+        );
+        Ok((self.m_length(), true, iterations + out.iterations, factorizations))
     }
 
-    /// [`Self::solve_with`] the lagged factor (Jacobi if its factorisation failed).
-    fn solve_with_lagged(&mut self) -> (f64, bool, usize, bool) {
-        let lagged = self.lagged.take();
-        let out = self.solve_with(lagged.as_ref());
-        self.lagged = lagged;
-        out
+    /// `‖δ‖_M` of the last solve's step (m·√kg).
+    fn m_length(&self) -> f64 {
+        self.step
+            .iter()
+            .zip(&self.dof_mass)
+            .map(|(d, m)| m * d * d)
+            .sum::<f64>()
+            .sqrt()
     }
 
     /// Factorises the projected step matrix as the preconditioner of later estimates.
@@ -282,54 +311,34 @@ impl Estimator {
         self.cholesky = Some(solver);
         // A factor that fails (a non-finite entry) leaves the Jacobi fallback in place.
         self.lagged = factor.ok();
-        self.stale = false;
         Ok(())
     }
 
-    /// CG on the exact step matrix, then on the projected one if the exact one is
-    /// indefinite, preconditioned by `factor` (Jacobi without one): the step's length,
-    /// whether the exact matrix was indefinite, the iterations, and whether the last
-    /// solve converged.
-    fn solve_with(&mut self, factor: Option<&CholeskyFactor>) -> (f64, bool, usize, bool) {
+    /// Jacobi-preconditioned CG on the exact step matrix, then on the projected one if
+    /// the exact one is indefinite: the step's length, whether it is the projected step's,
+    /// the iterations, and whether the last solve converged.
+    fn solve_jacobi(&mut self) -> (f64, bool, usize, bool) {
         let mut iterations = 0;
-        for (matrix, indefinite) in [(&self.exact, false), (&self.projected, true)] {
+        for (matrix, projected) in [(&self.exact, false), (&self.projected, true)] {
             let diagonal: Vec<f64> = matrix.diagonal().collect();
-            let precondition = |r: &[f64], z: &mut [f64]| match factor {
-                Some(f) => {
-                    z.copy_from_slice(r);
-                    f.solve_in_place(z);
+            let jacobi = |r: &[f64], z: &mut [f64]| {
+                for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
+                    // A non-positive diagonal (exact `H` only) falls back to the identity
+                    // scale; the preconditioner must stay SPD.
+                    *z = if *d > 0.0 { r / d } else { *r };
                 }
-                None => {
-                    for ((z, r), d) in z.iter_mut().zip(r).zip(&diagonal) {
-                        // A non-positive diagonal (exact `H` only) falls back to the
-                        // identity scale; the preconditioner must stay SPD.
-                        *z = if *d > 0.0 { r / d } else { *r };
-                    }
-                }
-            };
-            let tolerance = if factor.is_some() {
-                NEWTON_ESTIMATE_TOLERANCE_FACTORED
-            } else {
-                NEWTON_ESTIMATE_TOLERANCE
             };
             let out = weft_linalg::pcg(
                 matrix,
-                precondition,
+                jacobi,
                 &self.grad,
                 &mut self.step,
-                tolerance,
+                NEWTON_ESTIMATE_TOLERANCE,
                 NEWTON_ESTIMATE_ITERATIONS,
             );
             iterations += out.iterations;
             if !out.negative_curvature {
-                let length = self
-                    .step
-                    .iter()
-                    .zip(&self.dof_mass)
-                    .map(|(d, m)| m * d * d)
-                    .sum::<f64>()
-                    .sqrt();
-                return (length, indefinite, iterations, out.converged);
+                return (self.m_length(), projected, iterations, out.converged);
             }
         }
         // The projected `A ⪰ M/Δt²` is positive definite: CG cannot find negative
@@ -389,4 +398,20 @@ impl Estimator {
         }
         best
     }
+}
+
+/// CG on the projected step matrix `a`, preconditioned by a Cholesky `factor` of it or of
+/// an earlier frame's, to [`NEWTON_ESTIMATE_TOLERANCE_FACTORED`] within `cap` iterations.
+fn solve_projected(
+    a: &SymmetricMatrix,
+    factor: &CholeskyFactor,
+    grad: &[f64],
+    step: &mut [f64],
+    cap: usize,
+) -> weft_linalg::CgOutcome {
+    let precondition = |r: &[f64], z: &mut [f64]| {
+        z.copy_from_slice(r);
+        factor.solve_in_place(z);
+    };
+    weft_linalg::pcg(a, precondition, grad, step, NEWTON_ESTIMATE_TOLERANCE_FACTORED, cap)
 }

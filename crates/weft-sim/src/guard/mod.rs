@@ -21,7 +21,7 @@ use crate::scenes::MotionLabel;
 
 use estimate::Estimator;
 pub use estimate::{
-    CERTIFICATE_ITERATIONS, ErrorEstimate, EstimatePreconditioner, NEWTON_ESTIMATE_ITERATIONS, REFRESH_AFTER_ITERATIONS,
+    CERTIFICATE_ITERATIONS, ErrorEstimate, EstimatePreconditioner, LAGGED_FACTOR_ITERATIONS, NEWTON_ESTIMATE_ITERATIONS,
 };
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 

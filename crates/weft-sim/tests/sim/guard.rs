@@ -1,8 +1,8 @@
 //! The guarded roll-out (`weft_sim::guard`, docs/GUARD.md) on the quick mass-spring sheet.
 
 use weft_sim::guard::{
-    Correction, EstimatePreconditioner, Guard, GuardSettings, GuardTolerance, InertialPredictor, Outcome, Rejection, StepInput, Surrogate,
-    SurrogateError,
+    Correction, EstimatePreconditioner, Guard, GuardSettings, GuardTolerance, InertialPredictor, Outcome, Rejection,
+    StepInput, Surrogate, SurrogateError,
 };
 use weft_sim::rng::SplitMix64;
 use weft_sim::{ClothScene, ClothSimulation, Error};
@@ -240,17 +240,21 @@ fn the_newton_step_estimate_tracks_the_true_distance() {
 }
 
 /// `‖A⁻¹ g‖_M` for the step at `x` by a dense direct solve on the free DOFs, with `A` the
-/// step's exact matrix `M/Δt² + H` and `g` its gradient (docs/GUARD.md, Eq. G6).
-fn dense_newton_step_length(integrator: &weft_sim::ImplicitEuler, x: &[f64]) -> f64 {
+/// step's matrix `M/Δt² + H` (`H` projected per element if `projected`) and `g` its
+/// gradient (docs/GUARD.md, Eq. G6).
+fn dense_newton_step_length(integrator: &weft_sim::ImplicitEuler, x: &[f64], projected: bool) -> f64 {
     use std::sync::Arc;
     use weft_linalg::{SymmetricMatrix, SymmetricPattern};
     use weft_sim::energy::{Energy, checked_pairs};
     let n = x.len();
     let terms: Vec<&dyn Energy> = integrator.terms().iter().map(|t| t.as_ref()).collect();
-    let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(n / 3, checked_pairs(n, &terms).unwrap()));
+    let pattern = Arc::new(SymmetricPattern::from_vertex_pairs(
+        n / 3,
+        checked_pairs(n, &terms).unwrap(),
+    ));
     let mut h = SymmetricMatrix::zeros(pattern);
     for t in &terms {
-        t.add_hessian(x, false, &mut h);
+        t.add_hessian(x, projected, &mut h);
     }
     let mut g = vec![0.0; n];
     integrator
@@ -264,15 +268,19 @@ fn dense_newton_step_length(integrator: &weft_sim::ImplicitEuler, x: &[f64]) -> 
     });
     let b = nalgebra::DVector::from_iterator(free.len(), free.iter().map(|&i| g[i]));
     let delta = a.lu().solve(&b).unwrap();
-    free.iter().zip(delta.iter()).map(|(&i, d)| m(i) * d * d).sum::<f64>().sqrt()
+    free.iter()
+        .zip(delta.iter())
+        .map(|(&i, d)| m(i) * d * d)
+        .sum::<f64>()
+        .sqrt()
 }
 
 #[test]
 fn the_lagged_factor_finds_the_newton_step_and_is_reused() {
     // A smooth error (a shift of the free vertices) on every frame: the estimate with the
-    // lagged Cholesky factor must be the exact Newton step's length (a dense solve) to
-    // 1 % (measured: 0.07 %, Jacobi 0.8 %), at least as close as Jacobi's, and one
-    // factor must serve several frames (measured: 2 factorisations in 12 estimates).
+    // lagged Cholesky factor must be the projected Newton step's length (a dense solve)
+    // to 1 % (measured: 0.006 %), Jacobi's the exact or projected one's to 5 % (0.8 %),
+    // and one factor must serve several frames (measured: 2 factorisations in 12).
     let scene = quick_sheet(0.02);
     let frames = truth(&scene);
     let mut sim = ClothSimulation::new(scene.clone(), None).unwrap();
@@ -286,8 +294,7 @@ fn the_lagged_factor_finds_the_newton_step_and_is_reused() {
     };
     let mut jacobi = guard_with(&sim, EstimatePreconditioner::Jacobi);
     let mut lagged = guard_with(&sim, EstimatePreconditioner::LaggedCholesky);
-    let (mut compared, mut factorizations) = (0, 0);
-    let (mut worst_lagged, mut worst_jacobi) = (0.0f64, 0.0f64);
+    let (mut factorizations, mut worst_lagged, mut worst_jacobi) = (0, 0.0f64, 0.0f64);
     for m in 1..frames.len() {
         sim.integrator_mut()
             .set_state(&frames[m - 1], &frames[m.saturating_sub(2)])
@@ -297,24 +304,27 @@ fn the_lagged_factor_finds_the_newton_step_and_is_reused() {
         let x: Vec<f64> = frames[m]
             .iter()
             .enumerate()
-            .map(|(i, v)| if fixed[i] { *v } else { v + 3e-4 * [1.0, -0.5, 0.8][i % 3] })
+            .map(|(i, v)| {
+                if fixed[i] {
+                    *v
+                } else {
+                    v + 3e-4 * [1.0, -0.5, 0.8][i % 3]
+                }
+            })
             .collect();
         let a = jacobi.estimate(integrator, &x).unwrap();
         let b = lagged.estimate(integrator, &x).unwrap();
         assert_eq!(a.factorizations, 0, "Jacobi factorised");
+        assert!(b.projected, "the lagged factor's estimate is the projected step's");
         factorizations += b.factorizations;
-        // Where CG met negative curvature the estimate is the projected step's instead.
-        if !b.indefinite {
-            let exact = dense_newton_step_length(integrator, &x);
-            worst_lagged = worst_lagged.max((b.distance / exact - 1.0).abs());
-            worst_jacobi = worst_jacobi.max((a.distance / exact - 1.0).abs());
-            compared += 1;
-        }
+        let exact = dense_newton_step_length(integrator, &x, a.projected);
+        worst_jacobi = worst_jacobi.max((a.distance / exact - 1.0).abs());
+        let exact = dense_newton_step_length(integrator, &x, true);
+        worst_lagged = worst_lagged.max((b.distance / exact - 1.0).abs());
     }
-    assert!(compared >= 6, "only {compared} frames compared");
     assert!(
-        worst_lagged <= 0.01 && worst_lagged <= worst_jacobi,
-        "Newton step misread by {worst_lagged:.3} with the lagged factor, {worst_jacobi:.3} with Jacobi"
+        worst_lagged <= 0.01 && worst_jacobi <= 0.05,
+        "Newton step misread by {worst_lagged:.4} with the lagged factor, {worst_jacobi:.4} with Jacobi"
     );
     assert!(
         (1..frames.len() - 1).contains(&factorizations),
