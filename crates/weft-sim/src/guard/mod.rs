@@ -11,6 +11,7 @@
 //! it is rejected, counted, and the step is solved from the solver's own start.
 
 mod estimate;
+mod soft_tissue;
 mod surrogate;
 
 use std::time::Instant;
@@ -21,6 +22,7 @@ use crate::scenes::MotionLabel;
 
 use estimate::Estimator;
 pub use estimate::{CERTIFICATE_ITERATIONS, ErrorEstimate, NEWTON_ESTIMATE_ITERATIONS};
+pub use soft_tissue::{GuardedTissueFrame, InteriorCompletion, SkinningCompleted};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 
 /// When a proposal is good enough to pass on.
