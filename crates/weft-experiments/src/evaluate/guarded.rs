@@ -1,5 +1,5 @@
 //! Experiment `guarded`: learned proposals checked by the step's physics (issue 73,
-//! docs/GUARD.md), on `sheet-ms`.
+//! docs/GUARD.md), on `sheet-ms` (this module) and `limb-jiggle` (`guarded_limb`).
 //!
 //! 1. The one-step surrogate: weft-nn's inertial correction is fitted on the `sheet-ms`
 //!    dataset's training frames (the embed experiment's dataset, shared), its ridge weight
@@ -49,7 +49,7 @@ const TOLERANCES: [(f64, &str); 4] = [
 
 /// A guard setting of the dial: its name in the records and the settings (`None`:
 /// unguarded, every proposal passed on).
-fn dial() -> crate::Result<Vec<(String, Option<GuardSettings>)>> {
+pub(super) fn dial() -> crate::Result<Vec<(String, Option<GuardSettings>)>> {
     let mut out = vec![("truth-tolerance".to_string(), Some(GuardSettings::ground_truth()))];
     for (tau, name) in TOLERANCES {
         out.push((name.to_string(), Some(GuardSettings::millimetres(tau)?)));
@@ -58,7 +58,7 @@ fn dial() -> crate::Result<Vec<(String, Option<GuardSettings>)>> {
     Ok(out)
 }
 
-fn rms(v: &[f64]) -> f64 {
+pub(super) fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
@@ -136,19 +136,10 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
              and correction.",
             truth.seconds_per_frame
         ),
-        header: [
-            "method",
-            "M_rms (mm)",
-            "worst frame (mm)",
-            "accepted",
-            "Newton / frame",
-            "s / frame (proposal + guard + correction)",
-            "speed-up",
-        ]
-        .map(String::from)
-        .to_vec(),
+        header: rollout_header(),
         rows,
     });
+    super::guarded_limb::run(ctx, &mut out).context("guarded on limb-jiggle")?;
     Ok(out)
 }
 
@@ -201,75 +192,111 @@ fn estimate_honesty(
 ) -> crate::Result<()> {
     let mut sim = ClothSimulation::new(scene.clone(), None)?;
     let mut guard = Guard::new(sim.integrator(), &scene.name, surrogate, GuardSettings::ground_truth())?;
-    let (mut estimates, mut distances, mut errors) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut certified, mut violations) = (0usize, 0usize);
+    let mut honesty = Honesty::default();
     for m in 1..truth.frames.len() {
         let previous = &truth.frames[m.saturating_sub(2)];
         sim.integrator_mut().set_state(&truth.frames[m - 1], previous)?;
         let prescribed = sim.prescribed_at(m);
-        let integrator = sim.integrator();
-        let input = weft_sim::guard::StepInput {
-            frame: m,
-            dt: integrator.dt(),
-            current: integrator.positions(),
-            previous: integrator.previous_positions(),
-            prescribed: &prescribed,
-        };
-        let mut x = guard
-            .surrogate_mut()
-            .propose(&input)
-            .map_err(|e| crate::Error::Failed(format!("guarded: {name} at frame {m}: {e}")))?;
-        integrator.constrain(&prescribed, &mut x);
-        let e = guard.estimate(integrator, &x)?;
-        let at_truth = guard.estimate(integrator, &truth.frames[m])?;
-        let d = guard.mass_norm(&x, &truth.frames[m]);
-        estimates.push(e.distance);
-        distances.push(d);
-        errors.push(
-            1e3 * (x
-                .iter()
-                .zip(&truth.frames[m])
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                / x.len() as f64)
-                .sqrt(),
-        );
-        if let (true, true) = (e.certified, at_truth.certified) {
-            certified += 1;
-            // The truth is the minimiser only to its tolerance: its own bound covers that.
-            let bound = e.residual_m_inv / e.modulus + at_truth.residual_m_inv / at_truth.modulus;
-            violations += usize::from(d > bound);
-        }
+        let x = propose(&mut guard, sim.integrator(), m, &prescribed)?;
+        honesty.add(&mut guard, sim.integrator(), &x, &truth.frames[m])?;
     }
-    let frames = distances.len();
-    let split = "held-out";
-    for (metric, value, unit) in [
-        ("one-step-m-rms", rms(&errors), "mm"),
-        (
-            "estimate-rank-correlation",
-            weft_linalg::rank_correlation(&estimates, &distances),
-            "1",
-        ),
-        (
-            "estimate-ratio-median",
-            median(
-                estimates
-                    .iter()
-                    .zip(&distances)
-                    .map(|(e, d)| e / d.max(f64::MIN_POSITIVE)),
-            ),
-            "1",
-        ),
-        ("certified-share", certified as f64 / frames.max(1) as f64, "1"),
-        ("bound-violations", violations as f64, "count"),
-    ] {
-        out.record(SCENE, name, metric, value, unit, Timing::default());
-        out.split(split);
-    }
+    honesty.record(out, SCENE, name);
     Ok(())
 }
 
-fn median(values: impl Iterator<Item = f64>) -> f64 {
+/// The surrogate's proposal for step `step` of `integrator` (its history the integrator's
+/// state), with the step's fixed DOFs set as the guard sets them.
+pub(super) fn propose(
+    guard: &mut Guard,
+    integrator: &weft_sim::ImplicitEuler,
+    step: usize,
+    prescribed: &[(usize, f64)],
+) -> weft_sim::Result<Vec<f64>> {
+    let input = weft_sim::guard::StepInput {
+        frame: step,
+        dt: integrator.dt(),
+        current: integrator.positions(),
+        previous: integrator.previous_positions(),
+        prescribed,
+    };
+    let mut x = guard
+        .surrogate_mut()
+        .propose(&input)
+        .map_err(|source| weft_sim::Error::Surrogate {
+            surrogate: format!("{} (step {step})", guard.surrogate().name()),
+            source,
+        })?;
+    integrator.constrain(prescribed, &mut x);
+    Ok(x)
+}
+
+/// The estimate's honesty over proposals, each against the true step's frame
+/// (`estimate_honesty`): Newton-step estimates, true distances, one-step M_rms, and the
+/// certified bound's violations.
+#[derive(Debug, Default)]
+pub(super) struct Honesty {
+    estimates: Vec<f64>,
+    distances: Vec<f64>,
+    errors: Vec<f64>,
+    certified: usize,
+    violations: usize,
+}
+
+impl Honesty {
+    /// Adds proposal `x` of `integrator`'s next step, whose true frame is `truth`.
+    pub(super) fn add(
+        &mut self,
+        guard: &mut Guard,
+        integrator: &weft_sim::ImplicitEuler,
+        x: &[f64],
+        truth: &[f64],
+    ) -> weft_sim::Result<()> {
+        let e = guard.estimate(integrator, x)?;
+        let at_truth = guard.estimate(integrator, truth)?;
+        let d = guard.mass_norm(x, truth);
+        self.estimates.push(e.distance);
+        self.distances.push(d);
+        let sq: f64 = x.iter().zip(truth).map(|(a, b)| (a - b).powi(2)).sum();
+        self.errors.push(1e3 * (sq / x.len() as f64).sqrt());
+        if let (true, true) = (e.certified, at_truth.certified) {
+            self.certified += 1;
+            // The truth is the minimiser only to its tolerance: its own bound covers that.
+            let bound = e.residual_m_inv / e.modulus + at_truth.residual_m_inv / at_truth.modulus;
+            self.violations += usize::from(d > bound);
+        }
+        Ok(())
+    }
+
+    /// Records the figures (split `held-out`) of `scene` and the surrogate `name`.
+    pub(super) fn record(&self, out: &mut ExperimentOutput, scene: &str, name: &str) {
+        let frames = self.distances.len();
+        for (metric, value, unit) in [
+            ("one-step-m-rms", rms(&self.errors), "mm"),
+            (
+                "estimate-rank-correlation",
+                weft_linalg::rank_correlation(&self.estimates, &self.distances),
+                "1",
+            ),
+            (
+                "estimate-ratio-median",
+                median(
+                    self.estimates
+                        .iter()
+                        .zip(&self.distances)
+                        .map(|(e, d)| e / d.max(f64::MIN_POSITIVE)),
+                ),
+                "1",
+            ),
+            ("certified-share", self.certified as f64 / frames.max(1) as f64, "1"),
+            ("bound-violations", self.violations as f64, "count"),
+        ] {
+            out.record(scene, name, metric, value, unit, Timing::default());
+            out.split("held-out");
+        }
+    }
+}
+
+pub(super) fn median(values: impl Iterator<Item = f64>) -> f64 {
     let mut v: Vec<f64> = values.collect();
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
@@ -311,52 +338,98 @@ fn guarded_rollout(
         split[1] += r.seconds.guard;
         split[2] += r.seconds.correction;
     }
-    write_frames(run, &positions)?;
-    let t = *guard.totals();
-    let n = t.frames.max(1) as f64;
-    let seconds = split.iter().sum::<f64>() / n;
-    let m_rms = rms(&errors);
-    let worst = errors.iter().fold(0.0f64, |a, b| a.max(*b));
-    out.record(
-        SCENE,
+    write_frames(run.predictions, run.method, &run.truth.frames, &positions)?;
+    let tally = RolloutTally {
+        scene: SCENE,
         method,
-        "m-rms",
-        m_rms,
-        "mm",
-        Timing::new(seconds, truth.seconds_per_frame),
-    );
-    for (metric, value, unit) in [
-        ("max-frame-m-rms", worst, "mm"),
-        ("accepted-share", t.accepted as f64 / n, "1"),
-        ("newton-iterations-per-frame", t.newton_iterations as f64 / n, "count"),
-        ("guard-seconds-per-frame", split[1] / n, "s"),
-    ] {
-        out.record(SCENE, method, metric, value, unit, Timing::default());
+        errors,
+        split,
+        totals: *guard.totals(),
+        frames: truth.frames.len() - 1,
+        ground_truth_seconds: truth.seconds_per_frame,
+    };
+    Ok(tally.record(out))
+}
+
+/// What a roll-out of the dial measured, per frame of the scene.
+pub(super) struct RolloutTally<'a> {
+    pub scene: &'a str,
+    pub method: &'a str,
+    /// M_rms of each frame against the ground truth's (mm).
+    pub errors: Vec<f64>,
+    /// Seconds in proposal, guard and correction over the roll-out.
+    pub split: [f64; 3],
+    pub totals: weft_sim::GuardTotals,
+    /// Frames of the roll-out (a soft-tissue frame is several guarded steps).
+    pub frames: usize,
+    pub ground_truth_seconds: f64,
+}
+
+impl RolloutTally<'_> {
+    /// Records the roll-out's figures (per frame) and returns its table row.
+    pub(super) fn record(self, out: &mut ExperimentOutput) -> Vec<String> {
+        let (scene, method, t, errors, split) = (self.scene, self.method, self.totals, &self.errors, self.split);
+        let n = self.frames.max(1) as f64;
+        let steps = t.frames.max(1) as f64;
+        let seconds = split.iter().sum::<f64>() / n;
+        let m_rms = rms(errors);
+        let worst = errors.iter().fold(0.0f64, |a, b| a.max(*b));
+        out.record(
+            scene,
+            method,
+            "m-rms",
+            m_rms,
+            "mm",
+            Timing::new(seconds, self.ground_truth_seconds),
+        );
+        for (metric, value, unit) in [
+            ("max-frame-m-rms", worst, "mm"),
+            ("accepted-share", t.accepted as f64 / steps, "1"),
+            ("newton-iterations-per-frame", t.newton_iterations as f64 / n, "count"),
+            ("guard-seconds-per-frame", split[1] / n, "s"),
+        ] {
+            out.record(scene, method, metric, value, unit, Timing::default());
+        }
+        if method.ends_with("unguarded") || method.ends_with("tau-1000um") {
+            out.curves.push(Curve {
+                scene: scene.into(),
+                method: method.into(),
+                frames: (1..=errors.len()).map(|f| f as f64).collect(),
+                error_mm: errors.clone(),
+                error_mm_sd: Vec::new(),
+            });
+        }
+        vec![
+            method.to_string(),
+            format!("{m_rms:.3}"),
+            format!("{worst:.3}"),
+            format!("{}/{}", t.accepted, t.frames),
+            format!("{:.2}", t.newton_iterations as f64 / n),
+            format!(
+                "{:.4} ({:.4} + {:.4} + {:.4})",
+                seconds,
+                split[0] / n,
+                split[1] / n,
+                split[2] / n
+            ),
+            format!("{:.1}×", self.ground_truth_seconds / seconds.max(f64::MIN_POSITIVE)),
+        ]
     }
-    if method.ends_with("unguarded") || method.ends_with("tau-1000um") {
-        out.curves.push(Curve {
-            scene: SCENE.into(),
-            method: method.into(),
-            frames: (1..=errors.len()).map(|f| f as f64).collect(),
-            error_mm: errors.clone(),
-            error_mm_sd: Vec::new(),
-        });
-    }
-    Ok(vec![
-        method.to_string(),
-        format!("{m_rms:.3}"),
-        format!("{worst:.3}"),
-        format!("{}/{}", t.accepted, t.frames),
-        format!("{:.2}", t.newton_iterations as f64 / n),
-        format!(
-            "{:.4} ({:.4} + {:.4} + {:.4})",
-            seconds,
-            split[0] / n,
-            split[1] / n,
-            split[2] / n
-        ),
-        format!("{:.1}×", truth.seconds_per_frame / seconds.max(f64::MIN_POSITIVE)),
-    ])
+}
+
+/// The dial's table header (`RolloutTally::record`'s rows).
+pub(super) fn rollout_header() -> Vec<String> {
+    [
+        "method",
+        "M_rms (mm)",
+        "worst frame (mm)",
+        "accepted",
+        "Newton / frame",
+        "s / frame (proposal + guard + correction)",
+        "speed-up",
+    ]
+    .map(String::from)
+    .to_vec()
 }
 
 /// The no-drift roll-out (module docs, 5): per frame, the guarded frame's M_rms from its own
@@ -444,12 +517,18 @@ fn no_drift(
     Ok(())
 }
 
-/// `positions` (the roll-out's frames after the rest state) and the ground truth's, as
-/// `[frames, vertices, 3]` in metres, to `<predictions>/<method>.safetensors`.
-fn write_frames(run: &Rollout<'_>, positions: &[f64]) -> crate::Result<()> {
-    std::fs::create_dir_all(run.predictions)?;
-    let truth: Vec<f64> = run.truth.frames[1..].concat();
-    let v = run.truth.frames[0].len() / 3;
+/// `positions` (the roll-out's frames after the rest state) and the ground truth's frames
+/// after its first, as `[frames, vertices, 3]` in metres, to
+/// `<predictions>/<method>.safetensors`.
+pub(super) fn write_frames(
+    predictions: &std::path::Path,
+    method: &str,
+    truth_frames: &[Vec<f64>],
+    positions: &[f64],
+) -> crate::Result<()> {
+    std::fs::create_dir_all(predictions)?;
+    let truth: Vec<f64> = truth_frames[1..].concat();
+    let v = truth_frames[0].len() / 3;
     let f = truth.len() / (3 * v).max(1);
     let mut meta = std::collections::HashMap::new();
     meta.insert(
@@ -457,7 +536,7 @@ fn write_frames(run: &Rollout<'_>, positions: &[f64]) -> crate::Result<()> {
         "positions and ground_truth [frames, vertices, 3] in metres, frames 1.. of the held-out roll-out".into(),
     );
     weft_data::files::write_safetensors(
-        &run.predictions.join(format!("{}.safetensors", run.method)),
+        &predictions.join(format!("{method}.safetensors")),
         &[
             weft_data::files::Array::f64("positions", vec![f, v, 3], positions),
             weft_data::files::Array::f64("ground_truth", vec![f, v, 3], &truth),

@@ -11,6 +11,7 @@
 //! it is rejected, counted, and the step is solved from the solver's own start.
 
 mod estimate;
+mod soft_tissue;
 mod surrogate;
 
 use std::time::Instant;
@@ -23,6 +24,7 @@ use estimate::Estimator;
 pub use estimate::{
     CERTIFICATE_ITERATIONS, ErrorEstimate, EstimatePreconditioner, LAGGED_FACTOR_ITERATIONS, NEWTON_ESTIMATE_ITERATIONS,
 };
+pub use soft_tissue::{GuardedTissueFrame, InteriorCompletion, SkinningCompleted};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
 
 /// When a proposal is good enough to pass on.

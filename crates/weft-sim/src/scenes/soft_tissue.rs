@@ -18,6 +18,7 @@ use weft_mesh::limb::{Limb, LimbParams, limb};
 use crate::energies::{ConstantForce, LameParameters, Material, TetElasticity};
 use crate::energy::Energy;
 use crate::error::{Error, Result, check_nonnegative, check_positive};
+use crate::guard::{Guard, GuardedTissueFrame};
 use crate::integrators::implicit_euler::{ImplicitEuler, StepReport};
 use crate::newton::{NewtonSettings, NewtonSolver};
 use crate::rng::SplitMix64;
@@ -523,37 +524,90 @@ impl SoftTissue {
     /// their poses at each substep's end time).
     pub fn step_frame(&mut self) -> Result<FrameReport> {
         let start = std::time::Instant::now();
-        let dt = self.params.frame_dt / self.params.substeps as f64;
-        let t0 = self.time();
-        // Not `with_capacity(substeps)`: the count comes from the user, and a typo must not
-        // become one huge allocation.
-        let mut steps = Vec::new();
-        let positions = self.limb.mesh.positions();
-        let elbow = self.limb.params.joint_position();
-        for k in 1..=self.params.substeps {
-            let transforms = self.motion.bone_transforms(t0 + k as f64 * dt, &elbow);
-            let prescribed: Vec<(usize, f64)> = self
-                .bone_nodes
-                .iter()
-                .flat_map(|&v| {
-                    let b = self.limb.bone[v].expect("bone node without a bone");
-                    let x = transforms[b].apply(&positions[v]);
-                    [(3 * v, x.x), (3 * v + 1, x.y), (3 * v + 2, x.z)]
-                })
-                .collect();
-            steps.push(self.integrator.step(&prescribed)?);
-        }
-        self.frame += 1;
+        let steps = self.step_frame_with(|integrator, _, prescribed| integrator.step(prescribed))?;
         Ok(FrameReport {
             steps,
             seconds: start.elapsed().as_secs_f64(),
         })
     }
 
+    /// The next frame's `substeps` steps, each taken by `step(integrator, s, prescribed)`
+    /// with the bones prescribed at the substep's end time; `s` counts the integrator's
+    /// steps since the settled start (1 for the first substep of frame 1). The one loop of
+    /// [`SoftTissue::step_frame`] (`ImplicitEuler::step`) and of the guarded roll-out
+    /// ([`SoftTissue::step_frame_guarded`]), so both prescribe the same bones.
+    pub fn step_frame_with<R>(
+        &mut self,
+        mut step: impl FnMut(&mut ImplicitEuler, usize, &[(usize, f64)]) -> Result<R>,
+    ) -> Result<Vec<R>> {
+        // Not `with_capacity(substeps)`: the count comes from the user, and a typo must not
+        // become one huge allocation.
+        let mut steps = Vec::new();
+        for k in 1..=self.params.substeps {
+            let prescribed = self.substep_prescribed(k);
+            let s = self.frame * self.params.substeps + k;
+            steps.push(step(&mut self.integrator, s, &prescribed)?);
+        }
+        self.frame += 1;
+        Ok(steps)
+    }
+
+    /// The bone DOFs `(dof, value)` (m) at the end of substep `k` (1..=`substeps`) of the
+    /// next frame: each bone node carried rigidly by its bone's transform.
+    pub fn substep_prescribed(&self, k: usize) -> Vec<(usize, f64)> {
+        let transforms = self.motion.bone_transforms(
+            substep_time(&self.params, self.frame, k),
+            &self.limb.params.joint_position(),
+        );
+        let positions = self.limb.mesh.positions();
+        self.bone_nodes
+            .iter()
+            .flat_map(|&v| {
+                let b = self.limb.bone[v].expect("bone node without a bone");
+                let x = transforms[b].apply(&positions[v]);
+                [(3 * v, x.x), (3 * v + 1, x.y), (3 * v + 2, x.z)]
+            })
+            .collect()
+    }
+
+    /// The next frame under `guard` (docs/GUARD.md, "limb-jiggle"): per substep its
+    /// surrogate proposes the step (`StepInput::frame` is the step count `s` of
+    /// [`SoftTissue::step_frame_with`]), the guard accepts or corrects it with this
+    /// sequence's integrator. `reference` is the ground truth's frame (all nodes), if
+    /// known, for the last substep's true error.
+    pub fn step_frame_guarded(&mut self, guard: &mut Guard, reference: Option<&[f64]>) -> Result<GuardedTissueFrame> {
+        let start = std::time::Instant::now();
+        let last = (self.frame + 1) * self.params.substeps;
+        let reports = self.step_frame_with(|integrator, s, prescribed| {
+            guard.step(integrator, s, prescribed, reference.filter(|_| s == last))
+        })?;
+        Ok(GuardedTissueFrame {
+            reports,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The implicit-Euler integrator (its state is every node's, bones included).
+    pub fn integrator(&self) -> &ImplicitEuler {
+        &self.integrator
+    }
+
+    /// Linear-blend-skinning weight of the forearm per node (the upper arm's is `1 − w`).
+    pub fn forearm_weights(&self) -> &[f64] {
+        &self.forearm_weight
+    }
+
     /// Rest positions of all nodes (flat, m).
     pub fn rest_positions(&self) -> &[f64] {
         &self.rest
     }
+}
+
+/// The time (s) at the end of substep `k` of the frame after frame `frame`, as
+/// [`SoftTissue::step_frame`] poses the bones: `frame · frame_dt + k · frame_dt / substeps`.
+pub fn substep_time(params: &SoftTissueParams, frame: usize, k: usize) -> f64 {
+    let dt = params.frame_dt / params.substeps as f64;
+    frame as f64 * params.frame_dt + k as f64 * dt
 }
 
 /// Linear blend skinning of one point.

@@ -5,6 +5,7 @@ mod drape;
 mod energies;
 mod fem;
 mod guard;
+mod guard_limb;
 mod simulation;
 mod volume_scenes;
 mod warp;
