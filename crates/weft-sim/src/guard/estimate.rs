@@ -27,9 +27,14 @@ const NEWTON_ESTIMATE_TOLERANCE: f64 = 1e-2;
 const NEWTON_ESTIMATE_TOLERANCE_FACTORED: f64 = 1e-3;
 
 /// CG iterations a lagged factor is given before the estimate factorises afresh; more than
-/// half of them also refreshes the factor for the next estimate (docs/GUARD.md, "The
+/// half of them also refreshes the factor for the next estimate, and a failure makes the
+/// following estimates factorise at once, for 1, 2, 4, … frames (docs/GUARD.md, "The
 /// preconditioner").
 pub const LAGGED_FACTOR_ITERATIONS: usize = 16;
+
+/// The most estimates in a row that factorise afresh, after lagged factors failed,
+/// before one is tried again.
+const MAX_LAGGED_BACKOFF: usize = 16;
 
 /// How the Newton-step estimate's CG solve (Eq. G6) is preconditioned.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -107,10 +112,11 @@ pub(crate) struct Estimator {
     /// The symbolic analysis of the step matrix's pattern, made at the first
     /// factorisation.
     cholesky: Option<CholeskySolver>,
-    /// The last factor of the projected step matrix, and whether the next estimate
-    /// factorises afresh instead of trying it.
+    /// The last factor of the projected step matrix; how many more estimates factorise
+    /// afresh without trying it, and the current run of frames skipped after a failure.
     lagged: Option<CholeskyFactor>,
-    stale: bool,
+    skip_lagged: usize,
+    backoff: usize,
 }
 
 impl Estimator {
@@ -135,7 +141,8 @@ impl Estimator {
             preconditioner,
             cholesky: None,
             lagged: None,
-            stale: false,
+            skip_lagged: 0,
+            backoff: 0,
         })
     }
 
@@ -254,27 +261,33 @@ impl Estimator {
             return Ok((length, projected, iterations, 0));
         }
         let mut iterations = 0;
-        let mut lagged_failed = false;
-        if let (Some(lagged), false) = (&self.lagged, self.stale) {
-            let out = solve_projected(
-                &self.projected,
-                lagged,
-                &self.grad,
-                &mut self.step,
-                LAGGED_FACTOR_ITERATIONS,
-            );
-            if out.converged {
-                self.stale = 2 * out.iterations > LAGGED_FACTOR_ITERATIONS;
-                return Ok((self.m_length(), true, out.iterations, 0));
+        match (&self.lagged, self.skip_lagged) {
+            (Some(lagged), 0) => {
+                let out = solve_projected(
+                    &self.projected,
+                    lagged,
+                    &self.grad,
+                    &mut self.step,
+                    LAGGED_FACTOR_ITERATIONS,
+                );
+                if out.converged {
+                    self.backoff = 0;
+                    // A factor that needed most of its iterations is refreshed next time.
+                    self.skip_lagged = usize::from(2 * out.iterations > LAGGED_FACTOR_ITERATIONS);
+                    return Ok((self.m_length(), true, out.iterations, 0));
+                }
+                iterations += out.iterations;
+                // Where frames keep outrunning their predecessor's factor (a wrinkling
+                // sheet), try a lagged one ever more rarely: 1, 2, 4, … frames later.
+                self.backoff = (2 * self.backoff).clamp(1, MAX_LAGGED_BACKOFF);
+                self.skip_lagged = self.backoff;
             }
-            iterations += out.iterations;
-            lagged_failed = true;
+            (Some(_), _) => self.skip_lagged -= 1,
+            (None, _) => {}
         }
         // No factor yet, or the last one is too far from this frame's matrix: a fresh
-        // one solves the step in an iteration or two. Where a lagged factor just failed,
-        // the next frame factorises at once rather than spend the iterations again.
+        // one solves the step in an iteration or two.
         self.refactorize()?;
-        self.stale = lagged_failed;
         let factorizations = 1;
         let Some(fresh) = &self.lagged else {
             // The factorisation failed (a non-finite entry): Jacobi, as without one.
