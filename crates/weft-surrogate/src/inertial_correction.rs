@@ -41,7 +41,7 @@ use crate::error::{Error, Result};
 use crate::pca::PositionPca;
 
 /// The model kind in `config.json`.
-pub const KIND: &str = "inertial-correction";
+pub const KIND: &str = crate::model_dir::INERTIAL_CORRECTION;
 
 /// How the correction is fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

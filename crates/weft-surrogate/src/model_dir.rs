@@ -46,6 +46,10 @@ pub fn read_f64_arrays(path: &Path) -> Result<BTreeMap<String, Vec<f64>>> {
         .collect()
 }
 
+/// The `kind` an inertial correction's `config.json` names
+/// (`weft_surrogate::inertial_correction::KIND`).
+pub const INERTIAL_CORRECTION: &str = "inertial-correction";
+
 /// The kind of model a stored `config.json` belongs to, by the fields only that kind's
 /// configuration has: `drape` (a stamp of `config`, `layer` and the starting weights), `embed`
 /// (`autoencoder`), `altconv` (`variant` and `steps`), `nnwarp` (`material`) or
@@ -59,8 +63,8 @@ pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
         Some("altconv")
     } else if config.get("material").is_some() {
         Some("nnwarp")
-    } else if config.get("kind").and_then(|k| k.as_str()) == Some(crate::inertial_correction::KIND) {
-        Some(crate::inertial_correction::KIND)
+    } else if config.get("kind").and_then(|k| k.as_str()) == Some(INERTIAL_CORRECTION) {
+        Some(INERTIAL_CORRECTION)
     } else {
         None
     }
