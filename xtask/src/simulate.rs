@@ -66,24 +66,6 @@ pub struct SimulateArgs {
     pub certified: bool,
 }
 
-/// The guard's settings from `--tolerance` and `--certified`.
-fn guard_settings(tolerance: Option<&str>, certified: bool) -> anyhow::Result<weft_sim::guard::GuardSettings> {
-    use weft_sim::guard::{Acceptance, GuardSettings};
-    let mut s = match tolerance {
-        None | Some("truth") => GuardSettings::ground_truth(),
-        Some(t) => {
-            let mm: f64 = t
-                .parse()
-                .map_err(|_| anyhow::anyhow!("--tolerance {t:?}: a number of millimetres or `truth`"))?;
-            GuardSettings::millimetres(mm)?
-        }
-    };
-    if certified {
-        s.acceptance = Acceptance::CertifiedBound;
-    }
-    Ok(s)
-}
-
 pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     let mut loaded = weft_sim::load(&args.scene, args.quick)?;
     if let Some(f) = args.frames {
@@ -99,8 +81,8 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     overrides.apply(&mut loaded.scene)?;
     let out = &args.out;
     if let Some(dir) = &args.surrogate {
-        let settings = guard_settings(args.tolerance.as_deref(), args.certified)?;
-        let surrogate = weft_nn::inertial_correction::load_surrogate(dir)?;
+        let settings = weft_data::simulate::guard_settings(args.tolerance.as_deref(), args.certified)?;
+        let surrogate = weft_surrogate::load_surrogate(dir)?;
         let run = weft_data::simulate::simulate_guarded_into(&loaded, surrogate, settings, out, args.quiet)?;
         let t = &run.totals;
         eprintln!(

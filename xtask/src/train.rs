@@ -237,7 +237,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
             say(DrapeJob::new(a.common.params(&a.data, &a.out), drape)?)
         }
         TrainCommand::InertialCorrection(a) => {
-            let lines = weft_nn::inertial_correction::fit_directory(&a.data, &a.out, a.config.as_deref())?;
+            let lines = weft_surrogate::fit_directory(&a.data, &a.out, a.config.as_deref())?;
             lines.iter().for_each(|line| eprintln!("{line}"));
             Ok(())
         }

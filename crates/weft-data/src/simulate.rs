@@ -178,18 +178,47 @@ pub struct GuardedRun {
     pub per_frame: Vec<weft_sim::guard::GuardReport>,
 }
 
+/// The guard's settings from a command's tolerance — millimetres (mass-weighted RMS per
+/// coordinate) or `truth` (the ground truth's own test, also when `None`) — and whether
+/// to accept on the certified bound only. A tolerance that is not a positive, finite
+/// number of millimetres is refused.
+pub fn guard_settings(tolerance: Option<&str>, certified: bool) -> Result<weft_sim::guard::GuardSettings> {
+    use weft_sim::guard::{Acceptance, GuardSettings};
+    let mut s = match tolerance.map(str::trim) {
+        None | Some("truth") => GuardSettings::ground_truth(),
+        Some(t) => {
+            let mm: f64 = t
+                .parse()
+                .map_err(|_| Error::Invalid(format!("guard tolerance {t:?}: a number of millimetres or `truth`")))?;
+            GuardSettings::millimetres(mm)?
+        }
+    };
+    if certified {
+        s.acceptance = Acceptance::CertifiedBound;
+    }
+    Ok(s)
+}
+
+/// A guarded roll-out held in memory ([`simulate_guarded`]).
+#[derive(Debug)]
+pub struct GuardedRollout {
+    pub run: GuardedRun,
+    /// Flat positions `[F + 1, V, 3]` (m), the initial state first.
+    pub positions: Vec<f64>,
+    /// The cloth's rest mesh.
+    pub rest: weft_mesh::TriMesh,
+}
+
 /// Runs the cloth scene `loaded` with `surrogate` proposing every frame under a guard of
-/// `settings` (docs/GUARD.md) and writes `out`: `scene.toml`, `rest.obj`,
-/// `frames.safetensors` (`positions` `[F + 1, V, 3]` in m, rest state first) and
-/// `guard.json` ([`GuardedRun`]). Only cloth scenes have a guard today; another kind is
-/// refused by name.
-pub fn simulate_guarded_into(
+/// `settings` (docs/GUARD.md), `bar` counting frames. Only cloth scenes have a guard
+/// today; another kind is refused by name, as are a surrogate of another mesh, scene or
+/// time step and bad settings (weft-sim's `Guard::new`).
+pub fn simulate_guarded(
     loaded: &LoadedScene,
     surrogate: Box<dyn weft_sim::guard::Surrogate>,
     settings: weft_sim::guard::GuardSettings,
-    out: &Path,
-    quiet: bool,
-) -> Result<GuardedRun> {
+    bar: &indicatif::ProgressBar,
+) -> Result<GuardedRollout> {
     let AnyScene::Cloth(scene) = &loaded.scene else {
         return Err(Error::Invalid(format!(
             "scene {}: a guarded roll-out needs a cloth scene (implicit Euler); volumes and soft tissue have no guard \
@@ -197,15 +226,10 @@ pub fn simulate_guarded_into(
             loaded.scene.name()
         )));
     };
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut sim = weft_sim::ClothSimulation::new(scene.clone(), loaded.base_dir.as_deref())?;
     let mut guard = weft_sim::guard::Guard::new(sim.integrator(), &scene.name, surrogate, settings)?;
-    write_text(&out.join("scene.toml"), &loaded.scene.to_toml()?)?;
-    let mesh = sim.mesh();
-    weft_mesh::io::write_obj(&out.join("rest.obj"), mesh.positions(), mesh.faces())?;
-    let v = mesh.num_vertices();
+    let rest = sim.mesh().clone();
     let mut positions = sim.integrator().positions().to_vec();
-    let bar = progress_bar(quiet, scene.frames as u64, &scene.name, "frames")?;
     let (clock, mut per_frame) = (std::time::Instant::now(), Vec::new());
     for _ in 0..scene.frames {
         let f = sim.step_guarded(&mut guard, None)?;
@@ -213,24 +237,46 @@ pub fn simulate_guarded_into(
         per_frame.push(f.report);
         bar.inc(1);
     }
-    bar.finish_and_clear();
-    let f = positions.len() / (3 * v);
-    write_safetensors(
-        &out.join("frames.safetensors"),
-        &[crate::files::Array::f64("positions", vec![f, v, 3], &positions)],
-        Default::default(),
-    )?;
     let run = GuardedRun {
         scene: scene.name.clone(),
         surrogate: guard.surrogate().name().to_string(),
         settings,
-        vertices: v,
+        vertices: rest.num_vertices(),
         total_seconds: clock.elapsed().as_secs_f64(),
         totals: *guard.totals(),
         per_frame,
     };
-    write_json(&out.join("guard.json"), &run)?;
-    Ok(run)
+    Ok(GuardedRollout { run, positions, rest })
+}
+
+/// [`simulate_guarded`] written to `out`: `scene.toml`, `rest.obj`, `frames.safetensors`
+/// (`positions` `[F + 1, V, 3]` in m, the initial state first) and `guard.json`
+/// ([`GuardedRun`]).
+pub fn simulate_guarded_into(
+    loaded: &LoadedScene,
+    surrogate: Box<dyn weft_sim::guard::Surrogate>,
+    settings: weft_sim::guard::GuardSettings,
+    out: &Path,
+    quiet: bool,
+) -> Result<GuardedRun> {
+    let bar = progress_bar(quiet, loaded.scene.frames() as u64, loaded.scene.name(), "frames")?;
+    let rollout = simulate_guarded(loaded, surrogate, settings, &bar)?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    write_text(&out.join("scene.toml"), &loaded.scene.to_toml()?)?;
+    let (rest, v) = (&rollout.rest, rollout.rest.num_vertices());
+    weft_mesh::io::write_obj(&out.join("rest.obj"), rest.positions(), rest.faces())?;
+    write_safetensors(
+        &out.join("frames.safetensors"),
+        &[crate::files::Array::f64(
+            "positions",
+            vec![rollout.positions.len() / (3 * v), v, 3],
+            &rollout.positions,
+        )],
+        Default::default(),
+    )?;
+    write_json(&out.join("guard.json"), &rollout.run)?;
+    Ok(rollout.run)
 }
 
 /// The surface written per frame with `obj`, as (faces, surface vertex → recorded vertex)

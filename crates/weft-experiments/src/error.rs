@@ -10,6 +10,8 @@ pub enum Error {
     #[error(transparent)]
     Nn(#[from] weft_nn::Error),
     #[error(transparent)]
+    Surrogate(#[from] weft_surrogate::Error),
+    #[error(transparent)]
     Sim(#[from] weft_sim::Error),
     #[error(transparent)]
     Mesh(#[from] weft_mesh::Error),

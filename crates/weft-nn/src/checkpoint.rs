@@ -39,17 +39,6 @@ fn write_safetensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<(
     std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
 }
 
-/// Writes named tensors (a model's non-parameter arrays, e.g. fitted bases) to `path`
-/// through a temporary name.
-pub fn write_tensors(path: &Path, tensors: BTreeMap<String, Tensor>) -> Result<()> {
-    write_safetensors(path, tensors)
-}
-
-/// Reads every tensor of a safetensors file written by [`write_tensors`], on the CPU.
-pub fn read_tensors(path: &Path) -> Result<BTreeMap<String, Tensor>> {
-    read_safetensors_on(path, &candle_core::Device::Cpu)
-}
-
 fn read_safetensors(path: &Path, params: &ParamStore) -> Result<BTreeMap<String, Tensor>> {
     read_safetensors_on(path, params.device())
 }
@@ -130,56 +119,12 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
 }
 
 /// Reads a JSON file of a model directory; a file that does not parse is a checkpoint
-/// error naming it.
+/// error naming it (weft-surrogate's reader, the one for every model directory).
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| io_error(path, e))?;
-    serde_json::from_str(&text).map_err(|e| Error::Checkpoint {
-        path: path.display().to_string(),
-        reason: e.to_string(),
-    })
+    Ok(weft_surrogate::model_dir::read_json(path)?)
 }
 
-/// The kind of model a stored `config.json` belongs to, by the fields only that kind's
-/// configuration has: `drape` (a stamp of `config`, `layer` and the starting weights), `embed`
-/// (`autoencoder`), `altconv` (`variant` and `steps`), `nnwarp` (`material`) or
-/// `inertial-correction` (its `kind`).
-pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
-    if config.get("config").is_some() && config.get("layer").is_some() {
-        Some("drape")
-    } else if config.get("autoencoder").is_some() {
-        Some("embed")
-    } else if config.get("variant").is_some() && config.get("steps").is_some() {
-        Some("altconv")
-    } else if config.get("material").is_some() {
-        Some("nnwarp")
-    } else if config.get("kind").and_then(|k| k.as_str()) == Some(crate::inertial_correction::KIND) {
-        Some(crate::inertial_correction::KIND)
-    } else {
-        None
-    }
-}
-
-/// Checks that the model directory `dir` holds an `expected` model (see
-/// [`stored_model_kind`]): a directory of another kind is an error naming both kinds,
-/// rather than whatever field of the other configuration fails to parse first. A
-/// directory whose kind is not recognised passes (its own loader reports what is wrong).
-pub fn check_model_kind(dir: &Path, expected: &'static str) -> Result<()> {
-    let path = dir.join("config.json");
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(());
-    };
-    let kind = serde_json::from_str::<serde_json::Value>(&text)
-        .ok()
-        .as_ref()
-        .and_then(stored_model_kind);
-    match kind {
-        Some(k) if k != expected => Err(Error::Checkpoint {
-            path: path.display().to_string(),
-            reason: format!("{} holds a `{k}` model, not a `{expected}` one", dir.display()),
-        }),
-        _ => Ok(()),
-    }
-}
+pub use weft_surrogate::model_dir::{check_model_kind, stored_model_kind};
 
 /// Refuses to continue a model directory trained under another configuration:
 /// `continues` says whether the stored one (`path`) trains like the asked one but for its

@@ -19,6 +19,10 @@ pub enum Error {
     /// A dense or sparse solve failed (a fit's normal equations).
     #[error(transparent)]
     Linalg(#[from] weft_linalg::Error),
+    /// A closed-form surrogate or the PCA failed (weft-surrogate), or a model directory
+    /// is of another kind.
+    #[error(transparent)]
+    Surrogate(#[from] weft_surrogate::Error),
     /// Writing a mesh file failed.
     #[error(transparent)]
     Mesh(#[from] weft_mesh::Error),

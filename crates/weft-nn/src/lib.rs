@@ -23,7 +23,8 @@
 //!   linear baseline for reduced simulation;
 //! - [`inertial_correction`]: a learned one-step surrogate for weft-sim's guard — the
 //!   inertial predictor plus a ridge-regressed correction in a PCA subspace of its
-//!   residuals, fitted in closed form (no candle);
+//!   residuals, fitted in closed form; it and [`pca`] are weft-surrogate's, re-exported,
+//!   so what steps a scene under the guard needs no candle;
 //! - [`ik`]: cloth inverse kinematics in the embedding's latent space (Tan et al. §V-A)
 //!   beside the same potential minimised over every vertex;
 //! - [`metrics`]: the error measures the experiments report (M_RMS, STED, nDCG).
@@ -93,13 +94,11 @@ pub mod error;
 pub mod fast;
 pub mod graph;
 pub mod ik;
-pub mod inertial_correction;
 pub mod layers;
 pub mod metrics;
 pub mod nnwarp;
 pub mod ops;
 pub mod params;
-pub mod pca;
 pub mod pca_simulator;
 pub mod progress;
 pub mod train_job;
@@ -108,6 +107,9 @@ pub mod trainer;
 
 pub use candle_core::Device;
 pub use error::{Error, Result};
+/// The closed-form surrogates live below this crate (weft-surrogate, no candle) and keep
+/// their paths here.
+pub use weft_surrogate::{inertial_correction, pca};
 
 /// Which implementation computes a model's training passes: the fused kernels with
 /// hand-written backward passes, or candle's autograd through the same model built from

@@ -130,6 +130,18 @@ pub fn data(e: weft_data::Error) -> PyErr {
     let message = e.to_string();
     match e {
         weft_data::Error::Io { .. } => PyOSError::new_err(message),
+        weft_data::Error::Sim(s) => sim(s),
+        _ => PyValueError::new_err(message),
+    }
+}
+
+/// A surrogate's fit, model directory or kind: files are `OSError`s, everything else
+/// (bad settings, a model of another kind, parts that do not fit) a `ValueError`.
+pub fn surrogate(e: weft_surrogate::Error) -> PyErr {
+    let message = e.to_string();
+    match e {
+        weft_surrogate::Error::Io { .. } => PyOSError::new_err(message),
+        weft_surrogate::Error::Data(d) => data(d),
         _ => PyValueError::new_err(message),
     }
 }

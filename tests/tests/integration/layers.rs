@@ -153,3 +153,36 @@ fn only_weft_nn_depends_on_candle() {
         }
     }
 }
+
+/// The crates whose invariant in docs/ARCHITECTURE.md is "no candle" although the layer
+/// order alone would let them reach it: weft-py sits on the top layer beside xtask, and
+/// weft-surrogate exists so that the guard's surrogates load without candle.
+const CANDLE_FREE: [&str; 2] = ["weft-surrogate", "weft-py"];
+
+#[test]
+fn the_candle_free_crates_reach_neither_candle_nor_weft_nn_through_other_crates() {
+    let members = members();
+    for name in CANDLE_FREE {
+        // Normal dependencies only, followed through workspace members.
+        let (mut seen, mut todo) = (
+            std::collections::BTreeSet::new(),
+            vec![(name.to_string(), name.to_string())],
+        );
+        while let Some((crate_name, path)) = todo.pop() {
+            let manifest = &members[&crate_name];
+            for (table, dep) in dependencies(manifest) {
+                if table != "dependencies" || !seen.insert(dep.clone()) {
+                    continue;
+                }
+                let path = format!("{path} → {dep}");
+                assert!(
+                    dep != "weft-nn" && !dep.starts_with("candle"),
+                    "{path}: {name} must not depend on candle (docs/ARCHITECTURE.md)"
+                );
+                if members.contains_key(&dep) {
+                    todo.push((dep, path));
+                }
+            }
+        }
+    }
+}

@@ -14,5 +14,4 @@ mod altconv;
 mod base;
 mod drape;
 mod embed_gradients;
-mod inertial_correction;
 mod projection_ops;

@@ -7,7 +7,8 @@ raises typed exceptions:
   batches, with their vector-Jacobian products (for JAX or any framework);
 - ``weft.torch``: the same layers as ``torch.nn.Module``s over autograd functions;
 - ``weft.mesh``: built-in meshes and mesh files;
-- ``weft.simulate``: a built-in scene or a scene TOML file, frames as arrays;
+- ``weft.simulate``: a built-in scene or a scene TOML file, frames as arrays; with a
+  surrogate (``weft.train_inertial_correction``) and a tolerance, under the guard;
 - ``weft.acap``: ACAP deformation features and their Poisson inverse;
 - ``weft.datasets``: a weft dataset (manifest checksums verified) as arrays.
 
@@ -31,7 +32,7 @@ def _report(self):
 SolverError.report = property(_report)
 
 from . import acap, datasets, mesh, proj  # noqa: E402
-from .sim import scene_names, simulate  # noqa: E402
+from .sim import scene_names, simulate, train_inertial_correction  # noqa: E402
 
 __all__ = [
     "SolverError",
@@ -41,4 +42,5 @@ __all__ = [
     "proj",
     "scene_names",
     "simulate",
+    "train_inertial_correction",
 ]

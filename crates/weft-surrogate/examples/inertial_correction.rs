@@ -5,14 +5,14 @@
 //!
 //! ```sh
 //! cargo xtask dataset sheet-ms --size quick --out /tmp/q-sheet-ms
-//! cargo run --release -p weft-nn --example inertial_correction -- /tmp/q-sheet-ms [FRAMES]
+//! cargo run --release -p weft-surrogate --example inertial_correction -- /tmp/q-sheet-ms [FRAMES]
 //! ```
 //! The replays run the first `FRAMES` frames (default: all) of every sequence.
 
 use weft_data::ClothDataset;
-use weft_nn::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
 use weft_sim::ClothSimulation;
 use weft_sim::guard::{Guard, GuardSettings, InertialPredictor, Surrogate};
+use weft_surrogate::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt()

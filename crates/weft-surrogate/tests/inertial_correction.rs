@@ -1,12 +1,12 @@
-//! The inertial correction (`weft_nn::inertial_correction`, docs/GUARD.md): an exact fit
+//! The inertial correction (`weft_surrogate::inertial_correction`, docs/GUARD.md): an exact fit
 //! where the residual is linear in the features, the model directory's round trip, and
 //! its use under weft-sim's guard with typed errors for mismatches.
 
 use weft_data::{ClothDataset, ClothSequence, is_validation_frame};
-use weft_nn::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
 use weft_sim::guard::{Guard, GuardSettings, StepInput, Surrogate};
 use weft_sim::rng::SplitMix64;
 use weft_sim::{ClothScene, Error as SimError};
+use weft_surrogate::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
 
 fn quick_scene() -> ClothScene {
     ClothScene::builtin("sheet-ms", true).unwrap()

@@ -6,6 +6,8 @@
 //! principal direction with variance `λ`. This costs O(F² · 3V) instead of an SVD of the
 //! F × 3V matrix.
 
+use std::collections::BTreeMap;
+
 use nalgebra::{DMatrix, SymmetricEigen};
 
 use crate::error::{Error, Result};
@@ -81,42 +83,29 @@ impl PositionPca {
         self.mean.len()
     }
 
-    /// The fit as f64 tensors named `<name>.mean` `[3V]`, `<name>.components` `[k, 3V]`
+    /// The fit as f64 arrays named `<name>.mean` `[3V]`, `<name>.components` `[k, 3V]`
     /// and `<name>.variances` `[k]`, for a model directory's safetensors file.
-    pub fn to_tensors(&self, name: &str) -> Result<Vec<(String, candle_core::Tensor)>> {
-        let device = &candle_core::Device::Cpu;
+    pub fn to_arrays(&self, name: &str) -> Vec<weft_data::files::Array> {
+        use weft_data::files::Array;
         let (k, n) = (self.components.len(), self.mean.len());
-        Ok(vec![
-            (
-                format!("{name}.mean"),
-                candle_core::Tensor::from_vec(self.mean.clone(), n, device)?,
-            ),
-            (
-                format!("{name}.components"),
-                candle_core::Tensor::from_vec(self.components.concat(), (k, n), device)?,
-            ),
-            (
-                format!("{name}.variances"),
-                candle_core::Tensor::from_vec(self.variances.clone(), k, device)?,
-            ),
-        ])
+        vec![
+            Array::f64(&format!("{name}.mean"), vec![n], &self.mean),
+            Array::f64(&format!("{name}.components"), vec![k, n], &self.components.concat()),
+            Array::f64(&format!("{name}.variances"), vec![k], &self.variances),
+        ]
     }
 
-    /// The fit [`PositionPca::to_tensors`] wrote under `name`; `path` names the file in
+    /// The fit [`PositionPca::to_arrays`] wrote under `name`; `path` names the file in
     /// errors.
-    pub fn from_tensors(
-        tensors: &std::collections::BTreeMap<String, candle_core::Tensor>,
-        name: &str,
-        path: &str,
-    ) -> Result<Self> {
+    pub fn from_arrays(arrays: &BTreeMap<String, Vec<f64>>, name: &str, path: &str) -> Result<Self> {
         let get = |part: &str| -> Result<Vec<f64>> {
-            let t = tensors
+            arrays
                 .get(&format!("{name}.{part}"))
+                .cloned()
                 .ok_or_else(|| Error::Checkpoint {
                     path: path.into(),
-                    reason: format!("no tensor {name}.{part}"),
-                })?;
-            Ok(t.flatten_all()?.to_dtype(candle_core::DType::F64)?.to_vec1::<f64>()?)
+                    reason: format!("no array {name}.{part}"),
+                })
         };
         let (mean, flat, variances) = (get("mean")?, get("components")?, get("variances")?);
         let n = mean.len();

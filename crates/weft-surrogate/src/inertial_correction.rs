@@ -41,7 +41,7 @@ use crate::error::{Error, Result};
 use crate::pca::PositionPca;
 
 /// The model kind in `config.json`.
-pub const KIND: &str = "inertial-correction";
+pub const KIND: &str = crate::model_dir::INERTIAL_CORRECTION;
 
 /// How the correction is fitted.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -163,8 +163,8 @@ fn raw_features(positions: &PositionPca, p2: &[f64], p1: &[f64], grasp: &[usize]
 
 /// M_rms of one frame (mm): `1000 · ‖a − b‖ / √(3V)`.
 fn frame_mm(a: &[f64], b: &[f64]) -> f64 {
-    let (sq, _) = crate::metrics::frame_error(a, b, &(0..a.len() / 3).collect::<Vec<_>>());
-    1e3 * (sq / a.len().max(1) as f64).sqrt()
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    1e3 * (weft_linalg::dot(&d, &d) / a.len().max(1) as f64).sqrt()
 }
 
 impl InertialCorrection {
@@ -397,21 +397,20 @@ impl InertialCorrection {
             path: dir.display().to_string(),
             source: e,
         })?;
-        let mut tensors = std::collections::BTreeMap::new();
-        tensors.extend(self.positions.to_tensors("positions")?);
-        tensors.extend(self.corrections.to_tensors("corrections")?);
-        crate::checkpoint::write_tensors(&dir.join("bases.safetensors"), tensors)?;
-        crate::checkpoint::write_json(&dir.join("config.json"), &self.meta)
+        let mut arrays = self.positions.to_arrays("positions");
+        arrays.extend(self.corrections.to_arrays("corrections"));
+        weft_data::files::write_safetensors(&dir.join("bases.safetensors"), &arrays, Default::default())?;
+        Ok(weft_data::files::write_json(&dir.join("config.json"), &self.meta)?)
     }
 
     /// Reads a model directory written by [`InertialCorrection::save`].
     pub fn load(dir: &Path) -> Result<Self> {
-        crate::checkpoint::check_model_kind(dir, KIND)?;
-        let meta: Meta = crate::checkpoint::read_json(&dir.join("config.json"))?;
-        let arrays = crate::checkpoint::read_tensors(&dir.join("bases.safetensors"))?;
+        crate::model_dir::check_model_kind(dir, KIND)?;
+        let meta: Meta = crate::model_dir::read_json(&dir.join("config.json"))?;
+        let arrays = crate::model_dir::read_f64_arrays(&dir.join("bases.safetensors"))?;
         let path = dir.display().to_string();
-        let positions = PositionPca::from_tensors(&arrays, "positions", &path)?;
-        let corrections = PositionPca::from_tensors(&arrays, "corrections", &path)?;
+        let positions = PositionPca::from_arrays(&arrays, "positions", &path)?;
+        let corrections = PositionPca::from_arrays(&arrays, "corrections", &path)?;
         let features = 2 * positions.num_components() + 6 * meta.grasp.len();
         if meta.feature_mean.len() != features
             || meta.feature_scale.len() != features
@@ -446,13 +445,10 @@ pub fn fit_directory(data: &Path, out: &Path, config: Option<&Path>) -> Result<V
         });
     }
     let settings: InertialCorrectionSettings = match config {
-        Some(c) => crate::checkpoint::read_json(c)?,
+        Some(c) => crate::model_dir::read_json(c)?,
         None => InertialCorrectionSettings::default(),
     };
-    let dataset = ClothDataset::load(data).map_err(|e| Error::Load {
-        path: data.display().to_string(),
-        source: Box::new(e.into()),
-    })?;
+    let dataset = ClothDataset::load(data)?;
     let clock = std::time::Instant::now();
     let model = InertialCorrection::fit(&dataset, &settings)?;
     model.save(out)?;
@@ -488,8 +484,8 @@ pub fn fit_directory(data: &Path, out: &Path, config: Option<&Path>) -> Result<V
 /// directory of another kind (the embedding, NNWarp, the limb or drape models) is refused
 /// by name rather than misread.
 pub fn load_surrogate(dir: &Path) -> Result<Box<dyn weft_sim::guard::Surrogate>> {
-    let config: serde_json::Value = crate::checkpoint::read_json(&dir.join("config.json"))?;
-    match crate::checkpoint::stored_model_kind(&config) {
+    let config: serde_json::Value = crate::model_dir::read_json(&dir.join("config.json"))?;
+    match crate::model_dir::stored_model_kind(&config) {
         Some(KIND) => Ok(Box::new(InertialCorrection::load(dir)?)),
         other => Err(Error::Checkpoint {
             path: dir.display().to_string(),
