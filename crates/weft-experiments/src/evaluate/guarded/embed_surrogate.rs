@@ -37,11 +37,11 @@ pub(super) fn embed_rows(
     rows: &mut Vec<Vec<String>>,
 ) -> crate::Result<()> {
     let Some(dir) = trained_model(ctx) else {
-        out.notes.push(format!(
-            "guarded: no embed model with its weights under {} (run the `embed` experiment first, e.g. `--only \
-             embed,guarded`); the embed surrogate's rows are skipped",
-            ctx.out.join("embed").display()
-        ));
+        out.notes.push(
+            "guarded: no embed model with its weights under OUT/embed (run the `embed` experiment first, e.g. \
+             `--only embed,guarded`); the embed surrogate's rows are skipped"
+                .into(),
+        );
         return Ok(());
     };
     let mut surrogate = EmbedSurrogate::load(&dir, data.clone())?;
@@ -63,8 +63,9 @@ pub(super) fn embed_rows(
         None => "no inertial row to compare".into(),
     };
     out.notes.push(format!(
-        "guarded: the embed surrogate ({}) has a one-step M_rms of {embed:.3} mm on the {} test frames of {}, and {verdict}",
-        dir.display(),
+        "guarded: the embed surrogate (OUT/{}) has a one-step M_rms of {embed:.3} mm on the {} test frames of {}, and \
+         {verdict}",
+        dir.strip_prefix(&ctx.out).unwrap_or(&dir).display(),
         errors.len(),
         data.name
     ));
