@@ -19,6 +19,8 @@
 //!    against its own step's minimiser (Newton from the same accepted history to the
 //!    truth's tolerance), beside the unguarded roll-out's distance from the truth.
 
+mod embed_surrogate;
+
 use std::time::Instant;
 
 use weft_data::ClothDataset;
@@ -126,6 +128,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
             rows.push(guarded_rollout(&mut out, &run, surrogate, settings)?);
         }
     }
+    embed_surrogate::embed_rows(ctx, &mut out, &data, &scene, &truth, &mut rows)?;
     no_drift(ctx, &mut out, &scene, &model)?;
     out.tables.push(Table {
         title: format!("Guarded roll-outs of {SCENE}"),

@@ -8,6 +8,8 @@
 //! - `training`: the three training stages (§VI-A) on a cloth dataset ([`EmbedData`],
 //!   [`EmbedModel`], [`train_model`]);
 //! - `runtime`: the latent roll-out simulation (§V-B, [`LatentRollout`]);
+//! - `surrogate`: the latent simulator one step at a time from accepted frames, as a
+//!   surrogate of weft-sim's guard ([`EmbedSurrogate`], docs/GUARD.md);
 //! - `gradients`: each loss term's gradient norm on the decoder and λ_ephys calibrated
 //!   from them ([`decoder_gradient_norms`], [`calibrate_ephys`]; issue 71).
 //!
@@ -18,9 +20,11 @@ mod fused;
 mod gradients;
 mod model;
 mod runtime;
+mod surrogate;
 mod training;
 
 pub use gradients::*;
 pub use model::*;
 pub use runtime::*;
+pub use surrogate::*;
 pub use training::*;

@@ -78,37 +78,67 @@ impl<'a> LatentRollout<'a> {
 
     /// [`LatentRollout::step`] with the time of each stage.
     pub fn step_profiled(&mut self, q: &[f64]) -> Result<(Vec<f64>, FrameProfile)> {
-        let pins = self.inverse.pins().len();
-        if q.len() != 3 * pins {
-            return Err(Error::Shape {
-                what: "roll-out controls",
-                expected: format!("{} values (3 per grasped vertex)", 3 * pins),
-                got: format!("{}", q.len()),
-            });
-        }
+        check_controls(&self.inverse, q)?;
         let mut profile = FrameProfile::default();
         let t = Instant::now();
         let qt = convert::f64_to_tensor("roll-out controls", q, &[1, q.len()], &Device::Cpu)?;
         let z = self.simulator.step(&self.previous, &self.current, &qt)?;
         profile.latent_step = t.elapsed();
-        let t = Instant::now();
-        let (y, layers) = self.autoencoder.decode_timed(&z)?;
-        let flat: Vec<f32> = y.flatten_all()?.to_vec1()?;
-        profile.decoder = t.elapsed();
-        profile.decoder_layers = layers;
-        let t = Instant::now();
-        let normalised = convert::f32_to_f64("decoded features", &flat)?;
-        let features: Vec<Feature> = normalised
-            .chunks_exact(9)
-            .map(|f| self.normalization.denormalize(&std::array::from_fn(|d| f[d])))
-            .collect();
-        let gradients = self.inverse.deformation_gradients(&features)?;
-        profile.rotations = t.elapsed();
-        let t = Instant::now();
-        let pin_positions: Vec<Vector3<f64>> = q.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect();
-        let p = self.inverse.positions_from_gradients(&gradients, &pin_positions)?;
-        profile.solve = t.elapsed();
+        let p = decode_profiled(
+            self.autoencoder,
+            &self.inverse,
+            &self.normalization,
+            &z,
+            q,
+            &mut profile,
+        )?;
         self.previous = std::mem::replace(&mut self.current, z);
-        Ok((p.iter().flat_map(|v| [v.x, v.y, v.z]).collect(), profile))
+        Ok((p, profile))
     }
+}
+
+/// The controls `q` checked against the pseudo-inverse: 3 values per pin.
+fn check_controls(inverse: &PoissonPseudoInverse, q: &[f64]) -> Result<()> {
+    let pins = inverse.pins().len();
+    if q.len() != 3 * pins {
+        return Err(Error::Shape {
+            what: "roll-out controls",
+            expected: format!("{} values (3 per grasped vertex)", 3 * pins),
+            got: format!("{}", q.len()),
+        });
+    }
+    Ok(())
+}
+
+/// `ACAP⁻¹ ∘ D` of one code `z` (`[1, latent]`), pinned at the grasped positions `q` (3 per
+/// pin, in the pseudo-inverse's pin order): flat positions (m). Fills `profile`'s decoder,
+/// rotation and solve times. The one decode of the roll-out ([`LatentRollout`]) and of the
+/// guard's surrogate ([`super::EmbedSurrogate`]), so the two cannot drift apart.
+pub(super) fn decode_profiled(
+    autoencoder: &MeshAutoencoder,
+    inverse: &PoissonPseudoInverse,
+    normalization: &FeatureNormalization,
+    z: &Tensor,
+    q: &[f64],
+    profile: &mut FrameProfile,
+) -> Result<Vec<f64>> {
+    check_controls(inverse, q)?;
+    let t = Instant::now();
+    let (y, layers) = autoencoder.decode_timed(z)?;
+    let flat: Vec<f32> = y.flatten_all()?.to_vec1()?;
+    profile.decoder = t.elapsed();
+    profile.decoder_layers = layers;
+    let t = Instant::now();
+    let normalised = convert::f32_to_f64("decoded features", &flat)?;
+    let features: Vec<Feature> = normalised
+        .chunks_exact(9)
+        .map(|f| normalization.denormalize(&std::array::from_fn(|d| f[d])))
+        .collect();
+    let gradients = inverse.deformation_gradients(&features)?;
+    profile.rotations = t.elapsed();
+    let t = Instant::now();
+    let pin_positions: Vec<Vector3<f64>> = q.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect();
+    let p = inverse.positions_from_gradients(&gradients, &pin_positions)?;
+    profile.solve = t.elapsed();
+    Ok(p.iter().flat_map(|v| [v.x, v.y, v.z]).collect())
 }

@@ -308,6 +308,9 @@ pub struct EmbedData {
     pub normalization: FeatureNormalization,
     /// `features[s][m]`: normalised features of frame `m` of sequence `s`.
     features: Vec<Vec<Vec<Feature>>>,
+    /// The ACAP feature extractor of the rest mesh: how frames given as positions are
+    /// encoded ([`sequence_features`]).
+    pub acap: Arc<AcapFeatures>,
     pub inverse: Arc<PoissonPseudoInverse>,
     pub integrator: Arc<ImplicitEuler>,
     /// `Δt² / m̄` (m²/J, `m̄` the mean vertex mass): [`PhysScale::Inertial`].
@@ -329,6 +332,28 @@ fn points(x: &[f64]) -> Vec<Vector3<f64>> {
     x.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect()
 }
 
+/// The ACAP features (not normalised) of consecutive frames of one sequence (flat
+/// positions, m), encoded in order so the log-rotations stay continuous in time
+/// ([`AcapFeatures::encode_sequence`]): how [`EmbedData`] encodes a dataset's sequences,
+/// and how frames given as positions (the guard's accepted frames) are encoded.
+pub fn sequence_features<P: AsRef<[f64]>>(acap: &AcapFeatures, frames: &[P]) -> Result<Vec<Vec<Feature>>> {
+    let frames: Vec<Vec<Vector3<f64>>> = frames.iter().map(|p| points(p.as_ref())).collect();
+    Ok(acap.encode_sequence(&frames)?)
+}
+
+/// `[B, V, 9]` f32 tensor of `B` frames' (normalised) features.
+fn features_tensor<'f>(
+    frames: impl ExactSizeIterator<Item = &'f [Feature]>,
+    v: usize,
+    device: &Device,
+) -> Result<Tensor> {
+    let b = frames.len();
+    let flat: Vec<f32> = frames
+        .flat_map(|f| f.iter().flat_map(|x| x.map(|c| c as f32)))
+        .collect();
+    Ok(Tensor::from_vec(flat, (b, v, 9), device)?)
+}
+
 impl EmbedData {
     /// Encodes every frame (as a sequence, so log-rotations stay continuous in time) and
     /// fits the normalisation on the training frames only.
@@ -348,11 +373,8 @@ impl EmbedData {
         let raw: Vec<Vec<Vec<Feature>>> = dataset
             .sequences
             .iter()
-            .map(|s| {
-                let frames: Vec<Vec<Vector3<f64>>> = (0..s.num_frames()).map(|m| points(s.frame(m))).collect();
-                acap.encode_sequence(&frames)
-            })
-            .collect::<std::result::Result<_, _>>()?;
+            .map(|s| sequence_features(&acap, &(0..s.num_frames()).map(|m| s.frame(m)).collect::<Vec<_>>()))
+            .collect::<Result<_>>()?;
         let normalization = match normalization {
             Some(n) => n,
             None => FeatureNormalization::fit_per_block(raw.iter().flat_map(|seq| {
@@ -422,6 +444,7 @@ impl EmbedData {
             dataset,
             normalization,
             features,
+            acap: Arc::new(acap),
             inverse,
             integrator,
             inertial_scale,
@@ -446,16 +469,8 @@ impl EmbedData {
 
     /// `[B, V, 9]` normalised features of `frames`.
     pub fn feature_batch(&self, frames: &[FrameRef], device: &Device) -> Result<Tensor> {
-        let v = self.num_vertices();
-        let flat: Vec<f32> = frames
-            .iter()
-            .flat_map(|f| {
-                self.features[f.sequence][f.frame]
-                    .iter()
-                    .flat_map(|x| x.map(|c| c as f32))
-            })
-            .collect();
-        Ok(Tensor::from_vec(flat, (frames.len(), v, 9), device)?)
+        let rows = frames.iter().map(|f| self.features[f.sequence][f.frame].as_slice());
+        features_tensor(rows, self.num_vertices(), device)
     }
 
     /// The f32 tensor of shape `[B, shape…]` stacking `values(sequence, frame)` of `frames`.
@@ -611,9 +626,19 @@ impl EmbedModel {
 
     /// Latent codes `E(x)` of `frames` (flat `latent` values per frame).
     pub fn codes(&self, data: &EmbedData, frames: &[FrameRef]) -> Result<Vec<Vec<f64>>> {
-        let z = self
-            .autoencoder
-            .encode(&data.feature_batch(frames, self.autoencoder_params.device())?)?;
+        self.codes_of(&data.feature_batch(frames, self.autoencoder_params.device())?)
+    }
+
+    /// Latent codes `E(x)` of frames given by their normalised features (flat `latent`
+    /// values per frame): [`EmbedModel::codes`] of frames that are not the dataset's.
+    pub fn codes_of_features(&self, features: &[Vec<Feature>]) -> Result<Vec<Vec<f64>>> {
+        let v = features.first().map_or(0, Vec::len);
+        let rows = features.iter().map(Vec::as_slice);
+        self.codes_of(&features_tensor(rows, v, self.autoencoder_params.device())?)
+    }
+
+    fn codes_of(&self, x: &Tensor) -> Result<Vec<Vec<f64>>> {
+        let z = self.autoencoder.encode(x)?;
         let flat = crate::convert::tensor_to_f64("latent codes", &z)?;
         Ok(flat
             .chunks_exact(self.config.autoencoder.latent)

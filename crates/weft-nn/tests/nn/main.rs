@@ -7,6 +7,7 @@
 //!   runtime against the autograd reference;
 //! - `embed_gradients`: the embedding's per-term decoder gradients against finite
 //!   differences and autograd, and λ_ephys calibrated from their norms (issue 71);
+//! - `embed_surrogate`: the latent simulator as a guard surrogate against the roll-out;
 //! - `drape`: Geng et al.'s pose → cloth training with the projection layers;
 //! - `projection_ops`: the projection layers as candle ops against finite differences.
 
@@ -14,4 +15,5 @@ mod altconv;
 mod base;
 mod drape;
 mod embed_gradients;
+mod embed_surrogate;
 mod projection_ops;

@@ -314,7 +314,37 @@ struct Scene<'a> {
     models: PathBuf,
 }
 
+/// The model a scene reports as `method` (its first seed; for `ours`, at the λ_ephys chosen
+/// on validation), named in `OUT/embed/models/<scene>/reported-<method>.json` relative to
+/// the scene's models: what another experiment loads (`guarded`'s embed surrogate).
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct ReportedModel {
+    dir: PathBuf,
+}
+
+fn reported_path(models: &Path, method: &str) -> PathBuf {
+    models.join(format!("reported-{method}.json"))
+}
+
+/// The directory of the model the embed experiment under `out` reported as `method` on
+/// `scene`, if a run wrote one ([`ReportedModel`]); its weights may be gone (a model
+/// scored on another machine).
+pub(crate) fn reported_model(out: &Path, scene: &str, method: &str) -> Option<PathBuf> {
+    let models = out.join("embed").join("models").join(scene);
+    let r: ReportedModel = weft_nn::checkpoint::read_json(&reported_path(&models, method)).ok()?;
+    Some(models.join(r.dir))
+}
+
 impl<'a> Scene<'a> {
+    /// Names `dir` as the model reported as `method` ([`reported_model`]).
+    fn write_reported(&self, method: &str, dir: &Path) -> crate::Result<()> {
+        let dir = dir.strip_prefix(&self.models).unwrap_or(dir).to_path_buf();
+        Ok(weft_data::files::write_json(
+            &reported_path(&self.models, method),
+            &ReportedModel { dir },
+        )?)
+    }
+
     /// The directory of `method`'s model with `seed`.
     fn seed_dir(&self, method: &str, seed: u64) -> PathBuf {
         self.models.join(method).join(format!("seed-{seed}"))

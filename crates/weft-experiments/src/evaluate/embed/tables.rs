@@ -461,6 +461,7 @@ pub(super) fn report_method(s: &Scene, r: &mut SceneResults, method: &str, runs:
     let rollouts: Vec<Scores> = runs.iter().map(|(_, s)| s.rollout).collect();
     let seconds = mean_sd(runs.iter().map(|(_, s)| s.seconds_per_frame)).0;
     let (dir, first_seed) = (&runs[0].0, &runs[0].1);
+    s.write_reported(method, dir)?;
     let extras = first_seed.first_seed.as_ref().context("the first seed's plots")?;
     let long = seeds_long_rollout(scene, method, runs.iter().map(|(_, s)| s), out)?;
     out.curves.extend(long);
