@@ -33,6 +33,20 @@ fn perturbed(x: &[f64], fixed: &[bool], mm: f64, rng: &mut SplitMix64) -> Vec<f6
         .collect()
 }
 
+/// `x` with its free vertices shifted by `mm` along a fixed direction: a smooth error.
+fn shifted(x: &[f64], fixed: &[bool], mm: f64) -> Vec<f64> {
+    x.iter()
+        .enumerate()
+        .map(|(i, v)| {
+            if fixed[i] {
+                *v
+            } else {
+                v + 1e-3 * mm * [1.0, -0.5, 0.8][i % 3]
+            }
+        })
+        .collect()
+}
+
 /// Proposes the ground truth's frame, perturbed by `noise_mm`, or NaN on `nan_frame`.
 #[derive(Debug)]
 struct Oracle {
@@ -205,17 +219,7 @@ fn the_newton_step_estimate_tracks_the_true_distance() {
         let mut proposals = vec![(integrator.inertial_start(&prescribed).unwrap(), false)];
         for mm in [0.03, 0.3, 3.0] {
             proposals.push((perturbed(&frames[m], fixed, mm, &mut rng), false));
-            let shift: Vec<f64> = frames[m]
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    if fixed[i] {
-                        *v
-                    } else {
-                        v + 1e-3 * mm * [1.0, -0.5, 0.8][i % 3]
-                    }
-                })
-                .collect();
+            let shift = shifted(&frames[m], fixed, mm);
             proposals.push((shift, true));
         }
         for (x, smooth) in proposals {
@@ -301,17 +305,7 @@ fn the_lagged_factor_finds_the_newton_step_and_is_reused() {
             .unwrap();
         let integrator = sim.integrator();
         let fixed = integrator.fixed();
-        let x: Vec<f64> = frames[m]
-            .iter()
-            .enumerate()
-            .map(|(i, v)| {
-                if fixed[i] {
-                    *v
-                } else {
-                    v + 3e-4 * [1.0, -0.5, 0.8][i % 3]
-                }
-            })
-            .collect();
+        let x = shifted(&frames[m], fixed, 0.3);
         let a = jacobi.estimate(integrator, &x).unwrap();
         let b = lagged.estimate(integrator, &x).unwrap();
         assert_eq!(a.factorizations, 0, "Jacobi factorised");
