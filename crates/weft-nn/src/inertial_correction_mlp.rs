@@ -33,7 +33,9 @@ use std::sync::Arc;
 
 use candle_core::{Device, Tensor};
 use weft_data::ClothDataset;
-use weft_surrogate::inertial_correction::{InertialCorrection, InertialCorrectionSettings, frame_mm, history, split_windows};
+use weft_surrogate::inertial_correction::{
+    InertialCorrection, InertialCorrectionSettings, frame_mm, history, split_windows,
+};
 
 use crate::adam::AdamSettings;
 use crate::error::{Error, Result};
@@ -102,7 +104,11 @@ impl InertialCorrectionMlpSettings {
     /// Checks every field before any work (the linear model's fields are checked by its fit).
     pub fn validate(&self) -> Result<()> {
         if self.hidden.is_empty() {
-            return Err(crate::trainer::invalid("hidden", &self.hidden, "needs at least one layer"));
+            return Err(crate::trainer::invalid(
+                "hidden",
+                &self.hidden,
+                "needs at least one layer",
+            ));
         }
         for w in &self.hidden {
             check_count("hidden", *w, MAX_WIDTH)?;
@@ -547,8 +553,15 @@ mod tests {
                     .flat_map(|c| (0..rest.len()).map(move |i| (i, c)))
                     .map(|(i, c)| rest[i] + c[0] * phi[0][i] + c[1] * phi[1][i])
                     .collect();
-                ClothSequence::new(s, positions, q.repeat(frames), vec![0; frames], rest.len() / 3, grasp.len())
-                    .unwrap()
+                ClothSequence::new(
+                    s,
+                    positions,
+                    q.repeat(frames),
+                    vec![0; frames],
+                    rest.len() / 3,
+                    grasp.len(),
+                )
+                .unwrap()
             })
             .collect();
         data
@@ -588,11 +601,21 @@ mod tests {
         let (model, state) = InertialCorrectionMlp::train(&dir, &data, &settings(300), &mut Silent).unwrap();
         let mlp = rms(&model.one_step_errors(&data, "test").unwrap());
         let linear = rms(&model.linear().one_step_errors(&data, "test").unwrap());
-        eprintln!("one-step test M_rms: MLP {mlp:.4} mm, linear {linear:.4} mm, kept epoch {}", state.best_epoch);
-        assert!(linear > 0.01, "the nonlinear terms must leave the linear fit an error: {linear} mm");
+        eprintln!(
+            "one-step test M_rms: MLP {mlp:.4} mm, linear {linear:.4} mm, kept epoch {}",
+            state.best_epoch
+        );
+        assert!(
+            linear > 0.01,
+            "the nonlinear terms must leave the linear fit an error: {linear} mm"
+        );
         assert!(mlp < 0.3 * linear, "MLP {mlp} mm against the linear fit's {linear} mm");
         let v = model.validation().unwrap();
-        assert!(v.mlp_mm < v.linear_mm && state.best_epoch > 0, "{v:?}, kept epoch {}", state.best_epoch);
+        assert!(
+            v.mlp_mm < v.linear_mm && state.best_epoch > 0,
+            "{v:?}, kept epoch {}",
+            state.best_epoch
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -614,7 +637,12 @@ mod tests {
         )
         .unwrap();
         let first = |m: &InertialCorrectionMlp| -> Vec<f32> {
-            m.params.vars()["layer0.w"].as_tensor().flatten_all().unwrap().to_vec1().unwrap()
+            m.params.vars()["layer0.w"]
+                .as_tensor()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap()
         };
         let (model, state) = InertialCorrectionMlp::train(&dir, &data, &s, &mut Silent).unwrap();
         assert_ne!(first(&fresh), first(&model), "the first layer never moved");

@@ -61,7 +61,10 @@ pub const INERTIAL_CORRECTION_MLP: &str = "inertial-correction-mlp";
 /// `inertial-correction` or `inertial-correction-mlp` (their `kind`).
 pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
     let kind = config.get("kind").and_then(|k| k.as_str());
-    if let Some(k) = [INERTIAL_CORRECTION, INERTIAL_CORRECTION_MLP].into_iter().find(|k| kind == Some(*k)) {
+    if let Some(k) = [INERTIAL_CORRECTION, INERTIAL_CORRECTION_MLP]
+        .into_iter()
+        .find(|k| kind == Some(*k))
+    {
         Some(k)
     } else if config.get("config").is_some() && config.get("layer").is_some() {
         Some("drape")

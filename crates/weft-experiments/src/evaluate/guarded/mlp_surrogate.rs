@@ -31,7 +31,11 @@ pub(super) fn mlp_rows(
 ) -> crate::Result<InertialCorrectionMlp> {
     let (mut per_seed, mut first) = (Vec::new(), None);
     for seed in SEEDS {
-        let dir = ctx.out.join("guarded").join("models").join(format!("{SCENE}-mlp-seed-{seed}"));
+        let dir = ctx
+            .out
+            .join("guarded")
+            .join("models")
+            .join(format!("{SCENE}-mlp-seed-{seed}"));
         if dir.exists() {
             std::fs::remove_dir_all(&dir)?;
         }
