@@ -317,6 +317,11 @@ impl TrainJob for InertialCorrectionMlpJob<'_> {
             rms(model.linear().one_step_errors(data, "test")?),
             rms(predictor.one_step_errors(data, "test")?)
         ));
+        lines.push(format!(
+            "  test floor of the {}-component correction basis (each frame's own residual codes): {:.3} mm",
+            model.linear().num_codes(),
+            rms(model.linear().basis_floor_errors(data, "test")?)
+        ));
         Ok(TrainReport::new(lines, p.out))
     }
 }

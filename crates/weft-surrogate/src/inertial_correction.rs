@@ -316,6 +316,23 @@ impl InertialCorrection {
         self.one_step_errors_at(data, &split_windows(data, split)?)
     }
 
+    /// Each frame's M_rms (mm) on `split` of `data` with the true residual's own codes
+    /// `U_cᵀ c_m` (unclipped): the floor of any correction in this basis, whatever maps the
+    /// features to the codes.
+    pub fn basis_floor_errors(&self, data: &ClothDataset, split: &str) -> Result<Vec<f64>> {
+        self.check_dataset(data)?;
+        split_windows(data, split)?
+            .iter()
+            .map(|&(s, m)| {
+                let seq = &data.sequences[s];
+                let (p2, p1) = history(seq, m);
+                let codes = self.residual_codes(p2, p1, seq.control(m), seq.frame(m))?;
+                let x = self.with_codes(p2, p1, seq.control(m), &codes)?;
+                Ok(frame_mm(&x, seq.frame(m)))
+            })
+            .collect()
+    }
+
     /// Frame `p_m` (flat positions, m) from `p_{m−2}`, `p_{m−1}` and the controls `q_m`
     /// (3 per grasped vertex, in the model's grasp order).
     pub fn predict(&self, p2: &[f64], p1: &[f64], q: &[f64]) -> Result<Vec<f64>> {
