@@ -51,7 +51,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub newton_factorizations: Option<usize>,
     /// Cloth scenes only: a surrogate model directory (`cargo xtask train
-    /// inertial-correction`) proposing every frame under the guard (docs/GUARD.md); writes
+    /// inertial-correction` or `inertial-correction-mlp`) proposing every frame under the guard (docs/GUARD.md); writes
     /// `guard.json` with each frame's outcome, estimate, Newton iterations and times.
     #[arg(long)]
     pub surrogate: Option<PathBuf>,
@@ -82,7 +82,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
     let out = &args.out;
     if let Some(dir) = &args.surrogate {
         let settings = weft_data::simulate::guard_settings(args.tolerance.as_deref(), args.certified)?;
-        let surrogate = weft_surrogate::load_surrogate(dir)?;
+        let surrogate = weft_nn::inertial_correction_mlp::load_surrogate(dir)?;
         let run = weft_data::simulate::simulate_guarded_into(&loaded, surrogate, settings, out, args.quiet)?;
         let t = &run.totals;
         eprintln!(

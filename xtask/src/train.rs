@@ -10,7 +10,9 @@ use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 
-use weft_nn::train_job::{AltconvJob, DrapeJob, DrapeJobParams, EmbedJob, NnwarpJob, TrainJob, TrainParams};
+use weft_nn::train_job::{
+    AltconvJob, DrapeJob, DrapeJobParams, EmbedJob, InertialCorrectionMlpJob, NnwarpJob, TrainJob, TrainParams,
+};
 use weft_nn::train_setup::{DrapeLayerKind, Overrides};
 
 #[derive(Subcommand)]
@@ -33,6 +35,25 @@ pub enum TrainCommand {
     /// frames, the ridge weight chosen on its validation frames. Run it with
     /// `cargo xtask simulate SCENE --surrogate OUT --tolerance MM`.
     InertialCorrection(InertialCorrectionArgs),
+    /// The nonlinear one-step surrogate (docs/GUARD.md): an MLP on the inertial
+    /// correction's features adding to its codes, trained on a cloth dataset's training
+    /// frames, the epoch kept by the validation frames' one-step M_rms. Run it with
+    /// `cargo xtask simulate SCENE --surrogate OUT --tolerance MM`.
+    #[command(after_help = weft_nn::config_help::INERTIAL_CORRECTION_MLP)]
+    InertialCorrectionMlp(InertialCorrectionMlpArgs),
+}
+
+#[derive(Args)]
+pub struct InertialCorrectionMlpArgs {
+    /// A cloth dataset directory written by `cargo xtask dataset` (the scene the surrogate
+    /// will run on).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Where the model is written (`config.json`, `linear/`, the trainer's run `net/`).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub common: TrainArgs,
 }
 
 #[derive(Args)]
@@ -236,6 +257,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
             };
             say(DrapeJob::new(a.common.params(&a.data, &a.out), drape)?)
         }
+        TrainCommand::InertialCorrectionMlp(a) => say(InertialCorrectionMlpJob::new(a.common.params(&a.data, &a.out))?),
         TrainCommand::InertialCorrection(a) => {
             let lines = weft_surrogate::fit_directory(&a.data, &a.out, a.config.as_deref())?;
             lines.iter().for_each(|line| eprintln!("{line}"));

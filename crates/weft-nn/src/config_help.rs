@@ -67,6 +67,25 @@ unknown ones are refused):
                    clip_grad_norm, early_stopping_patience
 Validation: mean SqrtMSE over the dataset's validation examples.";
 
+/// The nonlinear inertial correction (`inertial_correction_mlp::InertialCorrectionMlpSettings`)
+/// configuration file.
+pub const INERTIAL_CORRECTION_MLP: &str = "\
+Configuration file (--config, JSON; omitted fields keep their defaults, unknown ones are refused):
+  linear           {\"position_components\": 32, \"correction_components\": 32,
+                    \"ridge\": [1e-8, 1e-6, 1e-4, 1e-2, 1]}: the linear correction whose features,
+                   basis and clip the network shares (`train inertial-correction`'s settings)
+  base             \"linear\" | \"predictor\": what the network adds to (the linear correction's
+                   codes, or nothing)
+  hidden           [128, 128]: hidden widths (1-65536 each)
+  adam             {\"learning_rate\": 1e-3, \"beta1\": 0.9, \"beta2\": 0.999, \"epsilon\": 1e-8}
+  batch            16 windows per step
+  epochs           200
+  seed             0
+  schedule         as for every model: decay (constant | exponential | reduce-on-plateau),
+                   warmup_epochs, clip_grad_norm; early_stopping_patience 30
+Validation: one-step M_rms (mm) of the validation frames (10 and 11 mod 17) from the true
+history; the best epoch's weights are kept (epoch 0 is the base model).";
+
 #[cfg(test)]
 mod tests {
     /// `train embed --help` lists every field a configuration file may set (the kernels
@@ -80,6 +99,18 @@ mod tests {
         let fields = serde_json::to_value(&config).unwrap();
         for key in fields.as_object().unwrap().keys().filter(|k| *k != "kernels") {
             assert!(super::EMBED.contains(&format!("  {key} ")), "{key} is not in the help");
+        }
+    }
+
+    #[test]
+    fn the_inertial_correction_mlp_configuration_help_names_every_field() {
+        let config = crate::inertial_correction_mlp::InertialCorrectionMlpSettings::default();
+        let fields = serde_json::to_value(&config).unwrap();
+        for key in fields.as_object().unwrap().keys() {
+            assert!(
+                super::INERTIAL_CORRECTION_MLP.contains(&format!("  {key} ")),
+                "{key} is not in the help"
+            );
         }
     }
 }

@@ -25,6 +25,9 @@
 //!   inertial predictor plus a ridge-regressed correction in a PCA subspace of its
 //!   residuals, fitted in closed form; it and [`pca`] are weft-surrogate's, re-exported,
 //!   so what steps a scene under the guard needs no candle;
+//! - [`inertial_correction_mlp`]: its nonlinear version — an MLP on the same features
+//!   adding to the linear correction's codes, trained through [`trainer`] — and the loader
+//!   of either kind as a guard surrogate;
 //! - [`ik`]: cloth inverse kinematics in the embedding's latent space (Tan et al. §V-A)
 //!   beside the same potential minimised over every vertex;
 //! - [`metrics`]: the error measures the experiments report (M_RMS, STED, nDCG).
@@ -94,6 +97,7 @@ pub mod error;
 pub mod fast;
 pub mod graph;
 pub mod ik;
+pub mod inertial_correction_mlp;
 pub mod layers;
 pub mod metrics;
 pub mod nnwarp;

@@ -248,6 +248,84 @@ impl TrainJob for AltconvJob<'_> {
     }
 }
 
+/// The nonlinear inertial correction, a one-step surrogate for the guard (docs/GUARD.md).
+#[derive(Debug)]
+pub struct InertialCorrectionMlpJob<'a> {
+    params: TrainParams<'a>,
+    config: crate::inertial_correction_mlp::InertialCorrectionMlpSettings,
+    dataset: weft_data::ClothDataset,
+}
+
+impl<'a> InertialCorrectionMlpJob<'a> {
+    pub fn new(params: TrainParams<'a>) -> Result<Self> {
+        let mut config: crate::inertial_correction_mlp::InertialCorrectionMlpSettings =
+            crate::train_setup::read_config(params.config)?;
+        params.overrides.apply(
+            &mut config.seed,
+            &mut config.adam.learning_rate,
+            std::slice::from_mut(&mut config.epochs),
+        );
+        config.validate()?;
+        refuse_overwrite(params.out, params.resume)?;
+        let dataset = load(params.data, weft_data::ClothDataset::load)?;
+        Ok(Self {
+            params,
+            config,
+            dataset,
+        })
+    }
+}
+
+impl TrainJob for InertialCorrectionMlpJob<'_> {
+    fn start(&self) -> Result<Vec<String>> {
+        let windows = |split| weft_surrogate::inertial_correction::split_windows(&self.dataset, split);
+        Ok(vec![format!(
+            "inertial-correction-mlp/{}: {} training and {} validation windows, {} vertices, base {:?}, seed {}",
+            self.dataset.name,
+            windows("train")?.len(),
+            windows("validation")?.len(),
+            self.dataset.rest.num_vertices(),
+            self.config.base,
+            self.config.seed
+        )])
+    }
+
+    /// Trains, then says the kept epoch and the one-step M_rms of the predictor, the
+    /// linear correction and the network on the validation and test frames.
+    fn run(self) -> Result<TrainReport> {
+        use crate::inertial_correction_mlp::InertialCorrectionMlp;
+        let (p, data) = (self.params, &self.dataset);
+        let mut progress = TrainProgress::new(p.quiet, &format!("inertial-correction-mlp/{}", data.name))?;
+        let (model, state) = InertialCorrectionMlp::train(p.out, data, &self.config, &mut progress)?;
+        drop(progress);
+        let rms = |v: Vec<f64>| (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let mut predictor = model.linear().clone();
+        predictor.disable_correction();
+        let mut lines = vec![format!(
+            "inertial-correction-mlp/{}: kept epoch {} of {}",
+            data.name, state.best_epoch, state.epochs_done
+        )];
+        if let Some(v) = model.validation() {
+            lines.push(format!(
+                "  validation one-step M_rms: {:.3} mm MLP, {:.3} mm linear correction, {:.3} mm inertial predictor",
+                v.mlp_mm, v.linear_mm, v.predictor_mm
+            ));
+        }
+        lines.push(format!(
+            "  test one-step M_rms: {:.3} mm MLP, {:.3} mm linear correction, {:.3} mm inertial predictor",
+            rms(model.one_step_errors(data, "test")?),
+            rms(model.linear().one_step_errors(data, "test")?),
+            rms(predictor.one_step_errors(data, "test")?)
+        ));
+        lines.push(format!(
+            "  test floor of the {}-component correction basis (each frame's own residual codes): {:.3} mm",
+            model.linear().num_codes(),
+            rms(model.linear().basis_floor_errors(data, "test")?)
+        ));
+        Ok(TrainReport::new(lines, p.out))
+    }
+}
+
 /// The drape flags beside the shared ones.
 #[derive(Debug, Clone, Copy)]
 pub struct DrapeJobParams<'a> {

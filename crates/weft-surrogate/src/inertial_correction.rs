@@ -111,7 +111,7 @@ struct Meta {
 /// The frames a window predicts: `m ≥ 1` with Tan et al.'s split rule (docs/DATASETS.md).
 /// Frame 1 is predicted from the initial state held still (`p_{−1} = p_0`), as the guard
 /// asks for it.
-fn windows(data: &ClothDataset, keep: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
+pub fn windows(data: &ClothDataset, keep: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for (s, seq) in data.sequences.iter().enumerate() {
         out.extend((1..seq.num_frames()).filter(|&m| keep(m)).map(|m| (s, m)));
@@ -120,7 +120,7 @@ fn windows(data: &ClothDataset, keep: impl Fn(usize) -> bool) -> Vec<(usize, usi
 }
 
 /// `(p_{m−2}, p_{m−1})` of window `m` of `seq` (`p_{−1} = p_0`).
-fn history(seq: &weft_data::ClothSequence, m: usize) -> (&[f64], &[f64]) {
+pub fn history(seq: &weft_data::ClothSequence, m: usize) -> (&[f64], &[f64]) {
     (seq.frame(m.saturating_sub(2)), seq.frame(m - 1))
 }
 
@@ -162,7 +162,7 @@ fn raw_features(positions: &PositionPca, p2: &[f64], p1: &[f64], grasp: &[usize]
 }
 
 /// M_rms of one frame (mm): `1000 · ‖a − b‖ / √(3V)`.
-fn frame_mm(a: &[f64], b: &[f64]) -> f64 {
+pub fn frame_mm(a: &[f64], b: &[f64]) -> f64 {
     let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
     1e3 * (weft_linalg::dot(&d, &d) / a.len().max(1) as f64).sqrt()
 }
@@ -316,9 +316,35 @@ impl InertialCorrection {
         self.one_step_errors_at(data, &split_windows(data, split)?)
     }
 
+    /// Each frame's M_rms (mm) on `split` of `data` with the true residual's own codes
+    /// `U_cᵀ c_m` (unclipped): the floor of any correction in this basis, whatever maps the
+    /// features to the codes.
+    pub fn basis_floor_errors(&self, data: &ClothDataset, split: &str) -> Result<Vec<f64>> {
+        self.check_dataset(data)?;
+        split_windows(data, split)?
+            .iter()
+            .map(|&(s, m)| {
+                let seq = &data.sequences[s];
+                let (p2, p1) = history(seq, m);
+                let codes = self.residual_codes(p2, p1, seq.control(m), seq.frame(m))?;
+                let x = self.with_codes(p2, p1, seq.control(m), &codes)?;
+                Ok(frame_mm(&x, seq.frame(m)))
+            })
+            .collect()
+    }
+
     /// Frame `p_m` (flat positions, m) from `p_{m−2}`, `p_{m−1}` and the controls `q_m`
     /// (3 per grasped vertex, in the model's grasp order).
     pub fn predict(&self, p2: &[f64], p1: &[f64], q: &[f64]) -> Result<Vec<f64>> {
+        if self.meta.ridge.is_none() {
+            self.check_input(p2, p1, q)?;
+            return Ok(inertial(p2, p1, &self.meta.grasp, q));
+        }
+        let codes = self.linear_codes(&self.features(p2, p1, q)?);
+        self.with_codes(p2, p1, q, &codes)
+    }
+
+    fn check_input(&self, p2: &[f64], p1: &[f64], q: &[f64]) -> Result<()> {
         let n = self.meta.num_dofs;
         if p2.len() != n || p1.len() != n || q.len() != 3 * self.meta.grasp.len() {
             return Err(Error::Shape {
@@ -327,26 +353,54 @@ impl InertialCorrection {
                 got: format!("{}, {} and {}", p2.len(), p1.len(), q.len()),
             });
         }
-        let mut x = inertial(p2, p1, &self.meta.grasp, q);
-        if self.meta.ridge.is_none() {
-            return Ok(x);
-        }
+        Ok(())
+    }
+
+    /// The step's features `f_m` standardised by the training frames' mean and spread,
+    /// without the bias (module docs): what `W` multiplies, and the input of the nonlinear
+    /// correction built on this model.
+    pub fn features(&self, p2: &[f64], p1: &[f64], q: &[f64]) -> Result<Vec<f64>> {
+        self.check_input(p2, p1, q)?;
         let raw = raw_features(&self.positions, p2, p1, &self.meta.grasp, q);
-        let f: Vec<f64> = raw
+        Ok(raw
             .iter()
             .zip(&self.meta.feature_mean)
             .zip(&self.meta.feature_scale)
             .map(|((v, m), s)| (v - m) / s)
-            .chain(std::iter::once(1.0))
-            .collect();
-        let codes: Vec<f64> = self
+            .collect())
+    }
+
+    /// The linear correction's codes `W [f; 1]` of standardised features `f`, clipped to the
+    /// training range; zeros where no correction was kept (`ridge: None`).
+    pub fn linear_codes(&self, features: &[f64]) -> Vec<f64> {
+        let k = self.corrections.num_components();
+        if self.meta.ridge.is_none() {
+            return vec![0.0; k];
+        }
+        let f: Vec<f64> = features.iter().copied().chain(std::iter::once(1.0)).collect();
+        let mut codes: Vec<f64> = self
             .meta
             .weights
             .chunks_exact(f.len())
-            .zip(&self.meta.code_range)
-            .map(|(w, (lo, hi))| w.iter().zip(&f).map(|(a, b)| a * b).sum::<f64>().clamp(*lo, *hi))
+            .map(|w| w.iter().zip(&f).map(|(a, b)| a * b).sum::<f64>())
             .collect();
-        let c = self.corrections.decode(&codes);
+        self.clip_codes(&mut codes);
+        codes
+    }
+
+    /// Clips each correction code to its training range widened by a quarter (module docs).
+    pub fn clip_codes(&self, codes: &mut [f64]) {
+        for (c, (lo, hi)) in codes.iter_mut().zip(&self.meta.code_range) {
+            *c = c.clamp(*lo, *hi);
+        }
+    }
+
+    /// The inertial predictor plus the correction `U_c codes`, the grasped vertices at the
+    /// controls (Eq. G7 with the codes given): checked to be finite.
+    pub fn with_codes(&self, p2: &[f64], p1: &[f64], q: &[f64], codes: &[f64]) -> Result<Vec<f64>> {
+        self.check_input(p2, p1, q)?;
+        let mut x = inertial(p2, p1, &self.meta.grasp, q);
+        let c = self.corrections.decode(codes);
         x.iter_mut().zip(&c).for_each(|(a, b)| *a += b);
         set_grasp(&mut x, &self.meta.grasp, q);
         if let Some(i) = x.iter().position(|v| !v.is_finite()) {
@@ -356,6 +410,48 @@ impl InertialCorrection {
             });
         }
         Ok(x)
+    }
+
+    /// The codes in `U_c` of the inertial residual `p − (2p1 − p2)` (grasp at `q`): the
+    /// targets of a correction fitted in this basis.
+    pub fn residual_codes(&self, p2: &[f64], p1: &[f64], q: &[f64], p: &[f64]) -> Result<Vec<f64>> {
+        self.check_input(p2, p1, q)?;
+        let guess = inertial(p2, p1, &self.meta.grasp, q);
+        let c: Vec<f64> = p.iter().zip(&guess).map(|(a, b)| a - b).collect();
+        Ok(self.corrections.encode(&c))
+    }
+
+    /// Components of the correction basis `U_c` (the codes' length).
+    pub fn num_codes(&self) -> usize {
+        self.corrections.num_components()
+    }
+
+    /// The standardised features' length (without the bias).
+    pub fn num_features(&self) -> usize {
+        self.meta.feature_mean.len()
+    }
+
+    /// The step's controls `q_m` (3 per grasped vertex, in the grasp's order) from the
+    /// DOFs the guard prescribes; every grasped DOF must be among them.
+    pub fn controls(&self, prescribed: &[(usize, f64)]) -> Result<Vec<f64>> {
+        let mut q = vec![f64::NAN; 3 * self.meta.grasp.len()];
+        for &(dof, value) in prescribed {
+            if let Some(g) = self.meta.grasp.iter().position(|&v| v == dof / 3) {
+                q[3 * g + dof % 3] = value;
+            }
+        }
+        if let Some(i) = q.iter().position(|v| v.is_nan()) {
+            return Err(Error::InvalidParameter {
+                name: "controls",
+                value: format!(
+                    "grasped vertex {} has no prescribed DOF {}",
+                    self.meta.grasp[i / 3],
+                    i % 3
+                ),
+                reason: "the correction was fitted with every grasped DOF prescribed",
+            });
+        }
+        Ok(q)
     }
 
     /// Drops the correction: the model then proposes the inertial predictor's frame (the
@@ -379,7 +475,18 @@ impl InertialCorrection {
         &self.meta.scene
     }
 
-    fn check_dataset(&self, data: &ClothDataset) -> Result<()> {
+    /// The time step (s) of the frames it was fitted on.
+    pub fn dt(&self) -> f64 {
+        self.meta.dt
+    }
+
+    /// The DOF count of the mesh it was fitted on.
+    pub fn num_dofs(&self) -> usize {
+        self.meta.num_dofs
+    }
+
+    /// Refuses a dataset of another scene, mesh or grasp.
+    pub fn check_dataset(&self, data: &ClothDataset) -> Result<()> {
         let n = 3 * data.rest.num_vertices();
         if n != self.meta.num_dofs || data.grasp != self.meta.grasp || data.scene.name != self.meta.scene {
             return Err(Error::Shape {
@@ -480,13 +587,20 @@ pub fn fit_directory(data: &Path, out: &Path, config: Option<&Path>) -> Result<V
 }
 
 /// The surrogate stored in the model directory `dir`, for weft-sim's guard: the inertial
-/// correction is the one model kind that proposes frames under the guard today; a
-/// directory of another kind (the embedding, NNWarp, the limb or drape models) is refused
+/// correction is the one model kind without a network that proposes frames under the
+/// guard (weft-nn's loader adds its nonlinear version); a directory of another kind (the embedding, NNWarp, the limb or drape models) is refused
 /// by name rather than misread.
 pub fn load_surrogate(dir: &Path) -> Result<Box<dyn weft_sim::guard::Surrogate>> {
     let config: serde_json::Value = crate::model_dir::read_json(&dir.join("config.json"))?;
     match crate::model_dir::stored_model_kind(&config) {
         Some(KIND) => Ok(Box::new(InertialCorrection::load(dir)?)),
+        Some(mlp @ crate::model_dir::INERTIAL_CORRECTION_MLP) => Err(Error::Checkpoint {
+            path: dir.display().to_string(),
+            reason: format!(
+                "holds a `{mlp}` model, a network this crate cannot run: load it with \
+                 `weft_nn::inertial_correction_mlp::load_surrogate` (what `cargo xtask simulate --surrogate` does)"
+            ),
+        }),
         other => Err(Error::Checkpoint {
             path: dir.display().to_string(),
             reason: format!(
@@ -497,8 +611,10 @@ pub fn load_surrogate(dir: &Path) -> Result<Box<dyn weft_sim::guard::Surrogate>>
     }
 }
 
-/// The windows of `split` (module docs).
-fn split_windows(data: &ClothDataset, split: &str) -> Result<Vec<(usize, usize)>> {
+/// The windows `(sequence, frame)` of `split` (`train`, `validation` or `test`; module
+/// docs): what every one-step figure of this model and of the nonlinear correction built on
+/// it (weft-nn's `inertial_correction_mlp`) is measured on.
+pub fn split_windows(data: &ClothDataset, split: &str) -> Result<Vec<(usize, usize)>> {
     Ok(match split {
         "train" => train_windows(data),
         "validation" => windows(data, is_validation_frame),
@@ -558,23 +674,7 @@ impl weft_sim::guard::Surrogate for InertialCorrection {
         &mut self,
         input: &weft_sim::guard::StepInput<'_>,
     ) -> std::result::Result<Vec<f64>, weft_sim::guard::SurrogateError> {
-        let mut q = vec![f64::NAN; 3 * self.meta.grasp.len()];
-        for &(dof, value) in input.prescribed {
-            if let Some(g) = self.meta.grasp.iter().position(|&v| v == dof / 3) {
-                q[3 * g + dof % 3] = value;
-            }
-        }
-        if let Some(i) = q.iter().position(|v| v.is_nan()) {
-            return Err(Box::new(Error::InvalidParameter {
-                name: "controls",
-                value: format!(
-                    "grasped vertex {} has no prescribed DOF {}",
-                    self.meta.grasp[i / 3],
-                    i % 3
-                ),
-                reason: "the correction was fitted with every grasped DOF prescribed",
-            }));
-        }
+        let q = self.controls(input.prescribed)?;
         Ok(self.predict(input.previous, input.current, &q)?)
     }
 }

@@ -50,12 +50,23 @@ pub fn read_f64_arrays(path: &Path) -> Result<BTreeMap<String, Vec<f64>>> {
 /// (`weft_surrogate::inertial_correction::KIND`).
 pub const INERTIAL_CORRECTION: &str = "inertial-correction";
 
+/// The `kind` the nonlinear inertial correction's `config.json` names (weft-nn's
+/// `inertial_correction_mlp`, trained with candle): told apart here so that this crate's
+/// loader, which has no network, refuses it by name.
+pub const INERTIAL_CORRECTION_MLP: &str = "inertial-correction-mlp";
+
 /// The kind of model a stored `config.json` belongs to, by the fields only that kind's
 /// configuration has: `drape` (a stamp of `config`, `layer` and the starting weights), `embed`
 /// (`autoencoder`), `altconv` (`variant` and `steps`), `nnwarp` (`material`) or
-/// `inertial-correction` (its `kind`).
+/// `inertial-correction` or `inertial-correction-mlp` (their `kind`).
 pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
-    if config.get("config").is_some() && config.get("layer").is_some() {
+    let kind = config.get("kind").and_then(|k| k.as_str());
+    if let Some(k) = [INERTIAL_CORRECTION, INERTIAL_CORRECTION_MLP]
+        .into_iter()
+        .find(|k| kind == Some(*k))
+    {
+        Some(k)
+    } else if config.get("config").is_some() && config.get("layer").is_some() {
         Some("drape")
     } else if config.get("autoencoder").is_some() {
         Some("embed")
@@ -63,8 +74,6 @@ pub fn stored_model_kind(config: &serde_json::Value) -> Option<&'static str> {
         Some("altconv")
     } else if config.get("material").is_some() {
         Some("nnwarp")
-    } else if config.get("kind").and_then(|k| k.as_str()) == Some(INERTIAL_CORRECTION) {
-        Some(INERTIAL_CORRECTION)
     } else {
         None
     }

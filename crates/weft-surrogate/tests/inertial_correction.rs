@@ -87,6 +87,9 @@ fn a_residual_linear_in_the_features_is_fitted_exactly() {
         after < 1e-3 * before,
         "test one-step error {after} mm against the predictor's {before} mm"
     );
+    // The residuals lie in two modes, which the correction basis spans: no floor.
+    let floor = rms(&model.basis_floor_errors(&data, "test").unwrap());
+    assert!(floor < 1e-6 * before, "basis floor {floor} mm");
     // "No correction" is scored first, so the kept model is never worse on validation.
     let scores = model.validation_scores();
     assert_eq!(scores[0].ridge, None);

@@ -1,10 +1,11 @@
 //! Experiment `guarded`: learned proposals checked by the step's physics (issue 73,
 //! docs/GUARD.md), on `sheet-ms` (this module) and `limb-jiggle` (`guarded_limb`).
 //!
-//! 1. The one-step surrogate: weft-nn's inertial correction is fitted on the `sheet-ms`
+//! 1. The one-step surrogates: weft-nn's inertial correction is fitted on the `sheet-ms`
 //!    dataset's training frames (the embed experiment's dataset, shared), its ridge weight
-//!    chosen on the validation frames; its one-step error on the test frames is reported
-//!    beside the inertial predictor's, from the true history.
+//!    chosen on the validation frames, and its nonlinear version trained for three seeds
+//!    (`mlp_surrogate`); their one-step errors on the test frames are reported beside the
+//!    inertial predictor's, from the true history, and the seed-0 MLP joins the dial.
 //! 2. A held-out sequence: the built-in `sheet-ms` scene (its own seed, not one of the
 //!    dataset's) simulated by today's solver, the ground truth, timed per frame.
 //! 3. The estimate's honesty on it: from the truth's history, each surrogate's proposal,
@@ -20,11 +21,13 @@
 //!    truth's tolerance), beside the unguarded roll-out's distance from the truth.
 
 mod embed_surrogate;
+mod mlp_surrogate;
 
 use std::time::Instant;
 
 use weft_data::ClothDataset;
 use weft_nn::inertial_correction::{InertialCorrection, InertialCorrectionSettings};
+use weft_nn::inertial_correction_mlp::InertialCorrectionMlp;
 use weft_sim::guard::{Guard, GuardSettings, InertialPredictor, Surrogate};
 use weft_sim::{ClothScene, ClothSimulation};
 
@@ -65,10 +68,15 @@ pub(super) fn rms(v: &[f64]) -> f64 {
 }
 
 /// The surrogates of the run, fresh for each roll-out.
-fn surrogates(model: &InertialCorrection, dofs: usize) -> Vec<(&'static str, Box<dyn Surrogate>)> {
+fn surrogates(
+    model: &InertialCorrection,
+    mlp: &InertialCorrectionMlp,
+    dofs: usize,
+) -> Vec<(&'static str, Box<dyn Surrogate>)> {
     vec![
         ("inertial", Box::new(InertialPredictor::new(dofs))),
         ("inertial-correction", Box::new(model.clone())),
+        (mlp_surrogate::METHOD, Box::new(mlp.clone())),
     ]
 }
 
@@ -89,6 +97,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         out.record(SCENE, method, "one-step-m-rms", rms(&errors), "mm", Timing::default());
         out.split("test");
     }
+    let mlp = mlp_surrogate::mlp_rows(ctx, &mut out, &data)?;
     out.notes.push(format!(
         "guarded: the inertial correction fitted on {} ({} sequences) in {fit_seconds:.1} s; ridge {:?} chosen on \
          validation from {:?} (one-step M_rms, mm)",
@@ -112,12 +121,12 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         truth.seconds_per_frame,
         truth.iterations_per_frame
     ));
-    for (name, surrogate) in surrogates(&model, truth.frames[0].len()) {
+    for (name, surrogate) in surrogates(&model, &mlp, truth.frames[0].len()) {
         estimate_honesty(&mut out, &scene, &truth, name, surrogate)?;
     }
     let mut rows = Vec::new();
     for (setting, settings) in dial()? {
-        for (name, surrogate) in surrogates(&model, truth.frames[0].len()) {
+        for (name, surrogate) in surrogates(&model, &mlp, truth.frames[0].len()) {
             let method = format!("{name}-{setting}");
             let run = Rollout {
                 scene: &scene,
