@@ -7,12 +7,13 @@
 //! is solved directly with a Cholesky factor of the projected stiffness `H⁺` (the fixed
 //! DOFs eliminated), and the modulus `μ ≤ λ_min(H)` is certified by a Cholesky
 //! factorisation of `H − μI` that succeeds (Sylvester's law of inertia), `μ` taken from a
-//! few inverse iterations.
+//! few inverse iterations. At the dial's accurate end the guard reads the residual alone,
+//! the ground truth's own test, for one gradient evaluation.
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use weft_linalg::{CholeskySolver, SymmetricMatrix, SymmetricPattern};
+use weft_linalg::{CholeskyFactor, CholeskySolver, SymmetricMatrix, SymmetricPattern};
 
 use super::{
     Acceptance, Correction, ErrorEstimate, GuardReport, GuardSettings, GuardTolerance, GuardTotals, Outcome, Rejection,
@@ -22,8 +23,8 @@ use crate::energy::{Energy, checked_pairs};
 use crate::error::{Error, Result};
 use crate::integrators::Quasistatic;
 
-/// Inverse iterations with the factor of `H` behind the modulus's Rayleigh quotient
-/// (docs/GUARD.md, Eq. Q3); the quotient is an upper bound on `λ_min` after any number,
+/// Inverse iterations with the factor of `H⁺` behind the modulus's Rayleigh quotient
+/// (docs/GUARD.md, Eq. Q3); the quotient is an upper bound on `λ_min(H)` after any number,
 /// and the certificate checks a fraction of it.
 pub const MODULUS_INVERSE_ITERATIONS: usize = 6;
 
@@ -152,6 +153,41 @@ impl QuasistaticEstimator {
     /// The estimate at `x` of the equilibrium under `load` (Eqs. Q1–Q4): the residual,
     /// the projected Newton step's length, and the certified modulus and bound.
     pub fn estimate(&mut self, internal: &[&dyn Energy], load: &[f64], x: &[f64]) -> Result<ErrorEstimate> {
+        let residual_only = self.residual(internal, load, x)?;
+        if !residual_only.residual_m_inv.is_finite() {
+            return Ok(residual_only);
+        }
+        self.exact.set_zero();
+        self.projected.set_zero();
+        for t in internal {
+            t.add_hessian(x, false, &mut self.exact);
+            t.add_hessian(x, true, &mut self.projected);
+        }
+        let residual = residual_only.residual_m_inv;
+        let mut factorizations = 0;
+        let (distance, step) = self.projected_step(&mut factorizations);
+        let modulus = match &step {
+            Some(factor) => self.certified_modulus(factor, &mut factorizations),
+            None => f64::NEG_INFINITY,
+        };
+        let certified = modulus > 0.0;
+        Ok(ErrorEstimate {
+            modulus,
+            certified,
+            bound_mm: certified.then(|| self.to_mm(residual / modulus)),
+            distance,
+            mm: self.to_mm(distance),
+            projected: true,
+            factorizations,
+            ..residual_only
+        })
+    }
+
+    /// The residual alone at `x` under `load` (`residual_m_inv` = `‖∇E(x)‖`, N, and its
+    /// largest free entry): what the ground truth's own convergence test reads, for one
+    /// gradient evaluation. The distance, modulus and bound are not computed (`NaN`,
+    /// `−∞`, `None`).
+    pub fn residual(&mut self, internal: &[&dyn Energy], load: &[f64], x: &[f64]) -> Result<ErrorEstimate> {
         for (name, len) in [("load", load.len()), ("positions", x.len())] {
             if len != self.grad.len() {
                 return Err(Error::LengthMismatch {
@@ -172,80 +208,68 @@ impl QuasistaticEstimator {
         if !sq.is_finite() || self.grad.iter().any(|g| !g.is_finite()) {
             return Ok(super::Estimator::non_finite());
         }
-        self.exact.set_zero();
-        self.projected.set_zero();
-        for t in internal {
-            t.add_hessian(x, false, &mut self.exact);
-            t.add_hessian(x, true, &mut self.projected);
-        }
-        let residual = sq.sqrt();
-        let mut factorizations = 0;
-        let (distance, projected_ok) = self.projected_step_length(&mut factorizations);
-        let modulus = self.certified_modulus(&mut factorizations);
-        let certified = modulus > 0.0;
         Ok(ErrorEstimate {
-            residual_m_inv: residual,
+            residual_m_inv: sq.sqrt(),
             residual_max: max,
-            modulus,
-            certified,
-            bound_mm: certified.then(|| self.to_mm(residual / modulus)),
-            distance,
-            mm: if projected_ok { self.to_mm(distance) } else { f64::INFINITY },
-            projected: true,
+            modulus: f64::NEG_INFINITY,
+            certified: false,
+            bound_mm: None,
+            distance: f64::NAN,
+            mm: f64::NAN,
+            projected: false,
             cg_iterations: 0,
-            factorizations,
+            factorizations: 0,
         })
     }
 
     /// `‖δ‖` of `H⁺ δ = ∇E(x)` (Eq. Q2), solved with a fresh factor of the projected
-    /// stiffness; whether it factorised (it is positive definite wherever the fixed DOFs
-    /// pin every rigid motion, unless an entry is not finite).
-    fn projected_step_length(&mut self, factorizations: &mut usize) -> (f64, bool) {
+    /// stiffness, and the factor; `∞` and none where it does not factorise (it is positive
+    /// definite wherever the fixed DOFs pin every rigid motion, unless an entry is not
+    /// finite).
+    fn projected_step(&mut self, factorizations: &mut usize) -> (f64, Option<CholeskyFactor>) {
         self.projected.constrain_dofs(&self.fixed);
         *factorizations += 1;
         match self.solver.factorize(&self.projected) {
             Ok(factor) => {
                 let mut step = self.grad.clone();
                 factor.solve_in_place(&mut step);
-                (step.iter().map(|d| d * d).sum::<f64>().sqrt(), true)
+                (step.iter().map(|d| d * d).sum::<f64>().sqrt(), Some(factor))
             }
-            Err(_) => (f64::INFINITY, false),
+            Err(_) => (f64::INFINITY, None),
         }
     }
 
     /// A certified lower bound `μ > 0` on `λ_min(H)` over the free DOFs (Eq. Q3), or
-    /// `−∞` where none was found: `H` must factorise (it is then positive definite), the
-    /// Rayleigh quotient `q` of a few inverse iterations bounds `λ_min` from above, and
-    /// the first of `q/2, q/4, q/8` for which `H − μI` factorises is a lower bound.
-    fn certified_modulus(&mut self, factorizations: &mut usize) -> f64 {
-        // The shift applies to the free block only: fixed DOFs are eliminated after it.
-        self.shifted.copy_values_from(&self.exact);
-        self.exact.constrain_dofs(&self.fixed);
-        *factorizations += 1;
-        let Ok(factor) = self.solver.factorize(&self.exact) else {
-            return f64::NEG_INFINITY;
-        };
+    /// `−∞` where none was found. Inverse iterations with the projected factor steer `v`
+    /// towards the softest modes; the Rayleigh quotient `q = vᵀHv` of the exact `H` bounds
+    /// `λ_min(H)` from above whatever `v` is, and the first of `q/2, q/4, q/8` for which
+    /// `H − μI` factorises is a lower bound (Sylvester's law of inertia).
+    fn certified_modulus(&mut self, projected: &CholeskyFactor, factorizations: &mut usize) -> f64 {
         let mut v: Vec<f64> = self.fixed.iter().map(|f| if *f { 0.0 } else { 1.0 }).collect();
-        let mut hv = vec![0.0; v.len()];
-        let mut quotient = f64::INFINITY;
         for _ in 0..MODULUS_INVERSE_ITERATIONS {
-            factor.solve_in_place(&mut v);
+            projected.solve_in_place(&mut v);
             let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
             if !(norm.is_finite() && norm > 0.0) {
                 return f64::NEG_INFINITY;
             }
             v.iter_mut().for_each(|a| *a /= norm);
-            self.exact.mul_vec(&v, &mut hv);
-            quotient = v.iter().zip(&hv).map(|(a, b)| a * b).sum::<f64>();
         }
-        let unshifted = self.shifted.clone();
+        // `v` is zero on the fixed DOFs, so the unconstrained `H` gives the free block's
+        // quotient.
+        let mut hv = vec![0.0; v.len()];
+        self.exact.mul_vec(&v, &mut hv);
+        let quotient = v.iter().zip(&hv).map(|(a, b)| a * b).sum::<f64>();
+        if !(quotient > 0.0) {
+            return f64::NEG_INFINITY;
+        }
         for fraction in MODULUS_FRACTIONS {
             let mu = fraction * quotient;
-            self.shifted.copy_values_from(&unshifted);
+            // The shift applies to the free block only: fixed DOFs are eliminated after it.
+            self.shifted.copy_values_from(&self.exact);
             self.shifted.add_diagonal(-mu);
             self.shifted.constrain_dofs(&self.fixed);
             *factorizations += 1;
-            if mu > 0.0 && self.solver.factorize(&self.shifted).is_ok() {
+            if self.solver.factorize(&self.shifted).is_ok() {
                 return mu;
             }
         }
@@ -427,11 +451,20 @@ impl QuasistaticGuard {
                 *v = *c;
             }
         }
-        let estimate = self.estimator.estimate(internal, load, x)?;
+        let estimate = self.judge(internal, load, x)?;
         if !estimate.residual_m_inv.is_finite() {
             return Ok((Some(Rejection::NonFiniteResidual), None));
         }
         Ok((None, Some(estimate)))
+    }
+
+    /// What the guard's tolerance reads at `x`: the residual alone at the truth's
+    /// tolerance (its own convergence test), else the full estimate.
+    fn judge(&mut self, internal: &[&dyn Energy], load: &[f64], x: &[f64]) -> Result<ErrorEstimate> {
+        match self.settings.tolerance {
+            GuardTolerance::GroundTruth => self.estimator.residual(internal, load, x),
+            GuardTolerance::Millimetres(_) => self.estimator.estimate(internal, load, x),
+        }
     }
 
     fn acceptable(&self, load: &[f64], estimate: &ErrorEstimate) -> bool {
@@ -506,7 +539,7 @@ impl QuasistaticGuard {
                 Err(e) => return Err(e),
             }
             let clock = Instant::now();
-            report.estimate = self.estimator.estimate(internal, load, &proposal)?;
+            report.estimate = self.judge(internal, load, &proposal)?;
             report.estimate_factorizations += report.estimate.factorizations;
             report.seconds.guard += clock.elapsed().as_secs_f64();
             if tolerance <= truth || self.acceptable(load, &report.estimate) {
@@ -522,7 +555,7 @@ impl QuasistaticGuard {
         report.seconds.correction += clock.elapsed().as_secs_f64();
         self.tally(&r, report);
         let clock = Instant::now();
-        report.estimate = self.estimator.estimate(internal, load, x)?;
+        report.estimate = self.judge(internal, load, x)?;
         report.estimate_factorizations += report.estimate.factorizations;
         report.seconds.guard += clock.elapsed().as_secs_f64();
         Ok(())
