@@ -169,10 +169,17 @@ fn surrogates(beam: &Beam, model: Option<&Path>) -> crate::Result<Vec<Box<dyn Qu
     let mut out: Vec<Box<dyn QuasistaticSurrogate>> = Vec::new();
     if let Some(dir) = model {
         let (_, mlp) = load_model(dir)?;
-        let proposal = WarpProposal::NnWarp { mlp, field: beam.field };
+        let proposal = WarpProposal::NnWarp {
+            mlp: Box::new(mlp),
+            field: beam.field,
+        };
         out.push(Box::new(WarpSurrogate::new(&beam.body(), proposal)?));
     }
-    for proposal in [WarpProposal::ModalWarping, WarpProposal::WarpedLinear, WarpProposal::Linear] {
+    for proposal in [
+        WarpProposal::ModalWarping,
+        WarpProposal::WarpedLinear,
+        WarpProposal::Linear,
+    ] {
         out.push(Box::new(WarpSurrogate::new(&beam.body(), proposal)?));
     }
     out.push(Box::new(PreviousEquilibrium::new(3 * beam.mesh.num_vertices())));

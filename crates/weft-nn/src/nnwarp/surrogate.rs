@@ -33,7 +33,7 @@ pub enum WarpProposal {
     ModalWarping,
     /// The warped solve corrected by a trained network, whose contextual features are
     /// measured along `field`.
-    NnWarp { mlp: NodeMlp, field: FieldDirection },
+    NnWarp { mlp: Box<NodeMlp>, field: FieldDirection },
 }
 
 /// A clamped tet body with a linear material: what every [`WarpSurrogate`] solves on.
@@ -85,7 +85,7 @@ impl WarpSurrogate {
                 let (_, scale) = unit_sphere_normalization(mesh.positions());
                 let context =
                     WarpContext::with_gradients(mesh, gradients.clone(), body.anchors, field, body.poisson, scale)?;
-                ("nnwarp", true, Some(NnWarp::new(context, mlp)))
+                ("nnwarp", true, Some(NnWarp::new(context, *mlp)))
             }
         };
         Ok(Self {
@@ -181,7 +181,11 @@ mod tests {
         let mut solver = Quasistatic::new(truth.len(), &internal, fixed.clone()).unwrap();
         solver.solve(&internal, &load, &mut truth, 4).unwrap();
         let mut errors = Vec::new();
-        for proposal in [WarpProposal::Linear, WarpProposal::WarpedLinear, WarpProposal::ModalWarping] {
+        for proposal in [
+            WarpProposal::Linear,
+            WarpProposal::WarpedLinear,
+            WarpProposal::ModalWarping,
+        ] {
             let mut s = WarpSurrogate::new(&body, proposal).unwrap();
             let rest = mesh.flat_positions();
             let step = LoadStep {
@@ -201,6 +205,11 @@ mod tests {
             assert!(r.error.unwrap().m_rms_mm < 1e-3, "{:?}", r.error);
             assert!(r.proposal_error.unwrap().m_rms_mm > 1.0, "{:?}", r.proposal_error);
         }
-        assert!(errors[2] < 0.9 * errors[0], "modal warping {} against linear {} m", errors[2], errors[0]);
+        assert!(
+            errors[2] < 0.9 * errors[0],
+            "modal warping {} against linear {} m",
+            errors[2],
+            errors[0]
+        );
     }
 }

@@ -209,7 +209,13 @@ impl QuasistaticSurrogate for Noisy {
         self.rest.len()
     }
     fn propose(&mut self, _: &LoadStep<'_>) -> Result<Vec<f64>, SurrogateError> {
-        let x = perturbed(&self.rest, &self.fixed, &self.frames[self.next], self.mm, self.next as u64 + 7);
+        let x = perturbed(
+            &self.rest,
+            &self.fixed,
+            &self.frames[self.next],
+            self.mm,
+            self.next as u64 + 7,
+        );
         self.next += 1;
         Ok(x)
     }
@@ -289,9 +295,18 @@ fn at_the_truth_tolerance_the_guarded_frames_are_the_quasistatic_solves() {
         assert!(outcomes.iter().all(|o| *o == Outcome::Corrected), "{outcomes:?}");
         for ((f, t), &a) in frames.iter().zip(&truth).zip(&accelerations) {
             let load = beam.load(a);
-            let mut slack = |x: &[f64]| estimator.estimate(&beam.internal(), &load, x).unwrap().bound_mm.unwrap();
+            let mut slack = |x: &[f64]| {
+                estimator
+                    .estimate(&beam.internal(), &load, x)
+                    .unwrap()
+                    .bound_mm
+                    .unwrap()
+            };
             let (d, bound) = (m_rms_mm(f, t), slack(f) + slack(t));
-            assert!(d <= bound && d < 1e-3, "load {a}: {d} mm from the truth (bound {bound} mm)");
+            assert!(
+                d <= bound && d < 1e-3,
+                "load {a}: {d} mm from the truth (bound {bound} mm)"
+            );
         }
     }
 }
@@ -339,9 +354,20 @@ fn bad_input_is_refused_with_the_mismatch_named() {
     let new = |s: Box<dyn QuasistaticSurrogate>, settings, steps| {
         QuasistaticGuard::new(beam.solver(), &beam.internal(), steps, s, settings)
     };
-    let e = new(Box::new(PreviousEquilibrium::new(n + 3)), GuardSettings::ground_truth(), RAMP).unwrap_err();
+    let e = new(
+        Box::new(PreviousEquilibrium::new(n + 3)),
+        GuardSettings::ground_truth(),
+        RAMP,
+    )
+    .unwrap_err();
     assert!(
-        matches!(&e, Error::SurrogateMismatch { what: "body DOF count", .. }),
+        matches!(
+            &e,
+            Error::SurrogateMismatch {
+                what: "body DOF count",
+                ..
+            }
+        ),
         "{e}"
     );
     for tau in [0.0, -1.0, f64::NAN, f64::INFINITY] {
@@ -349,14 +375,44 @@ fn bad_input_is_refused_with_the_mismatch_named() {
     }
     let e = new(Box::new(PreviousEquilibrium::new(n)), GuardSettings::ground_truth(), 0).unwrap_err();
     assert!(matches!(e, Error::InvalidParameter { name: "load steps", .. }), "{e}");
-    let mut guard = new(Box::new(PreviousEquilibrium::new(n)), GuardSettings::ground_truth(), RAMP).unwrap();
+    let mut guard = new(
+        Box::new(PreviousEquilibrium::new(n)),
+        GuardSettings::ground_truth(),
+        RAMP,
+    )
+    .unwrap();
     let mut x = beam.rest.clone();
     let e = guard
         .step(&beam.internal(), 1, None, &beam.load(1.0)[3..], &mut x, None)
         .unwrap_err();
-    assert!(matches!(&e, Error::SurrogateMismatch { what: "load (DOFs)", .. }), "{e}");
+    assert!(
+        matches!(
+            &e,
+            Error::SurrogateMismatch {
+                what: "load (DOFs)",
+                ..
+            }
+        ),
+        "{e}"
+    );
     let e = guard
-        .step(&beam.internal(), 1, None, &beam.load(1.0), &mut x, Some(&beam.rest[3..]))
+        .step(
+            &beam.internal(),
+            1,
+            None,
+            &beam.load(1.0),
+            &mut x,
+            Some(&beam.rest[3..]),
+        )
         .unwrap_err();
-    assert!(matches!(&e, Error::SurrogateMismatch { what: "reference (DOFs)", .. }), "{e}");
+    assert!(
+        matches!(
+            &e,
+            Error::SurrogateMismatch {
+                what: "reference (DOFs)",
+                ..
+            }
+        ),
+        "{e}"
+    );
 }
