@@ -18,7 +18,7 @@ pub(super) struct Shape {
 }
 
 /// The nodes at the body's smallest x: where every beam is clamped.
-pub(in crate::evaluate) fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
+pub(crate) fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
     let x_min = mesh.positions().iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
     (0..mesh.num_vertices())
         .filter(|&i| (mesh.positions()[i].x - x_min).abs() < 1e-9)
@@ -57,7 +57,7 @@ pub(super) fn shapes(size: Size) -> crate::Result<Vec<Shape>> {
 }
 
 /// The training beam's cells and size (m) at `size`, the `nnwarp` dataset's body.
-pub(in crate::evaluate) fn beam_params(size: Size) -> BeamParams {
+pub(crate) fn beam_params(size: Size) -> BeamParams {
     BeamParams {
         cells: if size == Size::Quick { [6, 3, 3] } else { [12, 6, 6] },
         size: [1.0, 0.5, 0.5],
