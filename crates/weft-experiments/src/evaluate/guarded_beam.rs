@@ -188,6 +188,7 @@ fn surrogates(beam: &Beam, model: Option<&Path>) -> crate::Result<Vec<Box<dyn Qu
 
 /// Adds the beam's rows, notes and table to the `guarded` experiment's output.
 pub(super) fn run(ctx: &EvalContext, out: &mut ExperimentOutput) -> crate::Result<()> {
+    let clock = Instant::now();
     let beam = Beam::new(ctx)?;
     let truth = ground_truth(&beam)?;
     let model = nnwarp_model(ctx);
@@ -238,6 +239,10 @@ pub(super) fn run(ctx: &EvalContext, out: &mut ExperimentOutput) -> crate::Resul
         header: rollout_header(),
         rows,
     });
+    out.notes.push(format!(
+        "guarded: the NNWarp beam's rows took {:.1} s",
+        clock.elapsed().as_secs_f64()
+    ));
     Ok(())
 }
 
