@@ -246,6 +246,26 @@ pub(super) fn run(ctx: &EvalContext, out: &mut ExperimentOutput) -> crate::Resul
     Ok(())
 }
 
+/// The surrogate's proposal of load step `k + 1` from the equilibrium `current` under the
+/// previous step's load.
+fn propose(
+    beam: &Beam,
+    surrogate: &mut dyn QuasistaticSurrogate,
+    k: usize,
+    current: &[f64],
+) -> weft_sim::Result<Vec<f64>> {
+    let input = LoadStep {
+        step: k + 1,
+        current,
+        current_load: k.checked_sub(1).map(|j| beam.loads[j].as_slice()),
+        load: &beam.loads[k],
+    };
+    surrogate.propose(&input).map_err(|source| weft_sim::Error::Surrogate {
+        surrogate: format!("{} (load step {})", surrogate.name(), k + 1),
+        source,
+    })
+}
+
 /// Every load step from the truth's previous equilibrium: the surrogate's proposal, its
 /// estimate against its distance from the truth's equilibrium.
 fn estimate_honesty(
@@ -258,16 +278,7 @@ fn estimate_honesty(
     let mut honesty = Honesty::default();
     for (k, load) in beam.loads.iter().enumerate() {
         let current = &truth.frames[k];
-        let input = LoadStep {
-            step: k + 1,
-            current,
-            current_load: k.checked_sub(1).map(|j| beam.loads[j].as_slice()),
-            load,
-        };
-        let mut x = surrogate.propose(&input).map_err(|source| weft_sim::Error::Surrogate {
-            surrogate: format!("{} (load step {})", surrogate.name(), k + 1),
-            source,
-        })?;
+        let mut x = propose(beam, surrogate.as_mut(), k, current)?;
         // Held where the body is held, as the guard holds it.
         for ((v, c), fixed) in x.iter_mut().zip(current).zip(&beam.fixed) {
             if *fixed {
@@ -334,18 +345,9 @@ fn unguarded<'a>(
 ) -> crate::Result<RolloutTally<'a>> {
     let mut x = beam.mesh.flat_positions();
     let (mut errors, mut seconds, mut positions) = (Vec::new(), 0.0, Vec::new());
-    for (k, load) in beam.loads.iter().enumerate() {
+    for k in 0..LOAD_STEPS {
         let clock = Instant::now();
-        let input = LoadStep {
-            step: k + 1,
-            current: &x,
-            current_load: k.checked_sub(1).map(|j| beam.loads[j].as_slice()),
-            load,
-        };
-        let next = surrogate.propose(&input).map_err(|source| weft_sim::Error::Surrogate {
-            surrogate: format!("{} (load step {})", surrogate.name(), k + 1),
-            source,
-        })?;
+        let next = propose(beam, surrogate.as_mut(), k, &x)?;
         seconds += clock.elapsed().as_secs_f64();
         x = next;
         surrogate.observe(&x, false);
