@@ -1,5 +1,6 @@
 //! Experiment `guarded`: learned proposals checked by the step's physics (issue 73,
-//! docs/GUARD.md), on `sheet-ms` (this module) and `limb-jiggle` (`guarded_limb`).
+//! docs/GUARD.md), on `sheet-ms` (this module), `limb-jiggle` (`guarded_limb`) and the
+//! NNWarp beam, quasistatic (`guarded_beam`).
 //!
 //! 1. The one-step surrogates: weft-nn's inertial correction is fitted on the `sheet-ms`
 //!    dataset's training frames (the embed experiment's dataset, shared), its ridge weight
@@ -152,6 +153,7 @@ pub fn run(ctx: &EvalContext) -> crate::Result<ExperimentOutput> {
         rows,
     });
     super::guarded_limb::run(ctx, &mut out).context("guarded on limb-jiggle")?;
+    super::guarded_beam::run(ctx, &mut out).context("guarded on the NNWarp beam")?;
     Ok(out)
 }
 
@@ -265,7 +267,20 @@ impl Honesty {
     ) -> weft_sim::Result<()> {
         let e = guard.estimate(integrator, x)?;
         let at_truth = guard.estimate(integrator, truth)?;
-        let d = guard.mass_norm(x, truth);
+        self.add_estimates(&e, &at_truth, guard.mass_norm(x, truth), x, truth);
+        Ok(())
+    }
+
+    /// Adds proposal `x`'s estimate `e`, the truth's own `at_truth` and their distance `d`
+    /// in the estimate's norm.
+    pub(super) fn add_estimates(
+        &mut self,
+        e: &weft_sim::ErrorEstimate,
+        at_truth: &weft_sim::ErrorEstimate,
+        d: f64,
+        x: &[f64],
+        truth: &[f64],
+    ) {
         self.estimates.push(e.distance);
         self.distances.push(d);
         let sq: f64 = x.iter().zip(truth).map(|(a, b)| (a - b).powi(2)).sum();
@@ -276,7 +291,6 @@ impl Honesty {
             let bound = e.residual_m_inv / e.modulus + at_truth.residual_m_inv / at_truth.modulus;
             self.violations += usize::from(d > bound);
         }
-        Ok(())
     }
 
     /// Records the figures (split `held-out`) of `scene` and the surrogate `name`.

@@ -14,6 +14,7 @@ pub mod context;
 pub mod drape;
 pub mod embed;
 pub mod guarded;
+mod guarded_beam;
 mod guarded_limb;
 pub mod nnwarp;
 pub mod proj;

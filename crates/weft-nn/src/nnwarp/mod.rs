@@ -5,6 +5,8 @@
 //!   standardisation and the network in candle ([`WarpMlp`]);
 //! - `runtime`: the same weights outside candle ([`NodeMlp`]), the correction of a linear
 //!   solution ([`NnWarp`]) and the corrected linear simulation ([`NnWarpSimulation`]);
+//! - `surrogate`: NNWarp and the linear solves as proposals of a guarded quasistatic
+//!   load step ([`WarpSurrogate`]);
 //! - `training`: the training pairs of a dataset, [`WarpTrainingSettings`] and
 //!   [`train_model`].
 //!
@@ -16,6 +18,7 @@ mod reference;
 mod run;
 mod runtime;
 mod scene;
+mod surrogate;
 mod training;
 
 pub use model::*;
@@ -23,4 +26,5 @@ pub use reference::*;
 pub use run::*;
 pub use runtime::*;
 pub use scene::*;
+pub use surrogate::*;
 pub use training::*;

@@ -11,6 +11,7 @@
 //! it is rejected, counted, and the step is solved from the solver's own start.
 
 mod estimate;
+mod quasistatic;
 mod soft_tissue;
 mod surrogate;
 
@@ -23,6 +24,10 @@ use crate::scenes::MotionLabel;
 use estimate::Estimator;
 pub use estimate::{
     CERTIFICATE_ITERATIONS, ErrorEstimate, EstimatePreconditioner, LAGGED_FACTOR_ITERATIONS, NEWTON_ESTIMATE_ITERATIONS,
+};
+pub use quasistatic::{
+    LoadStep, MODULUS_INVERSE_ITERATIONS, PreviousEquilibrium, QuasistaticEstimator, QuasistaticGuard,
+    QuasistaticSurrogate,
 };
 pub use soft_tissue::{GuardedTissueFrame, InteriorCompletion, SkinningCompleted};
 pub use surrogate::{InertialPredictor, StepInput, Surrogate, SurrogateError};
@@ -443,18 +448,22 @@ impl Guard {
     }
 
     fn count(&mut self, report: &GuardReport) {
-        let t = &mut self.totals;
-        t.frames += 1;
-        match report.outcome {
-            Outcome::Accepted => t.accepted += 1,
-            Outcome::Corrected => t.corrected += 1,
-            Outcome::Rejected(_) => t.rejected += 1,
-        }
-        t.unverified += usize::from(!report.estimate.certified);
-        t.newton_iterations += report.newton_iterations;
-        t.factorizations += report.factorizations;
-        t.estimate_factorizations += report.estimate_factorizations;
+        count_into(&mut self.totals, report);
     }
+}
+
+/// Adds a guarded frame's report to a roll-out's totals.
+fn count_into(t: &mut GuardTotals, report: &GuardReport) {
+    t.frames += 1;
+    match report.outcome {
+        Outcome::Accepted => t.accepted += 1,
+        Outcome::Corrected => t.corrected += 1,
+        Outcome::Rejected(_) => t.rejected += 1,
+    }
+    t.unverified += usize::from(!report.estimate.certified);
+    t.newton_iterations += report.newton_iterations;
+    t.factorizations += report.factorizations;
+    t.estimate_factorizations += report.estimate_factorizations;
 }
 
 /// The diagonal of the axis-aligned bounding box of flat positions (m).

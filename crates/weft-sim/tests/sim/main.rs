@@ -6,6 +6,7 @@ mod energies;
 mod fem;
 mod guard;
 mod guard_limb;
+mod guard_quasistatic;
 mod simulation;
 mod volume_scenes;
 mod warp;

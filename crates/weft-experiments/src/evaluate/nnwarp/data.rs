@@ -17,7 +17,8 @@ pub(super) struct Shape {
     pub split: &'static str,
 }
 
-fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
+/// The nodes at the body's smallest x: where every beam is clamped.
+pub(crate) fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
     let x_min = mesh.positions().iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
     (0..mesh.num_vertices())
         .filter(|&i| (mesh.positions()[i].x - x_min).abs() < 1e-9)
@@ -27,10 +28,7 @@ fn min_x_anchors(mesh: &TetMesh) -> Vec<usize> {
 /// The training beam, three unseen beams and the limb body (15 k tets at standard size).
 pub(super) fn shapes(size: Size) -> crate::Result<Vec<Shape>> {
     let quick = size == Size::Quick;
-    let params = BeamParams {
-        cells: if quick { [6, 3, 3] } else { [12, 6, 6] },
-        size: [1.0, 0.5, 0.5],
-    };
+    let params = beam_params(size);
     let mut out = Vec::new();
     for (name, mesh, split) in [
         ("beam", beam(&params)?, "train-shape"),
@@ -56,6 +54,14 @@ pub(super) fn shapes(size: Size) -> crate::Result<Vec<Shape>> {
         LimbResolution::Default
     })?);
     Ok(out)
+}
+
+/// The training beam's cells and size (m) at `size`, the `nnwarp` dataset's body.
+pub(crate) fn beam_params(size: Size) -> BeamParams {
+    BeamParams {
+        cells: if size == Size::Quick { [6, 3, 3] } else { [12, 6, 6] },
+        size: [1.0, 0.5, 0.5],
+    }
 }
 
 /// The `limb` body at `resolution`, clamped at its bones.

@@ -19,7 +19,7 @@
 //! nonlinear reference, and [`score_model`] for a model trained outside the evaluation),
 //! `figures` (Table 1's timings, the extrapolation and trajectory figures).
 
-mod data;
+pub(super) mod data;
 mod figures;
 mod scoring;
 mod studies;
@@ -43,25 +43,25 @@ use weft_data::Size;
 pub use scoring::score_model;
 
 /// Linear answers' largest displacement at the evaluated loads (unit-sphere units).
-const LEVELS: [f64; 3] = [0.5, 1.0, 1.5];
+pub(super) const LEVELS: [f64; 3] = [0.5, 1.0, 1.5];
 /// The evaluation field: `hemisphere_direction(α = 1.2, β = 0.6)`, inside the trained
 /// octant but drawn by no training sequence's seed.
-const FIELD_ANGLES: (f64, f64) = (1.2, 0.6);
+pub(super) const FIELD_ANGLES: (f64, f64) = (1.2, 0.6);
 /// The warped linear solve's fixed point: relative change between solves, and the most
 /// solves allowed.
-const WARP_TOLERANCE: f64 = 1e-4;
-const WARP_SOLVES: usize = 100;
+pub(super) const WARP_TOLERANCE: f64 = 1e-4;
+pub(super) const WARP_SOLVES: usize = 100;
 /// Newton load increments of the nonlinear reference from one load to the next.
-const REFERENCE_STEPS: usize = 4;
+pub(super) const REFERENCE_STEPS: usize = 4;
 /// Newton iterations per increment, and halvings of an increment, before the reference
 /// gives up on a load (reported under failures).
-const REFERENCE_NEWTON_ITERATIONS: usize = 50;
-const REFERENCE_SUBDIVISIONS: usize = 3;
+pub(super) const REFERENCE_NEWTON_ITERATIONS: usize = 50;
+pub(super) const REFERENCE_SUBDIVISIONS: usize = 3;
 /// The time steps of the trajectory figure (NNWarp Fig. 15 shows two).
 const TRAJECTORY_STEPS: [f64; 2] = [0.01, 0.04];
-const YOUNG: f64 = 1e5;
-const POISSON: f64 = 0.3;
-const DENSITY: f64 = 1000.0;
+pub(super) const YOUNG: f64 = 1e5;
+pub(super) const POISSON: f64 = 0.3;
+pub(super) const DENSITY: f64 = 1000.0;
 
 fn training_config(size: Size) -> WarpTrainingSettings {
     let mut c = WarpTrainingSettings::default();
